@@ -1,0 +1,1 @@
+//! The seven single-ray kd-tree traversals of the RT² thesis.

@@ -1,0 +1,71 @@
+//! The one error type of the crate. Its status codes are the C API's `rt2_status`.
+
+use std::fmt;
+
+/// Result codes of every fallible C call. Explicit numbers, never reused or renumbered.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2Status {
+    RT2_STATUS_OK = 0,
+    /// NULL pointer, NaN/inf, out of range, unknown enum value.
+    RT2_STATUS_INVALID_ARGUMENT = 1,
+    /// The call is not allowed in the object's state (e.g. render before commit).
+    RT2_STATUS_INVALID_OPERATION = 2,
+    RT2_STATUS_OUT_OF_MEMORY = 3,
+    /// A file is missing or unreadable.
+    RT2_STATUS_IO = 4,
+    /// A malformed PLY/OBJ file (the message names file and line or byte offset).
+    RT2_STATUS_PARSE = 5,
+    /// Valid input that this version does not handle.
+    RT2_STATUS_UNSUPPORTED = 6,
+    /// The GPU was asked for and none is usable.
+    RT2_STATUS_BACKEND_UNAVAILABLE = 7,
+    /// A bug in RT2: a panic caught at the C boundary.
+    RT2_STATUS_INTERNAL = 8,
+}
+
+/// An error with the status a C caller receives and the message `rt2_last_error_message` shows.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Error {
+    pub status: Rt2Status,
+    pub message: String,
+}
+
+impl Error {
+    pub fn new(status: Rt2Status, message: impl Into<String>) -> Self {
+        Error {
+            status,
+            message: message.into(),
+        }
+    }
+
+    pub fn invalid_argument(message: impl Into<String>) -> Self {
+        Self::new(Rt2Status::RT2_STATUS_INVALID_ARGUMENT, message)
+    }
+
+    pub fn invalid_operation(message: impl Into<String>) -> Self {
+        Self::new(Rt2Status::RT2_STATUS_INVALID_OPERATION, message)
+    }
+
+    pub fn io(message: impl Into<String>) -> Self {
+        Self::new(Rt2Status::RT2_STATUS_IO, message)
+    }
+
+    pub fn parse(message: impl Into<String>) -> Self {
+        Self::new(Rt2Status::RT2_STATUS_PARSE, message)
+    }
+
+    pub fn unsupported(message: impl Into<String>) -> Self {
+        Self::new(Rt2Status::RT2_STATUS_UNSUPPORTED, message)
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{:?}: {}", self.status, self.message)
+    }
+}
+
+impl std::error::Error for Error {}
+
+pub type Result<T> = std::result::Result<T, Error>;

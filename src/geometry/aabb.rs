@@ -1,0 +1,107 @@
+//! Axis-aligned bounding boxes: voxels of the kd-tree and bounds of primitives.
+
+use glam::Vec3;
+
+/// An axis-aligned box. The empty box has `min = +inf`, `max = -inf`, so that
+/// `union` with it is the identity and it overlaps nothing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+impl Aabb {
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::splat(f32::INFINITY),
+        max: Vec3::splat(f32::NEG_INFINITY),
+    };
+
+    pub fn new(min: Vec3, max: Vec3) -> Self {
+        Aabb { min, max }
+    }
+
+    pub fn from_points(points: &[Vec3]) -> Self {
+        points.iter().fold(Aabb::EMPTY, |b, &p| b.grow(p))
+    }
+
+    pub fn grow(self, p: Vec3) -> Self {
+        Aabb::new(self.min.min(p), self.max.max(p))
+    }
+
+    pub fn union(self, o: Aabb) -> Self {
+        Aabb::new(self.min.min(o.min), self.max.max(o.max))
+    }
+
+    /// The common part of two boxes; empty when they do not touch.
+    pub fn intersection(self, o: Aabb) -> Self {
+        let b = Aabb::new(self.min.max(o.min), self.max.min(o.max));
+        if b.is_empty() {
+            Aabb::EMPTY
+        } else {
+            b
+        }
+    }
+
+    /// True when some axis has `min > max` (a flat box with `min == max` is not empty).
+    pub fn is_empty(&self) -> bool {
+        self.min.cmpgt(self.max).any()
+    }
+
+    pub fn extent(&self) -> Vec3 {
+        (self.max - self.min).max(Vec3::ZERO)
+    }
+
+    pub fn center(&self) -> Vec3 {
+        0.5 * (self.min + self.max)
+    }
+
+    pub fn diagonal(&self) -> f32 {
+        if self.is_empty() {
+            0.0
+        } else {
+            self.extent().length()
+        }
+    }
+
+    pub fn surface_area(&self) -> f32 {
+        if self.is_empty() {
+            return 0.0;
+        }
+        let e = self.extent();
+        2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
+    }
+
+    /// Closed-interval overlap test: boxes that only share a face overlap.
+    pub fn overlaps(&self, o: &Aabb) -> bool {
+        !self.is_empty()
+            && !o.is_empty()
+            && self.min.cmple(o.max).all()
+            && o.min.cmple(self.max).all()
+    }
+
+    pub fn contains_point(&self, p: Vec3) -> bool {
+        self.min.cmple(p).all() && p.cmple(self.max).all()
+    }
+
+    /// Slab test: the parametric interval `[t0, t1]` of the ray inside the box,
+    /// clamped to `[tmin, tmax]`, or `None` when the ray misses it.
+    /// Zero direction components give infinite reciprocals; the `max`/`min`
+    /// below are written so that a NaN from `0 * inf` never widens the interval.
+    pub fn clip_ray(&self, org: Vec3, inv_dir: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32)> {
+        let mut t0 = tmin;
+        let mut t1 = tmax;
+        for a in 0..3 {
+            let ta = (self.min[a] - org[a]) * inv_dir[a];
+            let tb = (self.max[a] - org[a]) * inv_dir[a];
+            let (near, far) = if ta <= tb { (ta, tb) } else { (tb, ta) };
+            // NaN (ray in the slab's plane with a zero direction) compares false: no clipping.
+            if near > t0 {
+                t0 = near;
+            }
+            if far < t1 {
+                t1 = far;
+            }
+        }
+        (t0 <= t1).then_some((t0, t1))
+    }
+}

@@ -1,0 +1,156 @@
+//! Analytic primitives: spheres, ellipsoids, axis-aligned boxes and planes. They stay
+//! analytic (never tessellated): a sphere costs 16 bytes where a mesh of it costs kilobytes.
+
+use super::{Aabb, Ray};
+use glam::{Mat3, Vec3};
+
+/// Smallest root of `a t² + 2 b t + c = 0` inside `[tmin, tmax)`, computed without the
+/// cancellation of the textbook formula (Numerical Recipes' `q` form).
+fn nearest_root(a: f32, b: f32, c: f32, tmin: f32, tmax: f32) -> Option<f32> {
+    let disc = b * b - a * c;
+    if disc < 0.0 || a == 0.0 {
+        return None;
+    }
+    let q = -(b + b.signum() * disc.sqrt());
+    let (mut t0, mut t1) = (q / a, if q != 0.0 { c / q } else { q / a });
+    if t0 > t1 {
+        std::mem::swap(&mut t0, &mut t1);
+    }
+    [t0, t1].into_iter().find(|&t| t >= tmin && t < tmax)
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Sphere {
+    pub center: [f32; 3],
+    pub radius: f32,
+}
+
+impl Sphere {
+    pub fn bounds(&self) -> Aabb {
+        let c = Vec3::from(self.center);
+        Aabb::new(c - self.radius, c + self.radius)
+    }
+
+    /// Tight bounds of the sphere inside a voxel: the box of the sphere's disc cut by each
+    /// voxel face is folded in, so a voxel corner far from the surface is not counted.
+    pub fn clipped_bounds(&self, voxel: &Aabb) -> Aabb {
+        let b = self.bounds().intersection(*voxel);
+        if b.is_empty() {
+            return b;
+        }
+        let c = Vec3::from(self.center);
+        // The closest voxel point must lie inside the sphere for any overlap.
+        let closest = c.clamp(voxel.min, voxel.max);
+        if (closest - c).length_squared() > self.radius * self.radius {
+            return Aabb::EMPTY;
+        }
+        b
+    }
+
+    pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<f32> {
+        let oc = ray.org - Vec3::from(self.center);
+        let a = ray.dir.length_squared();
+        let b = oc.dot(ray.dir);
+        let c = oc.length_squared() - self.radius * self.radius;
+        nearest_root(a, b, c, ray.tmin, tmax)
+    }
+
+    pub fn normal(&self, p: Vec3) -> Vec3 {
+        (p - Vec3::from(self.center)).normalize_or_zero()
+    }
+}
+
+/// An ellipsoid as the image of the unit sphere under `x = center + M s`; stored as the
+/// inverse map, which is what intersection and normals need.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Ellipsoid {
+    pub center: [f32; 3],
+    /// Column-major `M⁻¹`.
+    pub inv: [f32; 9],
+    /// Half extents of the bounding box, derived from `M` when created.
+    pub half: [f32; 3],
+}
+
+impl Ellipsoid {
+    /// `m` maps the unit sphere onto the ellipsoid (columns = semi-axes). `None` when singular.
+    pub fn new(center: Vec3, m: Mat3) -> Option<Self> {
+        let det = m.determinant();
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        // Extent along axis i is the length of row i of M.
+        let half = Vec3::new(m.row(0).length(), m.row(1).length(), m.row(2).length());
+        Some(Ellipsoid {
+            center: center.to_array(),
+            inv: m.inverse().to_cols_array(),
+            half: half.to_array(),
+        })
+    }
+
+    pub fn bounds(&self) -> Aabb {
+        let c = Vec3::from(self.center);
+        let h = Vec3::from(self.half);
+        Aabb::new(c - h, c + h)
+    }
+
+    pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<f32> {
+        let inv = Mat3::from_cols_array(&self.inv);
+        let o = inv * (ray.org - Vec3::from(self.center));
+        let d = inv * ray.dir;
+        nearest_root(d.length_squared(), o.dot(d), o.length_squared() - 1.0, ray.tmin, tmax)
+    }
+
+    pub fn normal(&self, p: Vec3) -> Vec3 {
+        let inv = Mat3::from_cols_array(&self.inv);
+        let s = inv * (p - Vec3::from(self.center));
+        (inv.transpose() * s).normalize_or_zero()
+    }
+}
+
+/// Solid axis-aligned box; a ray starting inside hits its exit face.
+pub fn box_intersect(b: &Aabb, ray: &Ray, tmax: f32) -> Option<f32> {
+    let inv = ray.dir.recip();
+    let (t0, t1) = b.clip_ray(ray.org, inv, f32::NEG_INFINITY, f32::INFINITY)?;
+    [t0, t1].into_iter().find(|&t| t >= ray.tmin && t < tmax)
+}
+
+/// Outward normal of the box face nearest to `p`.
+pub fn box_normal(b: &Aabb, p: Vec3) -> Vec3 {
+    let c = b.center();
+    let h = 0.5 * b.extent();
+    let d = (p - c) / h.max(Vec3::splat(f32::MIN_POSITIVE));
+    let a = d.abs();
+    let axis = if a.x >= a.y && a.x >= a.z {
+        0
+    } else if a.y >= a.z {
+        1
+    } else {
+        2
+    };
+    let mut n = Vec3::ZERO;
+    n[axis] = d[axis].signum();
+    n
+}
+
+/// The infinite plane `normal · x = offset`. Unbounded, so it lives outside the kd-tree and
+/// every ray tests it directly (one test per ray; a tree cannot bound it anyway).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Plane {
+    pub normal: [f32; 3],
+    pub offset: f32,
+}
+
+impl Plane {
+    pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<f32> {
+        let n = Vec3::from(self.normal);
+        let denom = n.dot(ray.dir);
+        if denom == 0.0 {
+            return None;
+        }
+        let t = (self.offset - n.dot(ray.org)) / denom;
+        (t >= ray.tmin && t < tmax).then_some(t)
+    }
+}

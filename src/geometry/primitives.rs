@@ -1,0 +1,129 @@
+//! All bounded primitives of a committed scene, kind by kind in flat arrays (a sphere costs
+//! 16 bytes, a triangle 36), addressed by one global index: triangles first, then spheres,
+//! ellipsoids and boxes. Leaves of the kd-tree list these indices. Planes are unbounded and
+//! kept apart (see [`Plane`]).
+
+use super::{box_intersect, box_normal, Aabb, Ellipsoid, Hit, Plane, Ray, Sphere, Triangle};
+use glam::Vec3;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PrimKind {
+    Triangle,
+    Sphere,
+    Ellipsoid,
+    Box,
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct PrimitiveSet {
+    pub triangles: Vec<Triangle>,
+    pub spheres: Vec<Sphere>,
+    pub ellipsoids: Vec<Ellipsoid>,
+    pub boxes: Vec<Aabb>,
+    /// Unbounded primitives, tested by every ray outside the tree. Their global index
+    /// continues after the bounded ones.
+    pub planes: Vec<Plane>,
+}
+
+impl PrimitiveSet {
+    /// Number of bounded primitives (the ones the kd-tree holds).
+    pub fn len(&self) -> usize {
+        self.triangles.len() + self.spheres.len() + self.ellipsoids.len() + self.boxes.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0 && self.planes.is_empty()
+    }
+
+    /// Kind of a global index and the index inside that kind's array.
+    #[inline]
+    pub fn locate(&self, i: usize) -> (PrimKind, usize) {
+        let mut i = i;
+        for (kind, n) in [
+            (PrimKind::Triangle, self.triangles.len()),
+            (PrimKind::Sphere, self.spheres.len()),
+            (PrimKind::Ellipsoid, self.ellipsoids.len()),
+        ] {
+            if i < n {
+                return (kind, i);
+            }
+            i -= n;
+        }
+        (PrimKind::Box, i)
+    }
+
+    pub fn bounds(&self, i: usize) -> Aabb {
+        match self.locate(i) {
+            (PrimKind::Triangle, k) => self.triangles[k].bounds(),
+            (PrimKind::Sphere, k) => self.spheres[k].bounds(),
+            (PrimKind::Ellipsoid, k) => self.ellipsoids[k].bounds(),
+            (PrimKind::Box, k) => self.boxes[k],
+        }
+    }
+
+    /// Bounds of the part of primitive `i` inside `voxel` (perfect splits). Ellipsoids and
+    /// boxes use their box clipped to the voxel, which is exact for boxes and tight enough for
+    /// ellipsoids.
+    pub fn clipped_bounds(&self, i: usize, voxel: &Aabb) -> Aabb {
+        match self.locate(i) {
+            (PrimKind::Triangle, k) => self.triangles[k].clipped_bounds(voxel),
+            (PrimKind::Sphere, k) => self.spheres[k].clipped_bounds(voxel),
+            _ => self.bounds(i).intersection(*voxel),
+        }
+    }
+
+    /// Bounds of all bounded primitives.
+    pub fn scene_bounds(&self) -> Aabb {
+        (0..self.len()).fold(Aabb::EMPTY, |b, i| b.union(self.bounds(i)))
+    }
+
+    /// Tests bounded primitive `i` and keeps the hit if it is the closest so far.
+    #[inline]
+    pub fn intersect(&self, i: u32, ray: &Ray, hit: &mut Hit) -> bool {
+        let tmax = hit.bound(ray);
+        let found = match self.locate(i as usize) {
+            (PrimKind::Triangle, k) => self.triangles[k].intersect(ray, tmax),
+            (PrimKind::Sphere, k) => self.spheres[k].intersect(ray, tmax).map(|t| (t, 0.0, 0.0)),
+            (PrimKind::Ellipsoid, k) => self.ellipsoids[k].intersect(ray, tmax).map(|t| (t, 0.0, 0.0)),
+            (PrimKind::Box, k) => box_intersect(&self.boxes[k], ray, tmax).map(|t| (t, 0.0, 0.0)),
+        };
+        match found {
+            Some((t, u, v)) => hit.offer(t, u, v, i),
+            None => false,
+        }
+    }
+
+    /// Tests every plane (they are outside the tree); plane `k` has global index `len() + k`.
+    pub fn intersect_planes(&self, ray: &Ray, hit: &mut Hit) {
+        let base = self.len() as u32;
+        for (k, p) in self.planes.iter().enumerate() {
+            if let Some(t) = p.intersect(ray, hit.bound(ray)) {
+                hit.offer(t, 0.0, 0.0, base + k as u32);
+            }
+        }
+    }
+
+    /// Geometric normal (not oriented towards the ray) at hit point `p` of primitive `i`.
+    pub fn normal(&self, i: u32, p: Vec3) -> Vec3 {
+        let i = i as usize;
+        if i >= self.len() {
+            return Vec3::from(self.planes[i - self.len()].normal).normalize_or_zero();
+        }
+        match self.locate(i) {
+            (PrimKind::Triangle, k) => self.triangles[k].normal().normalize_or_zero(),
+            (PrimKind::Sphere, k) => self.spheres[k].normal(p),
+            (PrimKind::Ellipsoid, k) => self.ellipsoids[k].normal(p),
+            (PrimKind::Box, k) => box_normal(&self.boxes[k], p),
+        }
+    }
+
+    /// Bytes held by each kind's array, for the memory report.
+    pub fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.triangles.len() * size_of::<Triangle>()
+            + self.spheres.len() * size_of::<Sphere>()
+            + self.ellipsoids.len() * size_of::<Ellipsoid>()
+            + self.boxes.len() * size_of::<Aabb>()
+            + self.planes.len() * size_of::<Plane>()
+    }
+}

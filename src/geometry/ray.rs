@@ -1,0 +1,101 @@
+//! The ray and hit vocabulary shared by every traversal, backend and the C API.
+
+use glam::Vec3;
+
+/// A ray segment `org + t * dir`, `t` in `[tmin, tmax)` (a hit at exactly `tmax` does not count,
+/// as in `../shared/raysets`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub org: Vec3,
+    pub dir: Vec3,
+    pub tmin: f32,
+    pub tmax: f32,
+}
+
+impl Ray {
+    pub fn new(org: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
+        Ray { org, dir, tmin, tmax }
+    }
+
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.org + t * self.dir
+    }
+
+    /// Rays that can never hit anything: NaN or infinite components, a zero
+    /// direction, NaN bounds or `tmin > tmax`. They are defined misses, never errors.
+    pub fn is_degenerate(&self) -> bool {
+        !self.org.is_finite()
+            || !self.dir.is_finite()
+            || self.dir == Vec3::ZERO
+            || self.tmin.is_nan()
+            || self.tmax.is_nan()
+            || self.tmin > self.tmax
+    }
+}
+
+/// Index of a primitive inside the committed scene's primitive set.
+pub type PrimIndex = u32;
+
+/// Marks "no primitive" in hits and rope links.
+pub const INVALID: u32 = u32::MAX;
+
+/// The closest hit found so far: `t`, barycentrics (`u` weighs vertex 1, `v` vertex 2, as in
+/// `../shared/raysets`) and the primitive index (`INVALID` while none).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub u: f32,
+    pub v: f32,
+    pub prim: PrimIndex,
+}
+
+impl Hit {
+    pub const MISS: Hit = Hit {
+        t: f32::INFINITY,
+        u: 0.0,
+        v: 0.0,
+        prim: INVALID,
+    };
+
+    pub fn is_hit(&self) -> bool {
+        self.prim != INVALID
+    }
+
+    /// Exclusive upper bound for candidate `t`s: the ray's `tmax`, or just above the current
+    /// hit so that an equal-`t` candidate still reaches [`Hit::offer`]'s tie rule.
+    #[inline]
+    pub fn bound(&self, ray: &Ray) -> f32 {
+        if self.t < ray.tmax {
+            self.t.next_up()
+        } else {
+            ray.tmax
+        }
+    }
+
+    /// Keeps the closest candidate; equal `t` goes to the lowest primitive index, so that every
+    /// traversal order reports the same primitive (the tie rule of DESIGN.md §2).
+    pub fn offer(&mut self, t: f32, u: f32, v: f32, prim: PrimIndex) -> bool {
+        if t < self.t || (t == self.t && prim < self.prim) {
+            *self = Hit { t, u, v, prim };
+            true
+        } else {
+            false
+        }
+    }
+}
+
+/// Work counters of the thesis' table 1, summed over a batch when statistics are asked for.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TraversalStats {
+    pub nodes_visited: u64,
+    pub leaves_visited: u64,
+    pub prim_tests: u64,
+}
+
+impl TraversalStats {
+    pub fn add(&mut self, o: &TraversalStats) {
+        self.nodes_visited += o.nodes_visited;
+        self.leaves_visited += o.leaves_visited;
+        self.prim_tests += o.prim_tests;
+    }
+}

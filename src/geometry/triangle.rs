@@ -1,0 +1,96 @@
+//! Triangles, stored as `v0` and two edges so that Möller–Trumbore needs no subtraction
+//! of vertices per test (the precomputation of the vectorised-traversal paper).
+
+use super::{Aabb, Ray};
+use glam::Vec3;
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Triangle {
+    pub v0: [f32; 3],
+    pub e1: [f32; 3],
+    pub e2: [f32; 3],
+}
+
+impl Triangle {
+    pub fn from_vertices(a: Vec3, b: Vec3, c: Vec3) -> Self {
+        Triangle {
+            v0: a.to_array(),
+            e1: (b - a).to_array(),
+            e2: (c - a).to_array(),
+        }
+    }
+
+    pub fn vertices(&self) -> [Vec3; 3] {
+        let v0 = Vec3::from(self.v0);
+        [v0, v0 + Vec3::from(self.e1), v0 + Vec3::from(self.e2)]
+    }
+
+    pub fn bounds(&self) -> Aabb {
+        Aabb::from_points(&self.vertices())
+    }
+
+    /// Unnormalised geometric normal `e1 × e2` (zero for degenerate triangles).
+    pub fn normal(&self) -> Vec3 {
+        Vec3::from(self.e1).cross(Vec3::from(self.e2))
+    }
+
+    /// Möller–Trumbore (1997). Returns `(t, u, v)` with `tmin <= t < tmax`.
+    /// Degenerate (zero-area) triangles have `det == 0` and are never hit.
+    #[inline]
+    pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<(f32, f32, f32)> {
+        let e1 = Vec3::from(self.e1);
+        let e2 = Vec3::from(self.e2);
+        let p = ray.dir.cross(e2);
+        let det = e1.dot(p);
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let s = ray.org - Vec3::from(self.v0);
+        let u = s.dot(p) * inv;
+        if !(0.0..=1.0).contains(&u) {
+            return None;
+        }
+        let q = s.cross(e1);
+        let v = ray.dir.dot(q) * inv;
+        if v < 0.0 || u + v > 1.0 {
+            return None;
+        }
+        let t = e2.dot(q) * inv;
+        (t >= ray.tmin && t < tmax).then_some((t, u, v))
+    }
+
+    /// Bounds of the part of the triangle inside `voxel` (Sutherland–Hodgman clipping against
+    /// the six slabs): the "perfect splits" of Havran's thesis used by the SAH builder.
+    pub fn clipped_bounds(&self, voxel: &Aabb) -> Aabb {
+        let mut poly: Vec<Vec3> = self.vertices().to_vec();
+        let mut next = Vec::with_capacity(9);
+        for axis in 0..3 {
+            for (plane, keep_below) in [(voxel.min[axis], false), (voxel.max[axis], true)] {
+                next.clear();
+                for i in 0..poly.len() {
+                    let a = poly[i];
+                    let b = poly[(i + 1) % poly.len()];
+                    let inside = |p: Vec3| if keep_below { p[axis] <= plane } else { p[axis] >= plane };
+                    let (ia, ib) = (inside(a), inside(b));
+                    if ia {
+                        next.push(a);
+                    }
+                    if ia != ib {
+                        let t = (plane - a[axis]) / (b[axis] - a[axis]);
+                        let mut p = a + t * (b - a);
+                        p[axis] = plane; // exact on the plane despite rounding
+                        next.push(p);
+                    }
+                }
+                std::mem::swap(&mut poly, &mut next);
+                if poly.is_empty() {
+                    return Aabb::EMPTY;
+                }
+            }
+        }
+        // Rounding in the interpolation can step a hair outside the voxel: clamp back.
+        Aabb::from_points(&poly).intersection(*voxel)
+    }
+}

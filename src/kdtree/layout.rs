@@ -1,0 +1,1 @@
+//! Node layouts: depth-first and van Emde Boas.

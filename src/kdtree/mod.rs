@@ -1,0 +1,159 @@
+//! The kd-tree shared by every traversal and both backends: one flat format (DESIGN.md §2,
+//! "one tree format, two backends"), two builders (SAH with perfect splits, midpoint), two
+//! node layouts (depth-first, van Emde Boas) and optional ropes.
+//!
+//! Format: `nodes[0]` is the root. An inner node's two children sit side by side at
+//! `child` (below the split) and `child + 1` (above). A voxel is split into
+//! `[min, split]` (below) and `[split, max]` (above) along `axis`. A leaf points into
+//! `leaves`, whose range selects primitive indices in `prim_indices`.
+
+mod build;
+mod layout;
+mod ropes;
+
+pub use build::{build, BuildInput, BuildOptions, Builder, Layout};
+
+use crate::geometry::{Aabb, PrimitiveSet};
+
+/// 8-byte node: split position and `bits`. `bits & 3` is the split axis (0–2) of an inner node
+/// or 3 for a leaf; `bits >> 2` is the index of the first child, or the leaf index.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct KdNode {
+    pub split: f32,
+    pub bits: u32,
+}
+
+impl KdNode {
+    pub const LEAF: u32 = 3;
+
+    pub fn inner(axis: usize, split: f32, first_child: u32) -> Self {
+        debug_assert!(axis < 3 && first_child < (1 << 30));
+        KdNode {
+            split,
+            bits: (first_child << 2) | axis as u32,
+        }
+    }
+
+    pub fn leaf(leaf_index: u32) -> Self {
+        KdNode {
+            split: 0.0,
+            bits: (leaf_index << 2) | Self::LEAF,
+        }
+    }
+
+    #[inline]
+    pub fn is_leaf(&self) -> bool {
+        self.bits & 3 == Self::LEAF
+    }
+
+    /// Split axis of an inner node.
+    #[inline]
+    pub fn axis(&self) -> usize {
+        (self.bits & 3) as usize
+    }
+
+    /// First child (inner) or leaf index (leaf).
+    #[inline]
+    pub fn index(&self) -> u32 {
+        self.bits >> 2
+    }
+}
+
+/// A leaf's slice of `prim_indices`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct LeafRange {
+    pub first: u32,
+    pub count: u32,
+}
+
+/// Rope faces in the order `-x, +x, -y, +y, -z, +z`: face `2*axis + (positive as usize)`.
+pub const ROPE_FACES: usize = 6;
+
+/// Ropes (Popov et al. 2007): per leaf, the node across each face of its box (`INVALID` where
+/// the face lies on the scene boundary) and the leaf's box. Built only when a rope traversal
+/// asks for them ("model no more than a scene needs").
+#[derive(Clone, Debug, Default)]
+pub struct Ropes {
+    pub links: Vec<[u32; ROPE_FACES]>,
+    pub leaf_bounds: Vec<Aabb>,
+}
+
+/// Build statistics and memory, reported through `rt2_scene_stats`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TreeStats {
+    pub node_count: u32,
+    pub leaf_count: u32,
+    pub empty_leaf_count: u32,
+    pub max_depth: u32,
+    /// Mean depth of the leaves.
+    pub avg_leaf_depth: f32,
+    /// Mean number of primitive references per non-empty leaf.
+    pub avg_prims_per_leaf: f32,
+    /// SAH cost of the tree with the builder's cost constants (relative units).
+    pub sah_cost: f32,
+    pub build_ms: f32,
+}
+
+#[derive(Clone, Debug)]
+pub struct KdTree {
+    pub nodes: Vec<KdNode>,
+    pub leaves: Vec<LeafRange>,
+    pub prim_indices: Vec<u32>,
+    /// The root voxel.
+    pub bounds: Aabb,
+    pub ropes: Option<Ropes>,
+    pub stats: TreeStats,
+}
+
+impl KdTree {
+    /// Primitive indices of leaf `leaf`.
+    #[inline]
+    pub fn leaf_prims(&self, leaf: u32) -> &[u32] {
+        let r = self.leaves[leaf as usize];
+        &self.prim_indices[r.first as usize..(r.first + r.count) as usize]
+    }
+
+    /// Adds ropes (and leaf boxes) if they are not there yet.
+    pub fn ensure_ropes(&mut self) {
+        if self.ropes.is_none() {
+            self.ropes = Some(ropes::build_ropes(self));
+        }
+    }
+
+    /// Frees the ropes when no rope traversal needs them any more.
+    pub fn drop_ropes(&mut self) {
+        self.ropes = None;
+    }
+
+    pub fn node_bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice())
+    }
+
+    pub fn leaf_list_bytes(&self) -> usize {
+        std::mem::size_of_val(self.leaves.as_slice()) + std::mem::size_of_val(self.prim_indices.as_slice())
+    }
+
+    pub fn rope_bytes(&self) -> usize {
+        self.ropes.as_ref().map_or(0, |r| std::mem::size_of_val(r.links.as_slice()))
+    }
+
+    pub fn leaf_box_bytes(&self) -> usize {
+        self.ropes.as_ref().map_or(0, |r| std::mem::size_of_val(r.leaf_bounds.as_slice()))
+    }
+}
+
+impl BuildInput for PrimitiveSet {
+    fn prim_count(&self) -> usize {
+        self.len()
+    }
+
+    fn bounds(&self, prim: usize) -> Aabb {
+        PrimitiveSet::bounds(self, prim)
+    }
+
+    fn clipped_bounds(&self, prim: usize, voxel: &Aabb) -> Aabb {
+        PrimitiveSet::clipped_bounds(self, prim, voxel)
+    }
+}
