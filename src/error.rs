@@ -6,22 +6,22 @@ use std::fmt;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Rt2Status {
-    RT2_STATUS_OK = 0,
+    Ok = 0,
     /// NULL pointer, NaN/inf, out of range, unknown enum value.
-    RT2_STATUS_INVALID_ARGUMENT = 1,
+    InvalidArgument = 1,
     /// The call is not allowed in the object's state (e.g. render before commit).
-    RT2_STATUS_INVALID_OPERATION = 2,
-    RT2_STATUS_OUT_OF_MEMORY = 3,
+    InvalidOperation = 2,
+    OutOfMemory = 3,
     /// A file is missing or unreadable.
-    RT2_STATUS_IO = 4,
+    Io = 4,
     /// A malformed PLY/OBJ file (the message names file and line or byte offset).
-    RT2_STATUS_PARSE = 5,
+    Parse = 5,
     /// Valid input that this version does not handle.
-    RT2_STATUS_UNSUPPORTED = 6,
+    Unsupported = 6,
     /// The GPU was asked for and none is usable.
-    RT2_STATUS_BACKEND_UNAVAILABLE = 7,
+    BackendUnavailable = 7,
     /// A bug in RT2: a panic caught at the C boundary.
-    RT2_STATUS_INTERNAL = 8,
+    Internal = 8,
 }
 
 /// An error with the status a C caller receives and the message `rt2_last_error_message` shows.
@@ -40,23 +40,23 @@ impl Error {
     }
 
     pub fn invalid_argument(message: impl Into<String>) -> Self {
-        Self::new(Rt2Status::RT2_STATUS_INVALID_ARGUMENT, message)
+        Self::new(Rt2Status::InvalidArgument, message)
     }
 
     pub fn invalid_operation(message: impl Into<String>) -> Self {
-        Self::new(Rt2Status::RT2_STATUS_INVALID_OPERATION, message)
+        Self::new(Rt2Status::InvalidOperation, message)
     }
 
     pub fn io(message: impl Into<String>) -> Self {
-        Self::new(Rt2Status::RT2_STATUS_IO, message)
+        Self::new(Rt2Status::Io, message)
     }
 
     pub fn parse(message: impl Into<String>) -> Self {
-        Self::new(Rt2Status::RT2_STATUS_PARSE, message)
+        Self::new(Rt2Status::Parse, message)
     }
 
     pub fn unsupported(message: impl Into<String>) -> Self {
-        Self::new(Rt2Status::RT2_STATUS_UNSUPPORTED, message)
+        Self::new(Rt2Status::Unsupported, message)
     }
 }
 
