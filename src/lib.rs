@@ -1,11 +1,19 @@
 //! RT2: a real-time kd-tree ray tracer with a C API.
 //!
-//! Layers (DESIGN.md §2): [`api`] is the C boundary (layer 1), [`dispatch`] decides where each
-//! operation runs (layer 2), [`cpu`] is the CPU backend (layer 3a). Shared by all: the
-//! [`geometry`] vocabulary, the [`scene`] model and the [`kdtree`].
+//! Layers (DESIGN.md §2): [`api`] is the C boundary (layer 1); [`dispatch`] decides where each
+//! operation runs (layer 2); [`cpu`] is the CPU backend (layer 3a). Shared by all: the
+//! [`geometry`] vocabulary, the [`scene`] model, the [`kdtree`], [`camera`], [`frame`] and
+//! [`shading`]. [`context::Context`] ties a thread pool to a dispatch decision.
 
+pub mod api;
+pub mod camera;
+pub mod context;
+pub mod cpu;
+pub mod dispatch;
+pub mod error;
+pub mod frame;
 pub mod geometry;
 pub mod kdtree;
-pub mod cpu;
-pub mod error;
+pub mod render;
 pub mod scene;
+pub mod shading;

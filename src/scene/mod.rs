@@ -1,4 +1,301 @@
 //! The scene model: objects, materials and lights as the user described them, and the
-//! committed form (primitive set + kd-tree) that the backends trace.
+//! committed form (world-space primitive set + kd-tree) that the backends trace.
+//!
+//! Every edit validates first and changes nothing on error. Edits mark the scene dirty;
+//! `commit` rebuilds the tree (the RT² per-frame rebuild when objects move).
 
+pub mod builtin;
 pub mod loaders;
+mod material;
+mod object;
+
+pub use material::{Checker, Material, PointLight};
+pub use object::{Object, PrimOrigin, Shape};
+
+use crate::error::{Error, Result};
+use crate::geometry::{Aabb, PrimitiveSet};
+use crate::kdtree::{self, BuildOptions, KdTree};
+use glam::{Affine3A, Vec3};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// A scene as edited through the API. Material 0 always exists (the default material).
+#[derive(Clone, Debug)]
+pub struct Scene {
+    materials: Vec<Material>,
+    lights: Vec<PointLight>,
+    objects: Vec<Object>,
+    build: BuildOptions,
+    committed: Option<Arc<Committed>>,
+    dirty: bool,
+}
+
+/// What the backends trace: immutable, shared by concurrent renders.
+#[derive(Debug)]
+pub struct Committed {
+    pub prims: PrimitiveSet,
+    pub tree: KdTree,
+    /// Object and per-object index of each global primitive (bounded ones, then planes).
+    pub origins: Vec<PrimOrigin>,
+    pub object_material: Vec<u32>,
+    pub materials: Vec<Material>,
+    pub lights: Vec<PointLight>,
+    /// Bounds of the bounded primitives (planes excluded); sets the scale of ray offsets.
+    pub bounds: Aabb,
+    /// Time to place primitives in world space and build the tree.
+    pub commit_ms: f32,
+}
+
+impl Committed {
+    pub fn material_of(&self, prim: u32) -> &Material {
+        let object = self.origins[prim as usize].object as usize;
+        &self.materials[self.object_material[object] as usize]
+    }
+
+    /// A length that scales with the scene, for offsets of secondary-ray origins.
+    pub fn scale(&self) -> f32 {
+        let d = self.bounds.diagonal();
+        if d.is_finite() && d > 0.0 {
+            d
+        } else {
+            1.0
+        }
+    }
+}
+
+impl Default for Scene {
+    fn default() -> Self {
+        Scene {
+            materials: vec![Material::default()],
+            lights: Vec::new(),
+            objects: Vec::new(),
+            build: BuildOptions::default(),
+            committed: None,
+            dirty: true,
+        }
+    }
+}
+
+fn check_finite(name: &str, v: &[f32]) -> Result<()> {
+    match v.iter().position(|x| !x.is_finite()) {
+        Some(i) => Err(Error::invalid_argument(format!("{name}[{i}] is {} (must be finite)", v[i]))),
+        None => Ok(()),
+    }
+}
+
+fn check_color(name: &str, c: Vec3) -> Result<()> {
+    check_finite(name, &c.to_array())?;
+    if c.min_element() < 0.0 {
+        return Err(Error::invalid_argument(format!("{name} has a negative component: {c}")));
+    }
+    Ok(())
+}
+
+fn check_unit_range(name: &str, v: f32) -> Result<()> {
+    if !(0.0..=1.0).contains(&v) {
+        return Err(Error::invalid_argument(format!("{name} is {v} (must be in [0, 1])")));
+    }
+    Ok(())
+}
+
+impl Material {
+    pub fn validate(&self) -> Result<()> {
+        check_color("material.color", self.color)?;
+        for (name, v) in [
+            ("material.ambient", self.ambient),
+            ("material.diffuse", self.diffuse),
+            ("material.specular", self.specular),
+            ("material.reflectivity", self.reflectivity),
+            ("material.transparency", self.transparency),
+        ] {
+            check_unit_range(name, v)?;
+        }
+        if self.reflectivity + self.transparency > 1.0 {
+            return Err(Error::invalid_argument(format!(
+                "material.reflectivity + material.transparency is {} (must be at most 1)",
+                self.reflectivity + self.transparency
+            )));
+        }
+        if !(self.shininess.is_finite() && self.shininess >= 0.0) {
+            return Err(Error::invalid_argument(format!("material.shininess is {} (must be >= 0)", self.shininess)));
+        }
+        if !(self.ior.is_finite() && self.ior > 0.0) {
+            return Err(Error::invalid_argument(format!("material.ior is {} (must be > 0)", self.ior)));
+        }
+        if let Some(c) = self.checker {
+            check_color("material.checker_color", c.color2)?;
+            if !(c.scale.is_finite() && c.scale > 0.0) {
+                return Err(Error::invalid_argument(format!("material.checker_scale is {} (must be > 0)", c.scale)));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Shape {
+    pub fn validate(&self) -> Result<()> {
+        match self {
+            Shape::Mesh { positions, triangles } => {
+                for (i, p) in positions.iter().enumerate() {
+                    check_finite(&format!("positions[vertex {i}]"), &p.to_array())?;
+                }
+                for (t, tri) in triangles.iter().enumerate() {
+                    if let Some(k) = tri.iter().position(|&v| v as usize >= positions.len()) {
+                        return Err(Error::invalid_argument(format!(
+                            "indices[{}] (triangle {t}, corner {k}) is {}, but the mesh has {} vertices",
+                            3 * t + k,
+                            tri[k],
+                            positions.len()
+                        )));
+                    }
+                }
+            }
+            Shape::Sphere { center, radius } => {
+                check_finite("center", &center.to_array())?;
+                if !(radius.is_finite() && *radius > 0.0) {
+                    return Err(Error::invalid_argument(format!("radius is {radius} (must be finite and > 0)")));
+                }
+            }
+            Shape::Ellipsoid { center, radii } => {
+                check_finite("center", &center.to_array())?;
+                check_finite("radii", &radii.to_array())?;
+                if radii.min_element() <= 0.0 {
+                    return Err(Error::invalid_argument(format!("radii are {radii} (each must be > 0)")));
+                }
+            }
+            Shape::Box { min, max } => {
+                check_finite("min", &min.to_array())?;
+                check_finite("max", &max.to_array())?;
+                if min.cmpgt(*max).any() {
+                    return Err(Error::invalid_argument(format!("box min {min} exceeds max {max}")));
+                }
+            }
+            Shape::Plane { normal, offset } => {
+                check_finite("normal", &normal.to_array())?;
+                check_finite("offset", &[*offset])?;
+                if *normal == Vec3::ZERO {
+                    return Err(Error::invalid_argument("normal is the zero vector"));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Scene {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    pub fn materials(&self) -> &[Material] {
+        &self.materials
+    }
+
+    pub fn objects(&self) -> &[Object] {
+        &self.objects
+    }
+
+    pub fn lights(&self) -> &[PointLight] {
+        &self.lights
+    }
+
+    pub fn build_options(&self) -> BuildOptions {
+        self.build
+    }
+
+    pub fn add_material(&mut self, m: Material) -> Result<u32> {
+        m.validate()?;
+        self.materials.push(m);
+        self.dirty = true;
+        Ok(self.materials.len() as u32 - 1)
+    }
+
+    pub fn add_light(&mut self, l: PointLight) -> Result<u32> {
+        check_finite("position", &l.position.to_array())?;
+        check_color("rgb", l.color)?;
+        if !(l.intensity.is_finite() && l.intensity >= 0.0) {
+            return Err(Error::invalid_argument(format!("intensity is {} (must be finite and >= 0)", l.intensity)));
+        }
+        self.lights.push(l);
+        self.dirty = true;
+        Ok(self.lights.len() as u32 - 1)
+    }
+
+    pub fn add_object(&mut self, shape: Shape, material: u32) -> Result<u32> {
+        shape.validate()?;
+        if material as usize >= self.materials.len() {
+            return Err(Error::invalid_argument(format!(
+                "material is {material}, but the scene has {} materials",
+                self.materials.len()
+            )));
+        }
+        let prims: usize = self.objects.iter().map(|o| o.shape.prim_count()).sum();
+        if prims + shape.prim_count() >= (1 << 30) {
+            return Err(Error::unsupported("a scene holds fewer than 2^30 primitives"));
+        }
+        self.objects.push(Object {
+            shape,
+            material,
+            transform: Affine3A::IDENTITY,
+        });
+        self.dirty = true;
+        Ok(self.objects.len() as u32 - 1)
+    }
+
+    /// Sets an object's object-to-world transform (replacing the previous one).
+    pub fn set_transform(&mut self, object: u32, t: Affine3A) -> Result<()> {
+        let obj = self.objects.get(object as usize).ok_or_else(|| {
+            Error::invalid_argument(format!("object is {object}, but the scene has {} objects", self.objects.len()))
+        })?;
+        check_finite("transform", &t.to_cols_array())?;
+        let det = t.matrix3.determinant();
+        if det == 0.0 || !det.is_finite() {
+            return Err(Error::invalid_argument("transform is singular (its 3x3 part has determinant 0)"));
+        }
+        obj.shape.accepts(&t)?;
+        self.objects[object as usize].transform = t;
+        self.dirty = true;
+        Ok(())
+    }
+
+    pub fn set_build_options(&mut self, opts: BuildOptions) {
+        self.build = opts;
+        self.dirty = true;
+    }
+
+    /// Places every object in world space and builds the kd-tree.
+    pub fn commit(&mut self) -> Result<()> {
+        let start = Instant::now();
+        let mut prims = PrimitiveSet::default();
+        // One origin list per kind, concatenated in the order of the global index.
+        let mut by_kind: Vec<Vec<PrimOrigin>> = vec![Vec::new(); 5];
+        for (id, obj) in self.objects.iter().enumerate() {
+            object::place(obj, id as u32, &mut prims, &mut by_kind);
+        }
+        let origins: Vec<PrimOrigin> = by_kind.concat();
+        let tree = kdtree::build(&prims, &self.build);
+        self.committed = Some(Arc::new(Committed {
+            bounds: prims.scene_bounds(),
+            prims,
+            tree,
+            origins,
+            object_material: self.objects.iter().map(|o| o.material).collect(),
+            materials: self.materials.clone(),
+            lights: self.lights.clone(),
+            commit_ms: start.elapsed().as_secs_f32() * 1e3,
+        }));
+        self.dirty = false;
+        Ok(())
+    }
+
+    /// The committed scene, or an error if there is none or it is older than the last edit.
+    pub fn committed(&self) -> Result<&Arc<Committed>> {
+        match (&self.committed, self.dirty) {
+            (Some(c), false) => Ok(c),
+            (Some(_), true) => Err(Error::invalid_operation(
+                "the scene was modified after its last commit: call rt2_scene_commit first",
+            )),
+            (None, _) => Err(Error::invalid_operation("the scene was never committed: call rt2_scene_commit first")),
+        }
+    }
+}

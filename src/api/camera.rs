@@ -1,0 +1,85 @@
+//! `rt2_camera`: look-at pinhole or thin-lens camera. Calls on one camera must not overlap
+//! with edits of it from another thread; a camera may be read by concurrent renders.
+
+use super::ffi::{array, check_out, destroy, guard, handle_mut, write_out, Handle};
+use crate::camera::Camera;
+use crate::error::Rt2Status;
+use glam::Vec3;
+
+/// Opaque camera handle. Defaults: eye (0,0,5) looking at the origin, up +Y, 45° vertical
+/// field of view, pinhole.
+pub struct rt2_camera {
+    magic: u64,
+    pub(crate) camera: Camera,
+}
+
+impl Handle for rt2_camera {
+    const MAGIC: u64 = 0x7274_325f_6361_6d00;
+    const NAME: &'static str = "rt2_camera";
+    fn magic(&self) -> u64 {
+        self.magic
+    }
+}
+
+/// Creates a camera with the defaults.
+///
+/// # Safety
+/// `out` points to writable storage.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_camera_create(out: *mut *mut rt2_camera) -> Rt2Status {
+    guard(|| {
+        check_out(out, "out")?;
+        let h = Box::new(rt2_camera { magic: rt2_camera::MAGIC, camera: Camera::default() });
+        write_out(out, "out", Box::into_raw(h))
+    })
+}
+
+/// Frees a camera. NULL is a no-op.
+///
+/// # Safety
+/// `camera` is NULL or a camera not yet destroyed.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_camera_destroy(camera: *mut rt2_camera) {
+    guard(|| {
+        destroy(camera, |c| c.magic = 0);
+        Ok(())
+    });
+}
+
+/// Places the camera at `eye` looking at `target`; `up` must not be parallel to the view.
+///
+/// # Safety
+/// `camera` is a live camera; the arrays hold 3 floats each.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_camera_look_at(
+    camera: *mut rt2_camera,
+    eye: *const f32,
+    target: *const f32,
+    up: *const f32,
+) -> Rt2Status {
+    guard(|| {
+        let c = handle_mut(camera, "camera")?;
+        let [eye, target, up] = [(eye, "eye"), (target, "target"), (up, "up")]
+            .map(|(p, n)| array::<f32, 3>(p, n).map(Vec3::from));
+        c.camera.look_at(eye?, target?, up?)
+    })
+}
+
+/// Sets the vertical field of view in degrees, in (0, 180) (zoom).
+///
+/// # Safety
+/// `camera` is a live camera.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_camera_set_fov(camera: *mut rt2_camera, vertical_degrees: f32) -> Rt2Status {
+    guard(|| handle_mut(camera, "camera")?.camera.set_fov(vertical_degrees))
+}
+
+/// Sets the thin lens: `aperture` is the lens diameter (0 = pinhole), `focus_distance` the
+/// distance of the sharp plane (> 0). Depth of field needs several samples per pixel.
+///
+/// # Safety
+/// `camera` is a live camera.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_camera_set_lens(camera: *mut rt2_camera, aperture: f32, focus_distance: f32) -> Rt2Status {
+    guard(|| handle_mut(camera, "camera")?.camera.set_lens(aperture, focus_distance))
+}

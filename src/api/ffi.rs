@@ -1,0 +1,186 @@
+//! Helpers for the C boundary: the panic barrier, handle checks and checked views of
+//! caller memory. Nothing here trusts a pointer it has not checked.
+
+use super::status::set_last_error;
+use crate::error::{Error, Result, Rt2Status};
+use std::ffi::{c_char, CStr};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+/// Runs `f`, turning its error or panic into a status and this thread's error message.
+pub(crate) fn guard(f: impl FnOnce() -> Result<()>) -> Rt2Status {
+    match catch_unwind(AssertUnwindSafe(f)) {
+        Ok(Ok(())) => Rt2Status::Ok,
+        Ok(Err(e)) => {
+            set_last_error(&e.message);
+            e.status
+        }
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".into());
+            set_last_error(&format!("internal error (a bug in RT2, please report it): {what}"));
+            Rt2Status::Internal
+        }
+    }
+}
+
+/// Like [`guard`] for calls that return a pointer: NULL on failure.
+pub(crate) fn guard_ptr<T>(f: impl FnOnce() -> Result<*const T>) -> *const T {
+    let mut out = std::ptr::null();
+    guard(|| {
+        out = f()?;
+        Ok(())
+    });
+    out
+}
+
+/// A boxed object handed to C. `MAGIC` tells handles of this type from anything else.
+pub(crate) trait Handle: Sized {
+    const MAGIC: u64;
+    const NAME: &'static str;
+    fn magic(&self) -> u64;
+}
+
+/// Borrows a handle after checking it is non-NULL and carries the right magic.
+///
+/// # Safety
+/// `p` must be NULL or point to memory readable as `T` (the magic check catches handles of
+/// other types and destroyed handles whose memory was not reused).
+pub(crate) unsafe fn handle<'a, T: Handle>(p: *const T, arg: &str) -> Result<&'a T> {
+    if p.is_null() {
+        return Err(Error::invalid_argument(format!("{arg} is NULL")));
+    }
+    let r = &*p;
+    if r.magic() != T::MAGIC {
+        return Err(Error::invalid_argument(format!(
+            "{arg} is not a live {} (destroyed, or a different kind of handle)",
+            T::NAME
+        )));
+    }
+    Ok(r)
+}
+
+/// Mutable variant of [`handle`].
+///
+/// # Safety
+/// As for [`handle`], and no other reference to `*p` may be alive.
+pub(crate) unsafe fn handle_mut<'a, T: Handle>(p: *mut T, arg: &str) -> Result<&'a mut T> {
+    handle(p as *const T, arg)?;
+    Ok(&mut *p)
+}
+
+/// Frees a handle made by `Box::into_raw`, ignoring NULL and handles that fail the check.
+///
+/// # Safety
+/// `p` must be NULL or a handle of type `T` not yet destroyed.
+pub(crate) unsafe fn destroy<T: Handle>(p: *mut T, clear_magic: impl FnOnce(&mut T)) {
+    if p.is_null() || (*p).magic() != T::MAGIC {
+        return;
+    }
+    clear_magic(&mut *p);
+    drop(Box::from_raw(p));
+}
+
+/// A slice of `count` elements at `p`; NULL is allowed only for `count == 0`.
+///
+/// # Safety
+/// A non-NULL `p` must point to `count` readable, initialised elements.
+pub(crate) unsafe fn slice<'a, T>(p: *const T, count: usize, arg: &str) -> Result<&'a [T]> {
+    if count == 0 {
+        return Ok(&[]);
+    }
+    if p.is_null() {
+        return Err(Error::invalid_argument(format!("{arg} is NULL but its count is {count}")));
+    }
+    if count.checked_mul(std::mem::size_of::<T>()).is_none_or(|b| b > isize::MAX as usize) {
+        return Err(Error::invalid_argument(format!("{arg}: count {count} overflows the address space")));
+    }
+    Ok(std::slice::from_raw_parts(p, count))
+}
+
+/// Mutable variant of [`slice`].
+///
+/// # Safety
+/// A non-NULL `p` must point to `count` writable elements not aliased elsewhere.
+pub(crate) unsafe fn slice_mut<'a, T>(p: *mut T, count: usize, arg: &str) -> Result<&'a mut [T]> {
+    slice(p as *const T, count, arg)?;
+    if count == 0 {
+        return Ok(&mut []);
+    }
+    Ok(std::slice::from_raw_parts_mut(p, count))
+}
+
+/// Reads a fixed-size array argument such as `const float pos[3]`.
+///
+/// # Safety
+/// A non-NULL `p` must point to `N` readable elements.
+pub(crate) unsafe fn array<T: Copy, const N: usize>(p: *const T, arg: &str) -> Result<[T; N]> {
+    let s = slice(p, N, arg)?;
+    let mut out = [s[0]; N];
+    out.copy_from_slice(s);
+    Ok(out)
+}
+
+/// Writes an output argument, checking it first.
+///
+/// # Safety
+/// A non-NULL `p` must be writable.
+pub(crate) unsafe fn write_out<T>(p: *mut T, arg: &str, value: T) -> Result<()> {
+    if p.is_null() {
+        return Err(Error::invalid_argument(format!("{arg} is NULL")));
+    }
+    p.write(value);
+    Ok(())
+}
+
+/// Checks an output pointer before any work is done, so that failures leave no side effects.
+pub(crate) fn check_out<T>(p: *mut T, arg: &str) -> Result<()> {
+    if p.is_null() {
+        Err(Error::invalid_argument(format!("{arg} is NULL")))
+    } else {
+        Ok(())
+    }
+}
+
+/// A NUL-terminated path argument.
+///
+/// # Safety
+/// A non-NULL `p` must point to a NUL-terminated string.
+pub(crate) unsafe fn path_arg(p: *const c_char, arg: &str) -> Result<std::path::PathBuf> {
+    if p.is_null() {
+        return Err(Error::invalid_argument(format!("{arg} is NULL")));
+    }
+    let bytes = CStr::from_ptr(p).to_bytes();
+    if bytes.is_empty() {
+        return Err(Error::invalid_argument(format!("{arg} is an empty string")));
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        Ok(std::ffi::OsStr::from_bytes(bytes).into())
+    }
+    #[cfg(not(unix))]
+    {
+        std::str::from_utf8(bytes)
+            .map(Into::into)
+            .map_err(|_| Error::invalid_argument(format!("{arg} is not valid UTF-8")))
+    }
+}
+
+/// Checks the `struct_size` field of a versioned descriptor.
+pub(crate) fn check_struct_size<T>(struct_size: u32, name: &str) -> Result<()> {
+    let want = std::mem::size_of::<T>();
+    if struct_size as usize != want {
+        return Err(Error::invalid_argument(format!(
+            "{name}.struct_size is {struct_size}, expected {want}: start from {name}_default()"
+        )));
+    }
+    Ok(())
+}
+
+/// Unknown enum values from C are errors, never transmuted.
+pub(crate) fn enum_error(name: &str, value: u32) -> Error {
+    Error::new(Rt2Status::InvalidArgument, format!("{value} is not a valid {name} value"))
+}

@@ -1,0 +1,100 @@
+//! `rt2_frame`: an RGBA8 image that renders write into, with an optional HUD mask. A frame is
+//! used by one call at a time.
+
+use super::ffi::{check_out, destroy, guard, guard_ptr, handle, handle_mut, path_arg, slice, write_out, Handle};
+use crate::error::Rt2Status;
+use crate::frame::Frame;
+
+/// Opaque frame handle: `width × height` RGBA8 pixels, row-major from the top-left, initially
+/// transparent black.
+pub struct rt2_frame {
+    magic: u64,
+    pub(crate) frame: Frame,
+}
+
+impl Handle for rt2_frame {
+    const MAGIC: u64 = 0x7274_325f_6672_6d00;
+    const NAME: &'static str = "rt2_frame";
+    fn magic(&self) -> u64 {
+        self.magic
+    }
+}
+
+/// Creates a frame; each side must be in 1..=32768.
+///
+/// # Safety
+/// `out` points to writable storage.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_frame_create(width: u32, height: u32, out: *mut *mut rt2_frame) -> Rt2Status {
+    guard(|| {
+        check_out(out, "out")?;
+        let h = Box::new(rt2_frame { magic: rt2_frame::MAGIC, frame: Frame::new(width, height)? });
+        write_out(out, "out", Box::into_raw(h))
+    })
+}
+
+/// Frees a frame. NULL is a no-op.
+///
+/// # Safety
+/// `frame` is NULL or a frame not yet destroyed.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_frame_destroy(frame: *mut rt2_frame) {
+    guard(|| {
+        destroy(frame, |f| f.magic = 0);
+        Ok(())
+    });
+}
+
+/// Writes the frame's size.
+///
+/// # Safety
+/// `frame` is a live frame; `width` and `height` are writable.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_frame_size(frame: *const rt2_frame, width: *mut u32, height: *mut u32) -> Rt2Status {
+    guard(|| {
+        let f = handle(frame, "frame")?;
+        check_out(width, "width")?;
+        check_out(height, "height")?;
+        write_out(width, "width", f.frame.width())?;
+        write_out(height, "height", f.frame.height())
+    })
+}
+
+/// Sets the mask: one byte per pixel, 0 = not traced (left as it was, e.g. under a HUD).
+/// NULL clears the mask. The bytes are copied.
+///
+/// # Safety
+/// `frame` is a live frame; `mask` is NULL or holds width × height bytes.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_frame_set_mask(frame: *mut rt2_frame, mask: *const u8) -> Rt2Status {
+    guard(|| {
+        let f = handle_mut(frame, "frame")?;
+        if mask.is_null() {
+            return f.frame.set_mask(None);
+        }
+        let m = slice(mask, f.frame.pixel_count(), "mask")?;
+        f.frame.set_mask(Some(m))
+    })
+}
+
+/// The pixels, `4 × width × height` bytes (RGBA8); valid until the frame is destroyed.
+/// NULL (with the error message set) if `frame` is not a live frame.
+///
+/// # Safety
+/// `frame` is a live frame.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_frame_pixels(frame: *const rt2_frame) -> *const u8 {
+    guard_ptr(|| Ok(handle(frame, "frame")?.frame.pixels().as_ptr()))
+}
+
+/// Saves the frame as a PNG file.
+///
+/// # Safety
+/// `frame` is a live frame; `path` is a NUL-terminated string.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_frame_save_png(frame: *const rt2_frame, path: *const std::ffi::c_char) -> Rt2Status {
+    guard(|| {
+        let f = handle(frame, "frame")?;
+        f.frame.save_png(&path_arg(path, "path")?)
+    })
+}

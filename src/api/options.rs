@@ -1,0 +1,340 @@
+//! Versioned descriptors and enums of the C API. Callers start from `rt2_*_default()` and
+//! change fields, so fields can be added later. Enum-typed fields are `uint32_t` on the wire
+//! and checked, because an out-of-range C enum value must be an error, not undefined behaviour.
+
+use super::ffi::{check_struct_size, enum_error};
+use crate::cpu::traverse::Traversal;
+use crate::dispatch::BackendRequest;
+use crate::error::{Error, Result};
+use crate::kdtree::{BuildOptions, Builder, Layout};
+use crate::render::{RenderOptions, Transparency};
+use crate::scene::{Checker, Material};
+use glam::Vec3;
+
+/// Where tracing runs (`rt2_context_desc.backend`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2Backend {
+    Auto = 0,
+    Cpu = 1,
+    Gpu = 2,
+}
+
+/// kd-tree traversal algorithm (`rt2_render_options.traversal`); RT² thesis §2.4.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2Traversal {
+    /// The library picks per scene and backend (see `rt2_context_info`).
+    Auto = 0,
+    Standard = 1,
+    KdRestart = 2,
+    PushDown = 3,
+    ShortStack = 4,
+    PushDownShortStack = 5,
+    Ropes = 6,
+    RopesPlusPlus = 7,
+}
+
+/// How transparent materials pass light (`rt2_render_options.transparency`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2Transparency {
+    /// RT² mode: rays continue unbent.
+    Straight = 0,
+    /// Snell refraction with Fresnel reflection.
+    Refract = 1,
+}
+
+/// kd-tree builder (`rt2_build_options.builder`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2Builder {
+    /// Surface Area Heuristic with perfect splits (RT²).
+    Sah = 0,
+    /// Splits at the voxel centre (the vectorised-traversal paper).
+    Midpoint = 1,
+}
+
+/// Node order in memory (`rt2_build_options.layout`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2Layout {
+    DepthFirst = 0,
+    /// Cache-oblivious van Emde Boas order.
+    VanEmdeBoas = 1,
+}
+
+pub(crate) fn backend_from(v: u32) -> Result<BackendRequest> {
+    match v {
+        0 => Ok(BackendRequest::Auto),
+        1 => Ok(BackendRequest::Cpu),
+        2 => Ok(BackendRequest::Gpu),
+        _ => Err(enum_error("rt2_backend", v)),
+    }
+}
+
+pub(crate) fn traversal_from(v: u32) -> Result<Option<Traversal>> {
+    use Traversal::*;
+    Ok(Some(match v {
+        0 => return Ok(None),
+        1 => Standard,
+        2 => KdRestart,
+        3 => PushDown,
+        4 => ShortStack,
+        5 => PushDownShortStack,
+        6 => Ropes,
+        7 => RopesPlusPlus,
+        _ => return Err(enum_error("rt2_traversal", v)),
+    }))
+}
+
+/// Creation parameters of a context.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rt2_context_desc {
+    /// `sizeof(rt2_context_desc)`.
+    pub struct_size: u32,
+    /// An `rt2_backend` value. Default AUTO; the `RT2_BACKEND` environment variable overrides.
+    pub backend: u32,
+    /// Worker threads; 0 (default) uses every core.
+    pub threads: u32,
+}
+
+/// A context descriptor with the defaults filled in.
+#[no_mangle]
+pub extern "C" fn rt2_context_desc_default() -> rt2_context_desc {
+    rt2_context_desc {
+        struct_size: std::mem::size_of::<rt2_context_desc>() as u32,
+        backend: Rt2Backend::Auto as u32,
+        threads: 0,
+    }
+}
+
+/// A Phong/Whitted material. Colours are linear RGB in [0, inf); the terms in [0, 1];
+/// `reflectivity + transparency <= 1`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rt2_material {
+    /// `sizeof(rt2_material)`.
+    pub struct_size: u32,
+    pub color: [f32; 3],
+    pub ambient: f32,
+    pub diffuse: f32,
+    pub specular: f32,
+    /// Phong exponent, >= 0.
+    pub shininess: f32,
+    /// Fraction of light carried by the mirror ray.
+    pub reflectivity: f32,
+    /// Fraction of light carried by the transmitted ray.
+    pub transparency: f32,
+    /// Index of refraction (> 0), used with `RT2_TRANSPARENCY_REFRACT`.
+    pub ior: f32,
+    /// Non-zero: a world-space checkerboard of `color` and `checker_color`.
+    pub checker: u32,
+    pub checker_color: [f32; 3],
+    /// Edge length of one checker square (> 0).
+    pub checker_scale: f32,
+}
+
+impl From<&Material> for rt2_material {
+    fn from(m: &Material) -> Self {
+        let c = m.checker.unwrap_or(Checker { color2: Vec3::ZERO, scale: 1.0 });
+        rt2_material {
+            struct_size: std::mem::size_of::<rt2_material>() as u32,
+            color: m.color.to_array(),
+            ambient: m.ambient,
+            diffuse: m.diffuse,
+            specular: m.specular,
+            shininess: m.shininess,
+            reflectivity: m.reflectivity,
+            transparency: m.transparency,
+            ior: m.ior,
+            checker: m.checker.is_some() as u32,
+            checker_color: c.color2.to_array(),
+            checker_scale: c.scale,
+        }
+    }
+}
+
+impl rt2_material {
+    pub(crate) fn to_material(&self) -> Result<Material> {
+        check_struct_size::<rt2_material>(self.struct_size, "rt2_material")?;
+        let m = Material {
+            color: Vec3::from(self.color),
+            ambient: self.ambient,
+            diffuse: self.diffuse,
+            specular: self.specular,
+            shininess: self.shininess,
+            reflectivity: self.reflectivity,
+            transparency: self.transparency,
+            ior: self.ior,
+            checker: (self.checker != 0).then_some(Checker {
+                color2: Vec3::from(self.checker_color),
+                scale: self.checker_scale,
+            }),
+        };
+        m.validate()?;
+        Ok(m)
+    }
+}
+
+/// The default material (light grey, diffuse, a little specular).
+#[no_mangle]
+pub extern "C" fn rt2_material_default() -> rt2_material {
+    (&Material::default()).into()
+}
+
+/// kd-tree build parameters of a scene (`rt2_scene_set_build_options`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rt2_build_options {
+    /// `sizeof(rt2_build_options)`.
+    pub struct_size: u32,
+    /// An `rt2_builder` value (default SAH).
+    pub builder: u32,
+    /// An `rt2_layout` value (default depth-first).
+    pub layout: u32,
+    /// Maximum tree depth, at most 64; 0 (default) picks one from the primitive count.
+    pub max_depth: u32,
+    /// Midpoint builder: stop splitting at this many primitives (>= 1).
+    pub leaf_size: u32,
+    /// SAH cost of a traversal step relative to a primitive test (> 0).
+    pub traversal_cost: f32,
+    /// SAH bonus for cutting off empty space, in [0, 1).
+    pub empty_bonus: f32,
+    /// Non-zero: build ropes now (they are also built on demand by rope traversals).
+    pub ropes: u32,
+}
+
+impl From<&BuildOptions> for rt2_build_options {
+    fn from(o: &BuildOptions) -> Self {
+        rt2_build_options {
+            struct_size: std::mem::size_of::<rt2_build_options>() as u32,
+            builder: match o.builder {
+                Builder::Sah => Rt2Builder::Sah as u32,
+                Builder::Midpoint => Rt2Builder::Midpoint as u32,
+            },
+            layout: match o.layout {
+                Layout::DepthFirst => Rt2Layout::DepthFirst as u32,
+                Layout::VanEmdeBoas => Rt2Layout::VanEmdeBoas as u32,
+            },
+            max_depth: o.max_depth.unwrap_or(0),
+            leaf_size: o.leaf_size,
+            traversal_cost: o.traversal_cost,
+            empty_bonus: o.empty_bonus,
+            ropes: o.ropes as u32,
+        }
+    }
+}
+
+impl rt2_build_options {
+    pub(crate) fn to_options(&self) -> Result<BuildOptions> {
+        check_struct_size::<rt2_build_options>(self.struct_size, "rt2_build_options")?;
+        let bad = Error::invalid_argument;
+        let builder = match self.builder {
+            0 => Builder::Sah,
+            1 => Builder::Midpoint,
+            v => return Err(enum_error("rt2_builder", v)),
+        };
+        let layout = match self.layout {
+            0 => Layout::DepthFirst,
+            1 => Layout::VanEmdeBoas,
+            v => return Err(enum_error("rt2_layout", v)),
+        };
+        if self.max_depth > 64 {
+            return Err(bad(format!("max_depth is {} (at most 64)", self.max_depth)));
+        }
+        if self.leaf_size == 0 {
+            return Err(bad("leaf_size is 0 (must be >= 1)".into()));
+        }
+        if !(self.traversal_cost.is_finite() && self.traversal_cost > 0.0) {
+            return Err(bad(format!("traversal_cost is {} (must be > 0)", self.traversal_cost)));
+        }
+        if !(0.0..1.0).contains(&self.empty_bonus) {
+            return Err(bad(format!("empty_bonus is {} (must be in [0, 1))", self.empty_bonus)));
+        }
+        Ok(BuildOptions {
+            builder,
+            layout,
+            max_depth: (self.max_depth != 0).then_some(self.max_depth),
+            leaf_size: self.leaf_size,
+            traversal_cost: self.traversal_cost,
+            empty_bonus: self.empty_bonus,
+            ropes: self.ropes != 0,
+        })
+    }
+}
+
+/// Default kd-tree build options (SAH with perfect splits, depth-first).
+#[no_mangle]
+pub extern "C" fn rt2_build_options_default() -> rt2_build_options {
+    (&BuildOptions::default()).into()
+}
+
+/// Per-call render parameters (`rt2_render`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rt2_render_options {
+    /// `sizeof(rt2_render_options)`.
+    pub struct_size: u32,
+    /// Longest chain of rays from the eye, 1..=64 (default 6; 1 = ray casting with shadows).
+    pub max_depth: u32,
+    /// Samples per pixel, 1..=1024 (default 1).
+    pub samples: u32,
+    /// An `rt2_traversal` value (default AUTO).
+    pub traversal: u32,
+    /// Entries of the short stack, 1..=64 (default 3, as in RT²).
+    pub short_stack_size: u32,
+    /// An `rt2_transparency` value (default REFRACT).
+    pub transparency: u32,
+    /// Colour of rays that leave the scene.
+    pub background: [f32; 3],
+}
+
+impl rt2_render_options {
+    pub(crate) fn to_options(&self) -> Result<RenderOptions> {
+        check_struct_size::<rt2_render_options>(self.struct_size, "rt2_render_options")?;
+        let bad = Error::invalid_argument;
+        if !(1..=64).contains(&self.max_depth) {
+            return Err(bad(format!("max_depth is {} (must be in 1..=64)", self.max_depth)));
+        }
+        if !(1..=1024).contains(&self.samples) {
+            return Err(bad(format!("samples is {} (must be in 1..=1024)", self.samples)));
+        }
+        if !(1..=64).contains(&self.short_stack_size) {
+            return Err(bad(format!("short_stack_size is {} (must be in 1..=64)", self.short_stack_size)));
+        }
+        let transparency = match self.transparency {
+            0 => Transparency::Straight,
+            1 => Transparency::Refract,
+            v => return Err(enum_error("rt2_transparency", v)),
+        };
+        let background = Vec3::from(self.background);
+        if !background.is_finite() || background.min_element() < 0.0 {
+            return Err(bad(format!("background is {background} (must be finite and >= 0)")));
+        }
+        Ok(RenderOptions {
+            max_depth: self.max_depth,
+            samples: self.samples,
+            traversal: traversal_from(self.traversal)?,
+            short_stack_size: self.short_stack_size as usize,
+            transparency,
+            background,
+        })
+    }
+}
+
+/// Default render options (depth 6, 1 sample, AUTO traversal, refraction).
+#[no_mangle]
+pub extern "C" fn rt2_render_options_default() -> rt2_render_options {
+    let d = RenderOptions::default();
+    rt2_render_options {
+        struct_size: std::mem::size_of::<rt2_render_options>() as u32,
+        max_depth: d.max_depth,
+        samples: d.samples,
+        traversal: Rt2Traversal::Auto as u32,
+        short_stack_size: d.short_stack_size as u32,
+        transparency: Rt2Transparency::Refract as u32,
+        background: d.background.to_array(),
+    }
+}

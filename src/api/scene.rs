@@ -1,0 +1,362 @@
+//! `rt2_scene`: geometry, materials and lights. Edits and commit take the scene's write lock
+//! and renders its read lock, so concurrent calls never corrupt it: committed scenes may be
+//! rendered and queried from many threads at once; an edit waits for running renders.
+
+use super::context::rt2_context;
+use super::ffi::{array, check_out, destroy, guard, handle, path_arg, slice, write_out, Handle};
+use super::options::{rt2_build_options, rt2_material};
+use crate::context::Context;
+use crate::error::{Error, Result, Rt2Status};
+use crate::scene::{loaders, PointLight, Scene, Shape};
+use glam::{Affine3A, Mat3, Vec3};
+use std::sync::{Arc, RwLock, RwLockReadGuard, RwLockWriteGuard};
+
+/// Opaque scene handle. Material 0 exists from the start (the default material).
+pub struct rt2_scene {
+    magic: u64,
+    pub(crate) context: Arc<Context>,
+    scene: RwLock<Scene>,
+}
+
+impl Handle for rt2_scene {
+    const MAGIC: u64 = 0x7274_325f_7363_6e00;
+    const NAME: &'static str = "rt2_scene";
+    fn magic(&self) -> u64 {
+        self.magic
+    }
+}
+
+impl rt2_scene {
+    /// A panic while holding the lock leaves the scene as it was before the failed edit (all
+    /// edits validate before they change anything), so a poisoned lock is still usable.
+    pub(crate) fn read(&self) -> RwLockReadGuard<'_, Scene> {
+        self.scene.read().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn write(&self) -> RwLockWriteGuard<'_, Scene> {
+        self.scene.write().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// Runs an edit that yields an id, writing the id only on success.
+unsafe fn edit_with_id(scene: *mut rt2_scene, out_id: *mut u32, f: impl FnOnce(&mut Scene) -> Result<u32>) -> Rt2Status {
+    guard(|| {
+        let s = handle(scene, "scene")?;
+        let id = f(&mut s.write())?;
+        if !out_id.is_null() {
+            out_id.write(id);
+        }
+        Ok(())
+    })
+}
+
+/// Creates an empty scene that keeps `ctx` alive.
+///
+/// # Safety
+/// `ctx` is a live context; `out` is writable.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_create(ctx: *const rt2_context, out: *mut *mut rt2_scene) -> Rt2Status {
+    guard(|| {
+        let c = handle(ctx, "ctx")?;
+        check_out(out, "out")?;
+        let h = Box::new(rt2_scene {
+            magic: rt2_scene::MAGIC,
+            context: c.inner.clone(),
+            scene: RwLock::new(Scene::new()),
+        });
+        write_out(out, "out", Box::into_raw(h))
+    })
+}
+
+/// Frees a scene. NULL is a no-op. Must not overlap with other calls on the scene.
+///
+/// # Safety
+/// `scene` is NULL or a scene not yet destroyed.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_destroy(scene: *mut rt2_scene) {
+    guard(|| {
+        destroy(scene, |s| s.magic = 0);
+        Ok(())
+    });
+}
+
+/// Adds a material; `*out_id` (may be NULL) receives its id.
+///
+/// # Safety
+/// `scene` is a live scene; `material` points to an `rt2_material`.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_add_material(scene: *mut rt2_scene, material: *const rt2_material, out_id: *mut u32) -> Rt2Status {
+    edit_with_id(scene, out_id, |s| {
+        if material.is_null() {
+            return Err(Error::invalid_argument("material is NULL"));
+        }
+        s.add_material((*material).to_material()?)
+    })
+}
+
+/// Adds a point light at `position` with colour `rgb` (>= 0) scaled by `intensity` (>= 0).
+///
+/// # Safety
+/// `scene` is a live scene; the arrays hold 3 floats.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_add_point_light(
+    scene: *mut rt2_scene,
+    position: *const f32,
+    rgb: *const f32,
+    intensity: f32,
+    out_id: *mut u32,
+) -> Rt2Status {
+    edit_with_id(scene, out_id, |s| {
+        let position = Vec3::from(array::<f32, 3>(position, "position")?);
+        let color = Vec3::from(array::<f32, 3>(rgb, "rgb")?);
+        s.add_light(PointLight { position, color, intensity })
+    })
+}
+
+/// Adds a triangle mesh: `vertex_count` xyz positions and `triangle_count` index triples.
+/// The data is copied. `*out_object` (may be NULL) receives the object id.
+///
+/// # Safety
+/// `positions` holds 3 × vertex_count floats, `indices` 3 × triangle_count integers.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_add_mesh(
+    scene: *mut rt2_scene,
+    positions: *const f32,
+    vertex_count: usize,
+    indices: *const u32,
+    triangle_count: usize,
+    material: u32,
+    out_object: *mut u32,
+) -> Rt2Status {
+    edit_with_id(scene, out_object, |s| {
+        let n3 = |n: usize, what: &str| {
+            n.checked_mul(3).ok_or_else(|| Error::invalid_argument(format!("{what} overflows")))
+        };
+        let p = slice(positions, n3(vertex_count, "vertex_count")?, "positions")?;
+        let i = slice(indices, n3(triangle_count, "triangle_count")?, "indices")?;
+        if vertex_count > u32::MAX as usize {
+            return Err(Error::invalid_argument("vertex_count exceeds 2^32 - 1"));
+        }
+        let shape = Shape::Mesh {
+            positions: p.chunks_exact(3).map(Vec3::from_slice).collect(),
+            triangles: i.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+        };
+        s.add_object(shape, material)
+    })
+}
+
+/// Adds a sphere (radius > 0). It stays analytic.
+///
+/// # Safety
+/// `scene` is a live scene; `center` holds 3 floats.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_add_sphere(
+    scene: *mut rt2_scene,
+    center: *const f32,
+    radius: f32,
+    material: u32,
+    out_object: *mut u32,
+) -> Rt2Status {
+    edit_with_id(scene, out_object, |s| {
+        let center = Vec3::from(array::<f32, 3>(center, "center")?);
+        s.add_object(Shape::Sphere { center, radius }, material)
+    })
+}
+
+/// Adds an axis-aligned ellipsoid with semi-axes `radii` (each > 0); a transform may rotate it.
+///
+/// # Safety
+/// `scene` is a live scene; `center` and `radii` hold 3 floats.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_add_ellipsoid(
+    scene: *mut rt2_scene,
+    center: *const f32,
+    radii: *const f32,
+    material: u32,
+    out_object: *mut u32,
+) -> Rt2Status {
+    edit_with_id(scene, out_object, |s| {
+        let center = Vec3::from(array::<f32, 3>(center, "center")?);
+        let radii = Vec3::from(array::<f32, 3>(radii, "radii")?);
+        s.add_object(Shape::Ellipsoid { center, radii }, material)
+    })
+}
+
+/// Adds a solid axis-aligned box from `min` to `max` (componentwise `min <= max`).
+///
+/// # Safety
+/// `scene` is a live scene; `min` and `max` hold 3 floats.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_add_box(
+    scene: *mut rt2_scene,
+    min: *const f32,
+    max: *const f32,
+    material: u32,
+    out_object: *mut u32,
+) -> Rt2Status {
+    edit_with_id(scene, out_object, |s| {
+        let min = Vec3::from(array::<f32, 3>(min, "min")?);
+        let max = Vec3::from(array::<f32, 3>(max, "max")?);
+        s.add_object(Shape::Box { min, max }, material)
+    })
+}
+
+/// Adds the infinite plane `dot(normal, x) = offset` (`normal` non-zero, any length).
+///
+/// # Safety
+/// `scene` is a live scene; `normal` holds 3 floats.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_add_plane(
+    scene: *mut rt2_scene,
+    normal: *const f32,
+    offset: f32,
+    material: u32,
+    out_object: *mut u32,
+) -> Rt2Status {
+    edit_with_id(scene, out_object, |s| {
+        let normal = Vec3::from(array::<f32, 3>(normal, "normal")?);
+        s.add_object(Shape::Plane { normal, offset }, material)
+    })
+}
+
+/// Loads a triangle mesh from a `.ply` (ASCII or binary) or `.obj` file as one object.
+/// Errors name the file and the line or byte offset at fault. Triangles keep the file's face
+/// order (polygons are fan-triangulated).
+///
+/// # Safety
+/// `scene` is a live scene; `path` is a NUL-terminated string.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_load_file(
+    scene: *mut rt2_scene,
+    path: *const std::ffi::c_char,
+    material: u32,
+    out_object: *mut u32,
+) -> Rt2Status {
+    edit_with_id(scene, out_object, |s| {
+        let mesh = loaders::load_mesh(&path_arg(path, "path")?)?;
+        s.add_object(Shape::Mesh { positions: mesh.positions, triangles: mesh.triangles }, material)
+    })
+}
+
+/// Sets an object's object-to-world transform: a row-major 3×4 matrix `[R | t]` (12 floats),
+/// replacing the previous one. Takes effect at the next commit (the per-frame rebuild).
+/// Boxes accept only transforms that keep them axis-aligned.
+///
+/// # Safety
+/// `scene` is a live scene; `m3x4` holds 12 floats.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_set_transform(scene: *mut rt2_scene, object: u32, m3x4: *const f32) -> Rt2Status {
+    guard(|| {
+        let s = handle(scene, "scene")?;
+        let m = array::<f32, 12>(m3x4, "m3x4")?;
+        let lin = Mat3::from_cols_array(&[m[0], m[4], m[8], m[1], m[5], m[9], m[2], m[6], m[10]]);
+        let t = Affine3A::from_mat3_translation(lin, Vec3::new(m[3], m[7], m[11]));
+        s.write().set_transform(object, t)
+    })
+}
+
+/// Sets how the kd-tree is built; takes effect at the next commit.
+///
+/// # Safety
+/// `scene` is a live scene; `options` points to an `rt2_build_options`.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_set_build_options(scene: *mut rt2_scene, options: *const rt2_build_options) -> Rt2Status {
+    guard(|| {
+        let s = handle(scene, "scene")?;
+        if options.is_null() {
+            return Err(Error::invalid_argument("options is NULL"));
+        }
+        let o = (*options).to_options()?;
+        s.write().set_build_options(o);
+        Ok(())
+    })
+}
+
+/// Builds the acceleration structure. Rendering needs a commit after the last edit.
+///
+/// # Safety
+/// `scene` is a live scene.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_commit(scene: *mut rt2_scene) -> Rt2Status {
+    guard(|| {
+        let s = handle(scene, "scene")?;
+        let ctx = s.context.clone();
+        let mut w = s.write();
+        let scene: &mut Scene = &mut w;
+        ctx.install(|| scene.commit())
+    })
+}
+
+/// Size and memory of a committed scene (`rt2_scene_stats`). Bytes are exact sizes of the
+/// arrays the backends read.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct rt2_scene_statistics {
+    /// Set to `sizeof(rt2_scene_statistics)` before the call.
+    pub struct_size: u32,
+    pub object_count: u32,
+    pub triangle_count: u32,
+    pub sphere_count: u32,
+    pub ellipsoid_count: u32,
+    pub box_count: u32,
+    pub plane_count: u32,
+    pub node_count: u32,
+    pub leaf_count: u32,
+    pub empty_leaf_count: u32,
+    pub max_depth: u32,
+    pub avg_leaf_depth: f32,
+    /// Mean primitive references per non-empty leaf.
+    pub avg_prims_per_leaf: f32,
+    pub sah_cost: f32,
+    /// Time of the tree build alone.
+    pub build_ms: f32,
+    /// Time of the whole commit (world-space placement + build).
+    pub commit_ms: f32,
+    pub bytes_nodes: u64,
+    pub bytes_leaf_lists: u64,
+    pub bytes_ropes: u64,
+    pub bytes_leaf_boxes: u64,
+    pub bytes_primitives: u64,
+}
+
+/// Statistics of the committed scene. Fails with INVALID_OPERATION before the first commit
+/// or after an edit.
+///
+/// # Safety
+/// `scene` is a live scene; `out` points to an `rt2_scene_statistics` whose `struct_size` is set.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_stats(scene: *const rt2_scene, out: *mut rt2_scene_statistics) -> Rt2Status {
+    guard(|| {
+        let s = handle(scene, "scene")?;
+        check_out(out, "out")?;
+        super::ffi::check_struct_size::<rt2_scene_statistics>((*out).struct_size, "rt2_scene_statistics")?;
+        let r = s.read();
+        let c = r.committed()?;
+        let t = &c.tree;
+        let st = t.stats;
+        let stats = rt2_scene_statistics {
+            struct_size: std::mem::size_of::<rt2_scene_statistics>() as u32,
+            object_count: r.objects().len() as u32,
+            triangle_count: c.prims.triangles.len() as u32,
+            sphere_count: c.prims.spheres.len() as u32,
+            ellipsoid_count: c.prims.ellipsoids.len() as u32,
+            box_count: c.prims.boxes.len() as u32,
+            plane_count: c.prims.planes.len() as u32,
+            node_count: st.node_count,
+            leaf_count: st.leaf_count,
+            empty_leaf_count: st.empty_leaf_count,
+            max_depth: st.max_depth,
+            avg_leaf_depth: st.avg_leaf_depth,
+            avg_prims_per_leaf: st.avg_prims_per_leaf,
+            sah_cost: st.sah_cost,
+            build_ms: st.build_ms,
+            commit_ms: c.commit_ms,
+            bytes_nodes: t.node_bytes() as u64,
+            bytes_leaf_lists: t.leaf_list_bytes() as u64,
+            bytes_ropes: t.rope_bytes() as u64,
+            bytes_leaf_boxes: t.leaf_box_bytes() as u64,
+            bytes_primitives: c.prims.bytes() as u64,
+        };
+        write_out(out, "out", stats)
+    })
+}

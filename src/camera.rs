@@ -1,0 +1,124 @@
+//! The pinhole / thin-lens camera. Zoom (field of view) and focus are parameters of primary
+//! rays only, as in the thesis; the aspect ratio comes from the frame.
+
+use crate::error::{Error, Result};
+use crate::geometry::Ray;
+use glam::{Vec2, Vec3};
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    pub target: Vec3,
+    pub up: Vec3,
+    /// Vertical field of view in degrees.
+    pub fov_y: f32,
+    /// Lens diameter; 0 is a pinhole (no depth of field).
+    pub aperture: f32,
+    /// Distance from the eye to the plane in focus.
+    pub focus_distance: f32,
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Camera {
+            eye: Vec3::new(0.0, 0.0, 5.0),
+            target: Vec3::ZERO,
+            up: Vec3::Y,
+            fov_y: 45.0,
+            aperture: 0.0,
+            focus_distance: 1.0,
+        }
+    }
+}
+
+/// The camera's basis and image-plane scale, computed once per frame.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraRays {
+    eye: Vec3,
+    forward: Vec3,
+    right: Vec3,
+    up: Vec3,
+    half_h: f32,
+    half_w: f32,
+    aperture: f32,
+    focus: f32,
+}
+
+impl Camera {
+    pub fn look_at(&mut self, eye: Vec3, target: Vec3, up: Vec3) -> Result<()> {
+        for (n, v) in [("eye", eye), ("target", target), ("up", up)] {
+            if !v.is_finite() {
+                return Err(Error::invalid_argument(format!("{n} is {v} (must be finite)")));
+            }
+        }
+        let f = target - eye;
+        if f.length_squared() == 0.0 {
+            return Err(Error::invalid_argument("eye and target are the same point"));
+        }
+        if f.cross(up).length_squared() <= 1e-12 * f.length_squared() * up.length_squared() {
+            return Err(Error::invalid_argument("up is zero or parallel to the view direction"));
+        }
+        self.eye = eye;
+        self.target = target;
+        self.up = up;
+        Ok(())
+    }
+
+    pub fn set_fov(&mut self, degrees: f32) -> Result<()> {
+        if !(degrees > 0.0 && degrees < 180.0) {
+            return Err(Error::invalid_argument(format!("vertical_degrees is {degrees} (must be in (0, 180))")));
+        }
+        self.fov_y = degrees;
+        Ok(())
+    }
+
+    pub fn set_lens(&mut self, aperture: f32, focus_distance: f32) -> Result<()> {
+        if !(aperture.is_finite() && aperture >= 0.0) {
+            return Err(Error::invalid_argument(format!("aperture is {aperture} (must be finite and >= 0)")));
+        }
+        if !(focus_distance.is_finite() && focus_distance > 0.0) {
+            return Err(Error::invalid_argument(format!(
+                "focus_distance is {focus_distance} (must be finite and > 0)"
+            )));
+        }
+        self.aperture = aperture;
+        self.focus_distance = focus_distance;
+        Ok(())
+    }
+
+    /// Ray generator for a `width` × `height` image.
+    pub fn rays(&self, width: u32, height: u32) -> CameraRays {
+        let forward = (self.target - self.eye).normalize();
+        let right = forward.cross(self.up).normalize();
+        let up = right.cross(forward);
+        let half_h = (self.fov_y.to_radians() * 0.5).tan();
+        CameraRays {
+            eye: self.eye,
+            forward,
+            right,
+            up,
+            half_h,
+            half_w: half_h * width as f32 / height as f32,
+            aperture: self.aperture,
+            focus: self.focus_distance,
+        }
+    }
+}
+
+impl CameraRays {
+    /// Primary ray through image point `pixel` (in pixels, y down, (0,0) = top-left corner).
+    /// `lens` is a point in the unit square used for depth of field.
+    pub fn ray(&self, pixel: Vec2, size: Vec2, lens: Vec2) -> Ray {
+        let ndc = Vec2::new(2.0 * pixel.x / size.x - 1.0, 1.0 - 2.0 * pixel.y / size.y);
+        let dir = (self.forward + ndc.x * self.half_w * self.right + ndc.y * self.half_h * self.up).normalize();
+        if self.aperture == 0.0 {
+            return Ray::new(self.eye, dir, 0.0, f32::INFINITY);
+        }
+        // Thin lens: rays from a disk sample converge on the focus plane.
+        let focus_point = self.eye + dir * (self.focus / dir.dot(self.forward));
+        let r = 0.5 * self.aperture * lens.x.sqrt();
+        let phi = std::f32::consts::TAU * lens.y;
+        let org = self.eye + r * (phi.cos() * self.right + phi.sin() * self.up);
+        Ray::new(org, (focus_point - org).normalize(), 0.0, f32::INFINITY)
+    }
+}

@@ -1,0 +1,81 @@
+//! Frames: RGBA8 images, row-major from the top-left, with an optional HUD mask of pixels
+//! that are not traced at all (their contents are left as they were).
+
+use crate::error::{Error, Result};
+use std::path::Path;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    width: u32,
+    height: u32,
+    pixels: Vec<u8>,
+    mask: Option<Vec<u8>>,
+}
+
+/// Largest accepted side: keeps `width * height * 4` far from overflow and allocations sane.
+pub const MAX_SIDE: u32 = 1 << 15;
+
+impl Frame {
+    pub fn new(width: u32, height: u32) -> Result<Self> {
+        if width == 0 || height == 0 {
+            return Err(Error::invalid_argument(format!("frame size {width}x{height} is empty")));
+        }
+        if width > MAX_SIDE || height > MAX_SIDE {
+            return Err(Error::invalid_argument(format!(
+                "frame size {width}x{height} exceeds the maximum side of {MAX_SIDE}"
+            )));
+        }
+        let len = (width as usize) * (height as usize) * 4;
+        let mut pixels = Vec::new();
+        pixels
+            .try_reserve_exact(len)
+            .map_err(|_| Error::new(crate::error::Rt2Status::OutOfMemory, format!("{len} bytes for the frame")))?;
+        pixels.resize(len, 0);
+        Ok(Frame { width, height, pixels, mask: None })
+    }
+
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    pub fn pixel_count(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    pub fn pixels(&self) -> &[u8] {
+        &self.pixels
+    }
+
+    pub fn pixels_mut(&mut self) -> &mut [u8] {
+        &mut self.pixels
+    }
+
+    /// Pixels and mask together, for renderers that skip masked pixels while writing.
+    pub fn pixels_and_mask_mut(&mut self) -> (&mut [u8], Option<&[u8]>) {
+        (&mut self.pixels, self.mask.as_deref())
+    }
+
+    /// `mask` has one byte per pixel; 0 means "do not trace". `None` clears the mask.
+    pub fn set_mask(&mut self, mask: Option<&[u8]>) -> Result<()> {
+        if let Some(m) = mask {
+            if m.len() != self.pixel_count() {
+                return Err(Error::invalid_argument(format!(
+                    "mask has {} bytes, the frame {} pixels",
+                    m.len(),
+                    self.pixel_count()
+                )));
+            }
+        }
+        self.mask = mask.map(<[u8]>::to_vec);
+        Ok(())
+    }
+
+    pub fn save_png(&self, path: &Path) -> Result<()> {
+        image::save_buffer(path, &self.pixels, self.width, self.height, image::ExtendedColorType::Rgba8)
+            .map_err(|e| Error::io(format!("cannot write {}: {e}", path.display())))
+    }
+}

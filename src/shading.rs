@@ -1,0 +1,41 @@
+//! Whitted shading math, written once for the CPU (the WGSL kernels mirror it): Phong with
+//! point lights, mirror directions, Snell refraction and Schlick's Fresnel approximation.
+
+use crate::scene::{Material, PointLight};
+use glam::Vec3;
+
+/// Phong contribution of one light at point `p` with unit normal `n` facing the viewer,
+/// `view` the unit direction from `p` towards the viewer, `base` the material colour there.
+pub fn phong(m: &Material, base: Vec3, p: Vec3, n: Vec3, view: Vec3, light: &PointLight) -> Vec3 {
+    let l = (light.position - p).normalize_or_zero();
+    let ndotl = n.dot(l);
+    if ndotl <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let r = reflect(-l, n);
+    let spec = r.dot(view).max(0.0).powf(m.shininess);
+    (m.diffuse * ndotl * base + Vec3::splat(m.specular * spec)) * light.color * light.intensity
+}
+
+/// Mirror direction of `d` about the unit normal `n`.
+pub fn reflect(d: Vec3, n: Vec3) -> Vec3 {
+    d - 2.0 * d.dot(n) * n
+}
+
+/// Refracted direction of unit `d` through a surface with unit normal `n` facing against `d`,
+/// `eta` = n_from / n_to; `None` on total internal reflection.
+pub fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = -d.dot(n);
+    let sin2_t = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
+    if sin2_t > 1.0 {
+        return None;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    Some((eta * d + (eta * cos_i - cos_t) * n).normalize())
+}
+
+/// Schlick's approximation of the Fresnel reflectance for incidence cosine `cos_i`.
+pub fn schlick(cos_i: f32, eta: f32) -> f32 {
+    let r0 = ((1.0 - eta) / (1.0 + eta)).powi(2);
+    r0 + (1.0 - r0) * (1.0 - cos_i.clamp(0.0, 1.0)).powi(5)
+}
