@@ -1,0 +1,122 @@
+//! Wavefront OBJ parsing, limited to what a triangle mesh needs: `v` positions and `f`
+//! polygons. Texture coordinates, normals, groups, smoothing and materials are ignored.
+//!
+//! Errors name the 1-based line.
+
+use glam::Vec3;
+
+use super::{finite_coord, line_error, Mesh};
+use crate::error::{Error, Result};
+
+/// Parses an OBJ file held in memory; `name` is used in error messages.
+///
+/// Reads `v x y z [w]` (w ignored) and `f` with vertex references of the forms `i`, `i/t`,
+/// `i//n`, `i/t/n`; only `i` is used. Indices are 1-based; negative ones count back from the
+/// last vertex defined so far, and a positive one must refer to a vertex already defined
+/// (the OBJ rule, which lets every index be checked on its own line). Triangles follow the
+/// file's face order, each polygon of n vertices fan-triangulated in place into n-2 triangles
+/// `(v0, v(k), v(k+1))`.
+///
+/// Ignored statements: `vt`, `vn`, `vp`, `g`, `o`, `s`, `usemtl`, `mtllib`, comments and
+/// blank lines; CRLF line endings are accepted. Any other statement is an error, so that a
+/// file that is not OBJ (or uses features this loader would silently drop, like curves) is
+/// reported rather than half-loaded. A file without faces is an error too.
+pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
+    let mut mesh = Mesh::default();
+    let mut saw_statement = false;
+    for (i, raw) in text_bytes.split(|&b| b == b'\n').enumerate() {
+        let line_no = i + 1;
+        let err = |msg: String| line_error(name, line_no, msg);
+        let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
+        let line = std::str::from_utf8(raw).map_err(|_| err("line is not UTF-8 text".into()))?;
+        let line = line.split('#').next().unwrap_or_default();
+        let mut toks = line.split_whitespace();
+        let Some(keyword) = toks.next() else {
+            continue;
+        };
+        saw_statement = true;
+        match keyword {
+            "v" => {
+                let mut xyz = [0f32; 3];
+                for (axis, c) in xyz.iter_mut().enumerate() {
+                    let tok = toks
+                        .next()
+                        .ok_or_else(|| err("vertex needs 3 coordinates".into()))?;
+                    let v = tok
+                        .parse::<f32>()
+                        .map_err(|_| err(format!("'{tok}' is not a number")))?;
+                    *c = finite_coord(v.into(), axis).map_err(err)?;
+                }
+                if let Some(w) = toks.next() {
+                    w.parse::<f32>()
+                        .map_err(|_| err(format!("'{w}' is not a number")))?;
+                }
+                if let Some(extra) = toks.next() {
+                    return Err(err(format!("unexpected '{extra}' after the vertex")));
+                }
+                mesh.positions.push(Vec3::from_array(xyz));
+            }
+            "f" => {
+                let defined = mesh.positions.len();
+                let index = |tok: &str| -> Result<u32> {
+                    vertex_ref(tok, defined).map_err(|m| err(format!("face vertex '{tok}': {m}")))
+                };
+                let (Some(a), Some(b)) = (toks.next(), toks.next()) else {
+                    return Err(err("face has fewer than 3 vertices".into()));
+                };
+                let (v0, mut prev) = (index(a)?, index(b)?);
+                let mut corners = 2;
+                for tok in toks {
+                    let v = index(tok)?;
+                    mesh.triangles.push([v0, prev, v]);
+                    prev = v;
+                    corners += 1;
+                }
+                if corners < 3 {
+                    return Err(err("face has fewer than 3 vertices".into()));
+                }
+            }
+            "vt" | "vn" | "vp" | "g" | "o" | "s" | "usemtl" | "mtllib" => {}
+            other => return Err(err(format!("unsupported OBJ statement '{other}'"))),
+        }
+    }
+    if !saw_statement {
+        return Err(Error::parse(format!("{name}: empty file")));
+    }
+    if mesh.triangles.is_empty() {
+        return Err(Error::parse(format!("{name}: no faces ('f' lines) in the file")));
+    }
+    Ok(mesh)
+}
+
+/// Resolves one face vertex reference (`i`, `i/t`, `i//n`, `i/t/n`) to a 0-based index into
+/// the `defined` vertices seen so far. The texture and normal parts are checked for syntax only.
+fn vertex_ref(tok: &str, defined: usize) -> std::result::Result<u32, String> {
+    let mut parts = tok.split('/');
+    let v = parts.next().unwrap_or_default();
+    let t = parts.next();
+    let n = parts.next();
+    if parts.next().is_some() {
+        return Err("too many '/' parts".into());
+    }
+    let is_int = |s: &str| s.parse::<i64>().is_ok();
+    // `i/t`, `i/t/n` need an integer t; only `i//n` may leave it empty, and then n is required.
+    match (t, n) {
+        (None, _) => {}
+        (Some(t), None) if is_int(t) => {}
+        (Some(t), Some(n)) if (t.is_empty() || is_int(t)) && is_int(n) => {}
+        _ => return Err("malformed texture/normal index".into()),
+    }
+    let i: i64 = v.parse().map_err(|_| format!("'{v}' is not an integer"))?;
+    let resolved = match i {
+        0 => return Err("index 0 is invalid (OBJ indices start at 1)".into()),
+        i if i > 0 => i - 1,
+        i => defined as i64 + i,
+    };
+    if resolved < 0 || resolved >= defined as i64 {
+        return Err(format!(
+            "index {i} out of range ({defined} vertices defined so far)"
+        ));
+    }
+    u32::try_from(resolved).map_err(|_| "index does not fit 32 bits".into())
+}
