@@ -10,11 +10,12 @@ fn main() {
     // Version macros come from Cargo.toml so the header cannot disagree with the library.
     let v = |k: &str| std::env::var(k).expect("cargo sets the package version");
     config.after_includes = Some(format!(
-        "\n#define RT2_VERSION_MAJOR {}\n#define RT2_VERSION_MINOR {}\n#define RT2_VERSION_PATCH {}\n#define RT2_VERSION_STRING \"{}\"\n",
+        "\n#define RT2_VERSION_MAJOR {}\n#define RT2_VERSION_MINOR {}\n#define RT2_VERSION_PATCH {}\n#define RT2_VERSION_STRING \"{}\"\n\n/** Marks \"no object / no primitive\" in rt2_hit (rt2::api::RT2_INVALID_ID). */\n#define RT2_INVALID_ID {:#X}u\n",
         v("CARGO_PKG_VERSION_MAJOR"),
         v("CARGO_PKG_VERSION_MINOR"),
         v("CARGO_PKG_VERSION_PATCH"),
         v("CARGO_PKG_VERSION"),
+        u32::MAX,
     ));
     match cbindgen::generate_with_config(&crate_dir, config) {
         Ok(bindings) => {

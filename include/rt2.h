@@ -19,6 +19,9 @@
 #define RT2_VERSION_PATCH 0
 #define RT2_VERSION_STRING "0.1.0"
 
+/** Marks "no object / no primitive" in rt2_hit (rt2::api::RT2_INVALID_ID). */
+#define RT2_INVALID_ID 0xFFFFFFFFu
+
 
 /**
  * Where tracing runs (`rt2_context_desc.backend`).
@@ -331,6 +334,67 @@ typedef struct rt2_render_options {
 } rt2_render_options;
 
 /**
+ * Per-call options of the ray queries.
+ */
+typedef struct rt2_query_options {
+  /**
+   * `sizeof(rt2_query_options)`.
+   */
+  uint32_t struct_size;
+  /**
+   * An `rt2_traversal` value (default AUTO).
+   */
+  uint32_t traversal;
+  /**
+   * Entries of the short stack, 1..=64 (default 3).
+   */
+  uint32_t short_stack_size;
+} rt2_query_options;
+
+/**
+ * One ray: `org + t * dir` for `t` in `[tmin, tmax)` (32 bytes, the `.rays` record). Rays with
+ * NaN/inf components, a zero direction or `tmin > tmax` are misses, not errors.
+ */
+typedef struct rt2_ray {
+  float org[3];
+  float tmin;
+  float dir[3];
+  float tmax;
+} rt2_ray;
+
+/**
+ * The closest hit of one ray. A miss has `t = +inf` and `object = prim = RT2_INVALID_ID`.
+ */
+typedef struct rt2_hit {
+  float t;
+  /**
+   * Barycentric weight of the triangle's vertex 1 (0 for analytic primitives).
+   */
+  float u;
+  /**
+   * Barycentric weight of vertex 2.
+   */
+  float v;
+  /**
+   * Object id as returned by the `rt2_scene_add_*` call.
+   */
+  uint32_t object;
+  /**
+   * Triangle index inside a mesh (file face order for loaded meshes); 0 otherwise.
+   */
+  uint32_t prim;
+} rt2_hit;
+
+/**
+ * Work done by a query (the thesis' table 1 counters), summed over the batch.
+ */
+typedef struct rt2_query_stats {
+  uint64_t nodes_visited;
+  uint64_t leaves_visited;
+  uint64_t prim_tests;
+} rt2_query_stats;
+
+/**
  * Size and memory of a committed scene (`rt2_scene_stats`). Bytes are exact sizes of the
  * arrays the backends read.
  */
@@ -513,6 +577,41 @@ struct rt2_build_options rt2_build_options_default(void);
  * Default render options (depth 6, 1 sample, AUTO traversal, refraction).
  */
 struct rt2_render_options rt2_render_options_default(void);
+
+/**
+ * Default query options (AUTO traversal).
+ */
+struct rt2_query_options rt2_query_options_default(void);
+
+/**
+ * Closest hits of `count` rays into `hits`. `opt` may be NULL (defaults); `stats` may be NULL
+ * (not collected). On failure `hits` may be partly written only if the failure is internal.
+ *
+ * # Safety
+ * Handles are live; `rays` and `hits` hold `count` elements (may be NULL when count is 0).
+ */
+enum rt2_status rt2_intersect(const struct rt2_context *ctx,
+                              const struct rt2_scene *scene,
+                              const struct rt2_ray *rays,
+                              size_t count,
+                              struct rt2_hit *hits,
+                              const struct rt2_query_options *opt,
+                              struct rt2_query_stats *stats);
+
+/**
+ * Any-hit queries: `occluded[i]` becomes 1 when something lies in ray i's `[tmin, tmax)`,
+ * else 0 (shadow rays).
+ *
+ * # Safety
+ * Handles are live; `rays` and `occluded` hold `count` elements (may be NULL when count is 0).
+ */
+enum rt2_status rt2_occluded(const struct rt2_context *ctx,
+                             const struct rt2_scene *scene,
+                             const struct rt2_ray *rays,
+                             size_t count,
+                             uint8_t *occluded,
+                             const struct rt2_query_options *opt,
+                             struct rt2_query_stats *stats);
 
 /**
  * Renders `scene` seen by `camera` into `frame` (its aspect ratio sets the image's).

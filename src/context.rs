@@ -4,7 +4,9 @@ use crate::camera::Camera;
 use crate::cpu;
 use crate::dispatch::{self, Backend, BackendRequest, Decision};
 use crate::error::{Error, Result};
+use crate::cpu::traverse::TraverseOptions;
 use crate::frame::Frame;
+use crate::geometry::{Hit, Ray, TraversalStats};
 use crate::render::RenderOptions;
 use crate::scene::Committed;
 
@@ -49,5 +51,42 @@ impl Context {
             }
             Backend::Gpu => Err(Error::unsupported("the GPU backend is not built yet")),
         }
+    }
+
+    /// Closest hits of a batch of rays; the traversal is the caller's or AUTO's choice.
+    pub fn intersect(&self, scene: &Committed, rays: &[Ray], hits: &mut [Hit], q: &QueryOptions) -> Result<TraversalStats> {
+        let (how, opts) = self.query_setup(scene, q);
+        match self.decision.backend {
+            Backend::Cpu => Ok(self.install(|| cpu::query::intersect(scene, rays, hits, how, &opts))),
+            Backend::Gpu => Err(Error::unsupported("the GPU backend is not built yet")),
+        }
+    }
+
+    /// Any-hit queries for a batch of rays.
+    pub fn occluded(&self, scene: &Committed, rays: &[Ray], out: &mut [bool], q: &QueryOptions) -> Result<TraversalStats> {
+        let (how, opts) = self.query_setup(scene, q);
+        match self.decision.backend {
+            Backend::Cpu => Ok(self.install(|| cpu::query::occluded(scene, rays, out, how, &opts))),
+            Backend::Gpu => Err(Error::unsupported("the GPU backend is not built yet")),
+        }
+    }
+
+    fn query_setup(&self, scene: &Committed, q: &QueryOptions) -> (crate::cpu::traverse::Traversal, TraverseOptions) {
+        let (how, _why) = dispatch::choose_traversal(scene, q.traversal);
+        (how, TraverseOptions { short_stack_size: q.short_stack_size, ..TraverseOptions::default() })
+    }
+}
+
+/// Options of batch ray queries.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct QueryOptions {
+    /// `None` lets the library choose (AUTO).
+    pub traversal: Option<crate::cpu::traverse::Traversal>,
+    pub short_stack_size: usize,
+}
+
+impl Default for QueryOptions {
+    fn default() -> Self {
+        QueryOptions { traversal: None, short_stack_size: 3 }
     }
 }

@@ -30,6 +30,9 @@ pub unsafe extern "C" fn rt2_render(
         let cam = handle(camera, "camera")?;
         let opts = if options.is_null() { RenderOptions::default() } else { (*options).to_options()? };
         let f = handle_mut(frame, "frame")?;
+        if opts.traversal.is_some_and(|t| t.needs_ropes()) {
+            s.write().ensure_ropes()?;
+        }
         let guard = s.read();
         let committed = guard.committed()?;
         c.inner.render(committed, &cam.camera, &opts, &mut f.frame)

@@ -33,7 +33,7 @@ impl rt2_scene {
         self.scene.read().unwrap_or_else(|p| p.into_inner())
     }
 
-    fn write(&self) -> RwLockWriteGuard<'_, Scene> {
+    pub(crate) fn write(&self) -> RwLockWriteGuard<'_, Scene> {
         self.scene.write().unwrap_or_else(|p| p.into_inner())
     }
 }

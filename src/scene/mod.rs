@@ -16,21 +16,20 @@ use crate::error::{Error, Result};
 use crate::geometry::{Aabb, PrimitiveSet};
 use crate::kdtree::{self, BuildOptions, KdTree};
 use glam::{Affine3A, Vec3};
-use std::sync::Arc;
 use std::time::Instant;
 
 /// A scene as edited through the API. Material 0 always exists (the default material).
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct Scene {
     materials: Vec<Material>,
     lights: Vec<PointLight>,
     objects: Vec<Object>,
     build: BuildOptions,
-    committed: Option<Arc<Committed>>,
+    committed: Option<Committed>,
     dirty: bool,
 }
 
-/// What the backends trace: immutable, shared by concurrent renders.
+/// What the backends trace; read-only while renders run.
 #[derive(Debug)]
 pub struct Committed {
     pub prims: PrimitiveSet,
@@ -274,7 +273,7 @@ impl Scene {
         }
         let origins: Vec<PrimOrigin> = by_kind.concat();
         let tree = kdtree::build(&prims, &self.build);
-        self.committed = Some(Arc::new(Committed {
+        self.committed = Some(Committed {
             bounds: prims.scene_bounds(),
             prims,
             tree,
@@ -283,13 +282,23 @@ impl Scene {
             materials: self.materials.clone(),
             lights: self.lights.clone(),
             commit_ms: start.elapsed().as_secs_f32() * 1e3,
-        }));
+        });
         self.dirty = false;
         Ok(())
     }
 
+    /// Builds the ropes of the committed tree if a rope traversal needs them and they are not
+    /// there yet (ropes cost about 3x the tree, so they are made only on request).
+    pub fn ensure_ropes(&mut self) -> Result<()> {
+        self.committed()?;
+        if let Some(c) = &mut self.committed {
+            c.tree.ensure_ropes();
+        }
+        Ok(())
+    }
+
     /// The committed scene, or an error if there is none or it is older than the last edit.
-    pub fn committed(&self) -> Result<&Arc<Committed>> {
+    pub fn committed(&self) -> Result<&Committed> {
         match (&self.committed, self.dirty) {
             (Some(c), false) => Ok(c),
             (Some(_), true) => Err(Error::invalid_operation(

@@ -1,0 +1,187 @@
+//! `rt2_intersect` / `rt2_occluded`: batch ray queries in the record layout of
+//! `../shared/raysets` (like Embree's rtcIntersect1M), run by the context's thread pool.
+
+use super::context::rt2_context;
+use super::ffi::{check_struct_size, guard, handle, slice, slice_mut, write_out};
+use super::options::traversal_from;
+use super::scene::rt2_scene;
+use crate::context::QueryOptions;
+use crate::error::{Error, Rt2Status};
+use crate::geometry::{Hit, Ray, TraversalStats};
+use glam::Vec3;
+
+/// One ray: `org + t * dir` for `t` in `[tmin, tmax)` (32 bytes, the `.rays` record). Rays with
+/// NaN/inf components, a zero direction or `tmin > tmax` are misses, not errors.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct rt2_ray {
+    pub org: [f32; 3],
+    pub tmin: f32,
+    pub dir: [f32; 3],
+    pub tmax: f32,
+}
+
+/// The closest hit of one ray. A miss has `t = +inf` and `object = prim = RT2_INVALID_ID`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct rt2_hit {
+    pub t: f32,
+    /// Barycentric weight of the triangle's vertex 1 (0 for analytic primitives).
+    pub u: f32,
+    /// Barycentric weight of vertex 2.
+    pub v: f32,
+    /// Object id as returned by the `rt2_scene_add_*` call.
+    pub object: u32,
+    /// Triangle index inside a mesh (file face order for loaded meshes); 0 otherwise.
+    pub prim: u32,
+}
+
+/// Per-call options of the ray queries.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rt2_query_options {
+    /// `sizeof(rt2_query_options)`.
+    pub struct_size: u32,
+    /// An `rt2_traversal` value (default AUTO).
+    pub traversal: u32,
+    /// Entries of the short stack, 1..=64 (default 3).
+    pub short_stack_size: u32,
+}
+
+/// Work done by a query (the thesis' table 1 counters), summed over the batch.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct rt2_query_stats {
+    pub nodes_visited: u64,
+    pub leaves_visited: u64,
+    pub prim_tests: u64,
+}
+
+/// Default query options (AUTO traversal).
+#[no_mangle]
+pub extern "C" fn rt2_query_options_default() -> rt2_query_options {
+    let d = QueryOptions::default();
+    rt2_query_options {
+        struct_size: std::mem::size_of::<rt2_query_options>() as u32,
+        traversal: 0,
+        short_stack_size: d.short_stack_size as u32,
+    }
+}
+
+/// Marks "no object / no primitive" in hits.
+pub const RT2_INVALID_ID: u32 = u32::MAX;
+
+impl From<&rt2_ray> for Ray {
+    fn from(r: &rt2_ray) -> Self {
+        Ray::new(Vec3::from(r.org), Vec3::from(r.dir), r.tmin, r.tmax)
+    }
+}
+
+unsafe fn query_options(opt: *const rt2_query_options) -> crate::error::Result<QueryOptions> {
+    if opt.is_null() {
+        return Ok(QueryOptions::default());
+    }
+    let o = *opt;
+    check_struct_size::<rt2_query_options>(o.struct_size, "rt2_query_options")?;
+    if !(1..=64).contains(&o.short_stack_size) {
+        return Err(Error::invalid_argument(format!(
+            "short_stack_size is {} (must be in 1..=64)",
+            o.short_stack_size
+        )));
+    }
+    Ok(QueryOptions { traversal: traversal_from(o.traversal)?, short_stack_size: o.short_stack_size as usize })
+}
+
+/// Shared prologue of both queries: checks, ropes on demand, the committed scene.
+unsafe fn run_query<T>(
+    ctx: *const rt2_context,
+    scene: *const rt2_scene,
+    rays: *const rt2_ray,
+    count: usize,
+    out: *mut T,
+    opt: *const rt2_query_options,
+    stats: *mut rt2_query_stats,
+    f: impl FnOnce(&crate::context::Context, &crate::scene::Committed, &[Ray], &mut [T], &QueryOptions) -> crate::error::Result<TraversalStats>,
+) -> Rt2Status {
+    guard(|| {
+        let c = handle(ctx, "ctx")?;
+        let s = handle(scene, "scene")?;
+        let q = query_options(opt)?;
+        let rays = slice(rays, count, "rays")?;
+        let out = slice_mut(out, count, "hits")?;
+        if q.traversal.is_some_and(|t| t.needs_ropes()) {
+            s.write().ensure_ropes()?;
+        }
+        let guard = s.read();
+        let committed = guard.committed()?;
+        let rays: Vec<Ray> = rays.iter().map(Ray::from).collect();
+        let st = f(&c.inner, committed, &rays, out, &q)?;
+        if !stats.is_null() {
+            write_out(
+                stats,
+                "stats",
+                rt2_query_stats {
+                    nodes_visited: st.nodes_visited,
+                    leaves_visited: st.leaves_visited,
+                    prim_tests: st.prim_tests,
+                },
+            )?;
+        }
+        Ok(())
+    })
+}
+
+/// Closest hits of `count` rays into `hits`. `opt` may be NULL (defaults); `stats` may be NULL
+/// (not collected). On failure `hits` may be partly written only if the failure is internal.
+///
+/// # Safety
+/// Handles are live; `rays` and `hits` hold `count` elements (may be NULL when count is 0).
+#[no_mangle]
+pub unsafe extern "C" fn rt2_intersect(
+    ctx: *const rt2_context,
+    scene: *const rt2_scene,
+    rays: *const rt2_ray,
+    count: usize,
+    hits: *mut rt2_hit,
+    opt: *const rt2_query_options,
+    stats: *mut rt2_query_stats,
+) -> Rt2Status {
+    run_query(ctx, scene, rays, count, hits, opt, stats, |c, committed, rays, out, q| {
+        let mut inner = vec![Hit::MISS; rays.len()];
+        let st = c.intersect(committed, rays, &mut inner, q)?;
+        for (h, o) in inner.iter().zip(out.iter_mut()) {
+            *o = if h.is_hit() {
+                let origin = committed.origins[h.prim as usize];
+                rt2_hit { t: h.t, u: h.u, v: h.v, object: origin.object, prim: origin.prim }
+            } else {
+                rt2_hit { t: f32::INFINITY, u: 0.0, v: 0.0, object: RT2_INVALID_ID, prim: RT2_INVALID_ID }
+            };
+        }
+        Ok(st)
+    })
+}
+
+/// Any-hit queries: `occluded[i]` becomes 1 when something lies in ray i's `[tmin, tmax)`,
+/// else 0 (shadow rays).
+///
+/// # Safety
+/// Handles are live; `rays` and `occluded` hold `count` elements (may be NULL when count is 0).
+#[no_mangle]
+pub unsafe extern "C" fn rt2_occluded(
+    ctx: *const rt2_context,
+    scene: *const rt2_scene,
+    rays: *const rt2_ray,
+    count: usize,
+    occluded: *mut u8,
+    opt: *const rt2_query_options,
+    stats: *mut rt2_query_stats,
+) -> Rt2Status {
+    run_query(ctx, scene, rays, count, occluded, opt, stats, |c, committed, rays, out, q| {
+        let mut inner = vec![false; rays.len()];
+        let st = c.occluded(committed, rays, &mut inner, q)?;
+        for (b, o) in inner.iter().zip(out.iter_mut()) {
+            *o = *b as u8;
+        }
+        Ok(st)
+    })
+}
