@@ -6,7 +6,8 @@ fn main() {
     println!("cargo:rerun-if-changed=src/error.rs");
     println!("cargo:rerun-if-changed=cbindgen.toml");
     let crate_dir = std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR");
-    let mut config = cbindgen::Config::from_file(format!("{crate_dir}/cbindgen.toml")).expect("cbindgen.toml is valid");
+    let mut config = cbindgen::Config::from_file(format!("{crate_dir}/cbindgen.toml"))
+        .expect("cbindgen.toml is valid");
     // Version macros come from Cargo.toml so the header cannot disagree with the library.
     let v = |k: &str| std::env::var(k).expect("cargo sets the package version");
     config.after_includes = Some(format!(

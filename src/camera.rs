@@ -48,7 +48,9 @@ impl Camera {
     pub fn look_at(&mut self, eye: Vec3, target: Vec3, up: Vec3) -> Result<()> {
         for (n, v) in [("eye", eye), ("target", target), ("up", up)] {
             if !v.is_finite() {
-                return Err(Error::invalid_argument(format!("{n} is {v} (must be finite)")));
+                return Err(Error::invalid_argument(format!(
+                    "{n} is {v} (must be finite)"
+                )));
             }
         }
         let f = target - eye;
@@ -56,7 +58,9 @@ impl Camera {
             return Err(Error::invalid_argument("eye and target are the same point"));
         }
         if f.cross(up).length_squared() <= 1e-12 * f.length_squared() * up.length_squared() {
-            return Err(Error::invalid_argument("up is zero or parallel to the view direction"));
+            return Err(Error::invalid_argument(
+                "up is zero or parallel to the view direction",
+            ));
         }
         self.eye = eye;
         self.target = target;
@@ -66,7 +70,9 @@ impl Camera {
 
     pub fn set_fov(&mut self, degrees: f32) -> Result<()> {
         if !(degrees > 0.0 && degrees < 180.0) {
-            return Err(Error::invalid_argument(format!("vertical_degrees is {degrees} (must be in (0, 180))")));
+            return Err(Error::invalid_argument(format!(
+                "vertical_degrees is {degrees} (must be in (0, 180))"
+            )));
         }
         self.fov_y = degrees;
         Ok(())
@@ -74,7 +80,9 @@ impl Camera {
 
     pub fn set_lens(&mut self, aperture: f32, focus_distance: f32) -> Result<()> {
         if !(aperture.is_finite() && aperture >= 0.0) {
-            return Err(Error::invalid_argument(format!("aperture is {aperture} (must be finite and >= 0)")));
+            return Err(Error::invalid_argument(format!(
+                "aperture is {aperture} (must be finite and >= 0)"
+            )));
         }
         if !(focus_distance.is_finite() && focus_distance > 0.0) {
             return Err(Error::invalid_argument(format!(
@@ -110,7 +118,8 @@ impl CameraRays {
     /// `lens` is a point in the unit square used for depth of field.
     pub fn ray(&self, pixel: Vec2, size: Vec2, lens: Vec2) -> Ray {
         let ndc = Vec2::new(2.0 * pixel.x / size.x - 1.0, 1.0 - 2.0 * pixel.y / size.y);
-        let dir = (self.forward + ndc.x * self.half_w * self.right + ndc.y * self.half_h * self.up).normalize();
+        let dir = (self.forward + ndc.x * self.half_w * self.right + ndc.y * self.half_h * self.up)
+            .normalize();
         if self.aperture == 0.0 {
             return Ray::new(self.eye, dir, 0.0, f32::INFINITY);
         }

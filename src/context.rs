@@ -2,9 +2,9 @@
 
 use crate::camera::Camera;
 use crate::cpu;
+use crate::cpu::traverse::TraverseOptions;
 use crate::dispatch::{self, Backend, BackendRequest, Decision};
 use crate::error::{Error, Result};
-use crate::cpu::traverse::TraverseOptions;
 use crate::frame::Frame;
 use crate::geometry::{Hit, Ray, TraversalStats};
 use crate::render::RenderOptions;
@@ -25,7 +25,12 @@ impl Context {
             .num_threads(threads as usize)
             .thread_name(|i| format!("rt2-worker-{i}"))
             .build()
-            .map_err(|e| Error::new(crate::error::Rt2Status::Internal, format!("cannot start threads: {e}")))?;
+            .map_err(|e| {
+                Error::new(
+                    crate::error::Rt2Status::Internal,
+                    format!("cannot start threads: {e}"),
+                )
+            })?;
         Ok(Context { pool, decision })
     }
 
@@ -42,7 +47,13 @@ impl Context {
         self.pool.install(f)
     }
 
-    pub fn render(&self, scene: &Committed, camera: &Camera, opts: &RenderOptions, frame: &mut Frame) -> Result<()> {
+    pub fn render(
+        &self,
+        scene: &Committed,
+        camera: &Camera,
+        opts: &RenderOptions,
+        frame: &mut Frame,
+    ) -> Result<()> {
         let (traversal, _why) = dispatch::choose_traversal(scene, opts.traversal);
         match self.decision.backend {
             Backend::Cpu => {
@@ -54,16 +65,30 @@ impl Context {
     }
 
     /// Closest hits of a batch of rays; the traversal is the caller's or AUTO's choice.
-    pub fn intersect(&self, scene: &Committed, rays: &[Ray], hits: &mut [Hit], q: &QueryOptions) -> Result<TraversalStats> {
+    pub fn intersect(
+        &self,
+        scene: &Committed,
+        rays: &[Ray],
+        hits: &mut [Hit],
+        q: &QueryOptions,
+    ) -> Result<TraversalStats> {
         let (how, opts) = self.query_setup(scene, q);
         match self.decision.backend {
-            Backend::Cpu => Ok(self.install(|| cpu::query::intersect(scene, rays, hits, how, &opts))),
+            Backend::Cpu => {
+                Ok(self.install(|| cpu::query::intersect(scene, rays, hits, how, &opts)))
+            }
             Backend::Gpu => Err(Error::unsupported("the GPU backend is not built yet")),
         }
     }
 
     /// Any-hit queries for a batch of rays.
-    pub fn occluded(&self, scene: &Committed, rays: &[Ray], out: &mut [bool], q: &QueryOptions) -> Result<TraversalStats> {
+    pub fn occluded(
+        &self,
+        scene: &Committed,
+        rays: &[Ray],
+        out: &mut [bool],
+        q: &QueryOptions,
+    ) -> Result<TraversalStats> {
         let (how, opts) = self.query_setup(scene, q);
         match self.decision.backend {
             Backend::Cpu => Ok(self.install(|| cpu::query::occluded(scene, rays, out, how, &opts))),
@@ -71,9 +96,19 @@ impl Context {
         }
     }
 
-    fn query_setup(&self, scene: &Committed, q: &QueryOptions) -> (crate::cpu::traverse::Traversal, TraverseOptions) {
+    fn query_setup(
+        &self,
+        scene: &Committed,
+        q: &QueryOptions,
+    ) -> (crate::cpu::traverse::Traversal, TraverseOptions) {
         let (how, _why) = dispatch::choose_traversal(scene, q.traversal);
-        (how, TraverseOptions { short_stack_size: q.short_stack_size, ..TraverseOptions::default() })
+        (
+            how,
+            TraverseOptions {
+                short_stack_size: q.short_stack_size,
+                ..TraverseOptions::default()
+            },
+        )
     }
 }
 
@@ -87,6 +122,9 @@ pub struct QueryOptions {
 
 impl Default for QueryOptions {
     fn default() -> Self {
-        QueryOptions { traversal: None, short_stack_size: 3 }
+        QueryOptions {
+            traversal: None,
+            short_stack_size: 3,
+        }
     }
 }

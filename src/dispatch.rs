@@ -56,7 +56,10 @@ pub fn decide_backend(requested: BackendRequest, env: Option<&str>) -> Result<De
         None => (requested, "the context descriptor".to_string()),
     };
     match request {
-        BackendRequest::Cpu => Ok(Decision { backend: Backend::Cpu, reason: format!("CPU requested by {source}") }),
+        BackendRequest::Cpu => Ok(Decision {
+            backend: Backend::Cpu,
+            reason: format!("CPU requested by {source}"),
+        }),
         BackendRequest::Gpu => Err(Error::new(
             Rt2Status::BackendUnavailable,
             format!("GPU requested by {source}, but {NO_GPU}"),
@@ -69,12 +72,18 @@ pub fn decide_backend(requested: BackendRequest, env: Option<&str>) -> Result<De
 }
 
 /// The traversal AUTO picks for a scene on the CPU, and why.
-pub fn choose_traversal(_scene: &Committed, requested: Option<Traversal>) -> (Traversal, &'static str) {
+pub fn choose_traversal(
+    _scene: &Committed,
+    requested: Option<Traversal>,
+) -> (Traversal, &'static str) {
     match requested {
         Some(t) => (t, "requested by the caller"),
         // On a CPU the stack costs nothing: the standard traversal visits the fewest nodes of
         // the stack-based and restart methods (thesis table 1) and needs no ropes, which cost
         // about 3x the tree memory.
-        None => (Traversal::Standard, "the CPU has a cheap stack: standard visits the fewest nodes and needs no ropes"),
+        None => (
+            Traversal::Standard,
+            "the CPU has a cheap stack: standard visits the fewest nodes and needs no ropes",
+        ),
     }
 }

@@ -18,7 +18,9 @@ pub const MAX_SIDE: u32 = 1 << 15;
 impl Frame {
     pub fn new(width: u32, height: u32) -> Result<Self> {
         if width == 0 || height == 0 {
-            return Err(Error::invalid_argument(format!("frame size {width}x{height} is empty")));
+            return Err(Error::invalid_argument(format!(
+                "frame size {width}x{height} is empty"
+            )));
         }
         if width > MAX_SIDE || height > MAX_SIDE {
             return Err(Error::invalid_argument(format!(
@@ -27,11 +29,19 @@ impl Frame {
         }
         let len = (width as usize) * (height as usize) * 4;
         let mut pixels = Vec::new();
-        pixels
-            .try_reserve_exact(len)
-            .map_err(|_| Error::new(crate::error::Rt2Status::OutOfMemory, format!("{len} bytes for the frame")))?;
+        pixels.try_reserve_exact(len).map_err(|_| {
+            Error::new(
+                crate::error::Rt2Status::OutOfMemory,
+                format!("{len} bytes for the frame"),
+            )
+        })?;
         pixels.resize(len, 0);
-        Ok(Frame { width, height, pixels, mask: None })
+        Ok(Frame {
+            width,
+            height,
+            pixels,
+            mask: None,
+        })
     }
 
     pub fn width(&self) -> u32 {
@@ -75,7 +85,13 @@ impl Frame {
     }
 
     pub fn save_png(&self, path: &Path) -> Result<()> {
-        image::save_buffer(path, &self.pixels, self.width, self.height, image::ExtendedColorType::Rgba8)
-            .map_err(|e| Error::io(format!("cannot write {}: {e}", path.display())))
+        image::save_buffer(
+            path,
+            &self.pixels,
+            self.width,
+            self.height,
+            image::ExtendedColorType::Rgba8,
+        )
+        .map_err(|e| Error::io(format!("cannot write {}: {e}", path.display())))
     }
 }

@@ -14,6 +14,7 @@ pub mod error;
 pub mod frame;
 pub mod geometry;
 pub mod kdtree;
+pub mod rayset;
 pub mod render;
 pub mod scene;
 pub mod shading;

@@ -29,7 +29,10 @@ impl Handle for rt2_camera {
 pub unsafe extern "C" fn rt2_camera_create(out: *mut *mut rt2_camera) -> Rt2Status {
     guard(|| {
         check_out(out, "out")?;
-        let h = Box::new(rt2_camera { magic: rt2_camera::MAGIC, camera: Camera::default() });
+        let h = Box::new(rt2_camera {
+            magic: rt2_camera::MAGIC,
+            camera: Camera::default(),
+        });
         write_out(out, "out", Box::into_raw(h))
     })
 }
@@ -70,8 +73,15 @@ pub unsafe extern "C" fn rt2_camera_look_at(
 /// # Safety
 /// `camera` is a live camera.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_camera_set_fov(camera: *mut rt2_camera, vertical_degrees: f32) -> Rt2Status {
-    guard(|| handle_mut(camera, "camera")?.camera.set_fov(vertical_degrees))
+pub unsafe extern "C" fn rt2_camera_set_fov(
+    camera: *mut rt2_camera,
+    vertical_degrees: f32,
+) -> Rt2Status {
+    guard(|| {
+        handle_mut(camera, "camera")?
+            .camera
+            .set_fov(vertical_degrees)
+    })
 }
 
 /// Sets the thin lens: `aperture` is the lens diameter (0 = pinhole), `focus_distance` the
@@ -80,6 +90,14 @@ pub unsafe extern "C" fn rt2_camera_set_fov(camera: *mut rt2_camera, vertical_de
 /// # Safety
 /// `camera` is a live camera.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_camera_set_lens(camera: *mut rt2_camera, aperture: f32, focus_distance: f32) -> Rt2Status {
-    guard(|| handle_mut(camera, "camera")?.camera.set_lens(aperture, focus_distance))
+pub unsafe extern "C" fn rt2_camera_set_lens(
+    camera: *mut rt2_camera,
+    aperture: f32,
+    focus_distance: f32,
+) -> Rt2Status {
+    guard(|| {
+        handle_mut(camera, "camera")?
+            .camera
+            .set_lens(aperture, focus_distance)
+    })
 }

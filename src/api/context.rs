@@ -43,14 +43,25 @@ pub struct rt2_context_properties {
 /// # Safety
 /// `desc` is NULL or points to an `rt2_context_desc`; `out` points to writable storage.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_context_create(desc: *const rt2_context_desc, out: *mut *mut rt2_context) -> Rt2Status {
+pub unsafe extern "C" fn rt2_context_create(
+    desc: *const rt2_context_desc,
+    out: *mut *mut rt2_context,
+) -> Rt2Status {
     guard(|| {
         check_out(out, "out")?;
-        let d = if desc.is_null() { super::options::rt2_context_desc_default() } else { *desc };
+        let d = if desc.is_null() {
+            super::options::rt2_context_desc_default()
+        } else {
+            *desc
+        };
         check_struct_size::<rt2_context_desc>(d.struct_size, "rt2_context_desc")?;
         let ctx = Context::new(backend_from(d.backend)?, d.threads)?;
         let reason = CString::new(ctx.decision().reason.replace('\0', "")).unwrap_or_default();
-        let h = Box::new(rt2_context { magic: rt2_context::MAGIC, inner: Arc::new(ctx), reason });
+        let h = Box::new(rt2_context {
+            magic: rt2_context::MAGIC,
+            inner: Arc::new(ctx),
+            reason,
+        });
         write_out(out, "out", Box::into_raw(h))
     })
 }
@@ -72,7 +83,10 @@ pub unsafe extern "C" fn rt2_context_destroy(ctx: *mut rt2_context) {
 /// # Safety
 /// `ctx` is a live context; `out` points to an `rt2_context_properties` whose `struct_size` is set.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_context_info(ctx: *const rt2_context, out: *mut rt2_context_properties) -> Rt2Status {
+pub unsafe extern "C" fn rt2_context_info(
+    ctx: *const rt2_context,
+    out: *mut rt2_context_properties,
+) -> Rt2Status {
     guard(|| {
         let c = handle(ctx, "ctx")?;
         check_out(out, "out")?;

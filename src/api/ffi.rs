@@ -20,7 +20,9 @@ pub(crate) fn guard(f: impl FnOnce() -> Result<()>) -> Rt2Status {
                 .map(|s| s.to_string())
                 .or_else(|| panic.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "unknown panic".into());
-            set_last_error(&format!("internal error (a bug in RT2, please report it): {what}"));
+            set_last_error(&format!(
+                "internal error (a bug in RT2, please report it): {what}"
+            ));
             Rt2Status::Internal
         }
     }
@@ -92,10 +94,17 @@ pub(crate) unsafe fn slice<'a, T>(p: *const T, count: usize, arg: &str) -> Resul
         return Ok(&[]);
     }
     if p.is_null() {
-        return Err(Error::invalid_argument(format!("{arg} is NULL but its count is {count}")));
+        return Err(Error::invalid_argument(format!(
+            "{arg} is NULL but its count is {count}"
+        )));
     }
-    if count.checked_mul(std::mem::size_of::<T>()).is_none_or(|b| b > isize::MAX as usize) {
-        return Err(Error::invalid_argument(format!("{arg}: count {count} overflows the address space")));
+    if count
+        .checked_mul(std::mem::size_of::<T>())
+        .is_none_or(|b| b > isize::MAX as usize)
+    {
+        return Err(Error::invalid_argument(format!(
+            "{arg}: count {count} overflows the address space"
+        )));
     }
     Ok(std::slice::from_raw_parts(p, count))
 }
@@ -182,5 +191,8 @@ pub(crate) fn check_struct_size<T>(struct_size: u32, name: &str) -> Result<()> {
 
 /// Unknown enum values from C are errors, never transmuted.
 pub(crate) fn enum_error(name: &str, value: u32) -> Error {
-    Error::new(Rt2Status::InvalidArgument, format!("{value} is not a valid {name} value"))
+    Error::new(
+        Rt2Status::InvalidArgument,
+        format!("{value} is not a valid {name} value"),
+    )
 }

@@ -1,7 +1,9 @@
 //! `rt2_frame`: an RGBA8 image that renders write into, with an optional HUD mask. A frame is
 //! used by one call at a time.
 
-use super::ffi::{check_out, destroy, guard, guard_ptr, handle, handle_mut, path_arg, slice, write_out, Handle};
+use super::ffi::{
+    check_out, destroy, guard, guard_ptr, handle, handle_mut, path_arg, slice, write_out, Handle,
+};
 use crate::error::Rt2Status;
 use crate::frame::Frame;
 
@@ -25,10 +27,17 @@ impl Handle for rt2_frame {
 /// # Safety
 /// `out` points to writable storage.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_frame_create(width: u32, height: u32, out: *mut *mut rt2_frame) -> Rt2Status {
+pub unsafe extern "C" fn rt2_frame_create(
+    width: u32,
+    height: u32,
+    out: *mut *mut rt2_frame,
+) -> Rt2Status {
     guard(|| {
         check_out(out, "out")?;
-        let h = Box::new(rt2_frame { magic: rt2_frame::MAGIC, frame: Frame::new(width, height)? });
+        let h = Box::new(rt2_frame {
+            magic: rt2_frame::MAGIC,
+            frame: Frame::new(width, height)?,
+        });
         write_out(out, "out", Box::into_raw(h))
     })
 }
@@ -50,7 +59,11 @@ pub unsafe extern "C" fn rt2_frame_destroy(frame: *mut rt2_frame) {
 /// # Safety
 /// `frame` is a live frame; `width` and `height` are writable.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_frame_size(frame: *const rt2_frame, width: *mut u32, height: *mut u32) -> Rt2Status {
+pub unsafe extern "C" fn rt2_frame_size(
+    frame: *const rt2_frame,
+    width: *mut u32,
+    height: *mut u32,
+) -> Rt2Status {
     guard(|| {
         let f = handle(frame, "frame")?;
         check_out(width, "width")?;
@@ -92,7 +105,10 @@ pub unsafe extern "C" fn rt2_frame_pixels(frame: *const rt2_frame) -> *const u8 
 /// # Safety
 /// `frame` is a live frame; `path` is a NUL-terminated string.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_frame_save_png(frame: *const rt2_frame, path: *const std::ffi::c_char) -> Rt2Status {
+pub unsafe extern "C" fn rt2_frame_save_png(
+    frame: *const rt2_frame,
+    path: *const std::ffi::c_char,
+) -> Rt2Status {
     guard(|| {
         let f = handle(frame, "frame")?;
         f.frame.save_png(&path_arg(path, "path")?)

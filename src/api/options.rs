@@ -138,7 +138,10 @@ pub struct rt2_material {
 
 impl From<&Material> for rt2_material {
     fn from(m: &Material) -> Self {
-        let c = m.checker.unwrap_or(Checker { color2: Vec3::ZERO, scale: 1.0 });
+        let c = m.checker.unwrap_or(Checker {
+            color2: Vec3::ZERO,
+            scale: 1.0,
+        });
         rt2_material {
             struct_size: std::mem::size_of::<rt2_material>() as u32,
             color: m.color.to_array(),
@@ -248,10 +251,16 @@ impl rt2_build_options {
             return Err(bad("leaf_size is 0 (must be >= 1)".into()));
         }
         if !(self.traversal_cost.is_finite() && self.traversal_cost > 0.0) {
-            return Err(bad(format!("traversal_cost is {} (must be > 0)", self.traversal_cost)));
+            return Err(bad(format!(
+                "traversal_cost is {} (must be > 0)",
+                self.traversal_cost
+            )));
         }
         if !(0.0..1.0).contains(&self.empty_bonus) {
-            return Err(bad(format!("empty_bonus is {} (must be in [0, 1))", self.empty_bonus)));
+            return Err(bad(format!(
+                "empty_bonus is {} (must be in [0, 1))",
+                self.empty_bonus
+            )));
         }
         Ok(BuildOptions {
             builder,
@@ -296,13 +305,22 @@ impl rt2_render_options {
         check_struct_size::<rt2_render_options>(self.struct_size, "rt2_render_options")?;
         let bad = Error::invalid_argument;
         if !(1..=64).contains(&self.max_depth) {
-            return Err(bad(format!("max_depth is {} (must be in 1..=64)", self.max_depth)));
+            return Err(bad(format!(
+                "max_depth is {} (must be in 1..=64)",
+                self.max_depth
+            )));
         }
         if !(1..=1024).contains(&self.samples) {
-            return Err(bad(format!("samples is {} (must be in 1..=1024)", self.samples)));
+            return Err(bad(format!(
+                "samples is {} (must be in 1..=1024)",
+                self.samples
+            )));
         }
         if !(1..=64).contains(&self.short_stack_size) {
-            return Err(bad(format!("short_stack_size is {} (must be in 1..=64)", self.short_stack_size)));
+            return Err(bad(format!(
+                "short_stack_size is {} (must be in 1..=64)",
+                self.short_stack_size
+            )));
         }
         let transparency = match self.transparency {
             0 => Transparency::Straight,
@@ -311,7 +329,9 @@ impl rt2_render_options {
         };
         let background = Vec3::from(self.background);
         if !background.is_finite() || background.min_element() < 0.0 {
-            return Err(bad(format!("background is {background} (must be finite and >= 0)")));
+            return Err(bad(format!(
+                "background is {background} (must be finite and >= 0)"
+            )));
         }
         Ok(RenderOptions {
             max_depth: self.max_depth,

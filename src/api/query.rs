@@ -89,7 +89,10 @@ unsafe fn query_options(opt: *const rt2_query_options) -> crate::error::Result<Q
             o.short_stack_size
         )));
     }
-    Ok(QueryOptions { traversal: traversal_from(o.traversal)?, short_stack_size: o.short_stack_size as usize })
+    Ok(QueryOptions {
+        traversal: traversal_from(o.traversal)?,
+        short_stack_size: o.short_stack_size as usize,
+    })
 }
 
 /// Shared prologue of both queries: checks, ropes on demand, the committed scene.
@@ -101,7 +104,13 @@ unsafe fn run_query<T>(
     out: *mut T,
     opt: *const rt2_query_options,
     stats: *mut rt2_query_stats,
-    f: impl FnOnce(&crate::context::Context, &crate::scene::Committed, &[Ray], &mut [T], &QueryOptions) -> crate::error::Result<TraversalStats>,
+    f: impl FnOnce(
+        &crate::context::Context,
+        &crate::scene::Committed,
+        &[Ray],
+        &mut [T],
+        &QueryOptions,
+    ) -> crate::error::Result<TraversalStats>,
 ) -> Rt2Status {
     guard(|| {
         let c = handle(ctx, "ctx")?;
@@ -146,19 +155,40 @@ pub unsafe extern "C" fn rt2_intersect(
     opt: *const rt2_query_options,
     stats: *mut rt2_query_stats,
 ) -> Rt2Status {
-    run_query(ctx, scene, rays, count, hits, opt, stats, |c, committed, rays, out, q| {
-        let mut inner = vec![Hit::MISS; rays.len()];
-        let st = c.intersect(committed, rays, &mut inner, q)?;
-        for (h, o) in inner.iter().zip(out.iter_mut()) {
-            *o = if h.is_hit() {
-                let origin = committed.origins[h.prim as usize];
-                rt2_hit { t: h.t, u: h.u, v: h.v, object: origin.object, prim: origin.prim }
-            } else {
-                rt2_hit { t: f32::INFINITY, u: 0.0, v: 0.0, object: RT2_INVALID_ID, prim: RT2_INVALID_ID }
-            };
-        }
-        Ok(st)
-    })
+    run_query(
+        ctx,
+        scene,
+        rays,
+        count,
+        hits,
+        opt,
+        stats,
+        |c, committed, rays, out, q| {
+            let mut inner = vec![Hit::MISS; rays.len()];
+            let st = c.intersect(committed, rays, &mut inner, q)?;
+            for (h, o) in inner.iter().zip(out.iter_mut()) {
+                *o = if h.is_hit() {
+                    let origin = committed.origins[h.prim as usize];
+                    rt2_hit {
+                        t: h.t,
+                        u: h.u,
+                        v: h.v,
+                        object: origin.object,
+                        prim: origin.prim,
+                    }
+                } else {
+                    rt2_hit {
+                        t: f32::INFINITY,
+                        u: 0.0,
+                        v: 0.0,
+                        object: RT2_INVALID_ID,
+                        prim: RT2_INVALID_ID,
+                    }
+                };
+            }
+            Ok(st)
+        },
+    )
 }
 
 /// Any-hit queries: `occluded[i]` becomes 1 when something lies in ray i's `[tmin, tmax)`,
@@ -176,12 +206,21 @@ pub unsafe extern "C" fn rt2_occluded(
     opt: *const rt2_query_options,
     stats: *mut rt2_query_stats,
 ) -> Rt2Status {
-    run_query(ctx, scene, rays, count, occluded, opt, stats, |c, committed, rays, out, q| {
-        let mut inner = vec![false; rays.len()];
-        let st = c.occluded(committed, rays, &mut inner, q)?;
-        for (b, o) in inner.iter().zip(out.iter_mut()) {
-            *o = *b as u8;
-        }
-        Ok(st)
-    })
+    run_query(
+        ctx,
+        scene,
+        rays,
+        count,
+        occluded,
+        opt,
+        stats,
+        |c, committed, rays, out, q| {
+            let mut inner = vec![false; rays.len()];
+            let st = c.occluded(committed, rays, &mut inner, q)?;
+            for (b, o) in inner.iter().zip(out.iter_mut()) {
+                *o = *b as u8;
+            }
+            Ok(st)
+        },
+    )
 }

@@ -28,7 +28,11 @@ pub unsafe extern "C" fn rt2_render(
         let c = handle(ctx, "ctx")?;
         let s = handle(scene, "scene")?;
         let cam = handle(camera, "camera")?;
-        let opts = if options.is_null() { RenderOptions::default() } else { (*options).to_options()? };
+        let opts = if options.is_null() {
+            RenderOptions::default()
+        } else {
+            (*options).to_options()?
+        };
         let f = handle_mut(frame, "frame")?;
         if opts.traversal.is_some_and(|t| t.needs_ropes()) {
             s.write().ensure_ropes()?;

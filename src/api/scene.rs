@@ -39,7 +39,11 @@ impl rt2_scene {
 }
 
 /// Runs an edit that yields an id, writing the id only on success.
-unsafe fn edit_with_id(scene: *mut rt2_scene, out_id: *mut u32, f: impl FnOnce(&mut Scene) -> Result<u32>) -> Rt2Status {
+unsafe fn edit_with_id(
+    scene: *mut rt2_scene,
+    out_id: *mut u32,
+    f: impl FnOnce(&mut Scene) -> Result<u32>,
+) -> Rt2Status {
     guard(|| {
         let s = handle(scene, "scene")?;
         let id = f(&mut s.write())?;
@@ -55,7 +59,10 @@ unsafe fn edit_with_id(scene: *mut rt2_scene, out_id: *mut u32, f: impl FnOnce(&
 /// # Safety
 /// `ctx` is a live context; `out` is writable.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_scene_create(ctx: *const rt2_context, out: *mut *mut rt2_scene) -> Rt2Status {
+pub unsafe extern "C" fn rt2_scene_create(
+    ctx: *const rt2_context,
+    out: *mut *mut rt2_scene,
+) -> Rt2Status {
     guard(|| {
         let c = handle(ctx, "ctx")?;
         check_out(out, "out")?;
@@ -85,7 +92,11 @@ pub unsafe extern "C" fn rt2_scene_destroy(scene: *mut rt2_scene) {
 /// # Safety
 /// `scene` is a live scene; `material` points to an `rt2_material`.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_scene_add_material(scene: *mut rt2_scene, material: *const rt2_material, out_id: *mut u32) -> Rt2Status {
+pub unsafe extern "C" fn rt2_scene_add_material(
+    scene: *mut rt2_scene,
+    material: *const rt2_material,
+    out_id: *mut u32,
+) -> Rt2Status {
     edit_with_id(scene, out_id, |s| {
         if material.is_null() {
             return Err(Error::invalid_argument("material is NULL"));
@@ -109,7 +120,11 @@ pub unsafe extern "C" fn rt2_scene_add_point_light(
     edit_with_id(scene, out_id, |s| {
         let position = Vec3::from(array::<f32, 3>(position, "position")?);
         let color = Vec3::from(array::<f32, 3>(rgb, "rgb")?);
-        s.add_light(PointLight { position, color, intensity })
+        s.add_light(PointLight {
+            position,
+            color,
+            intensity,
+        })
     })
 }
 
@@ -130,7 +145,8 @@ pub unsafe extern "C" fn rt2_scene_add_mesh(
 ) -> Rt2Status {
     edit_with_id(scene, out_object, |s| {
         let n3 = |n: usize, what: &str| {
-            n.checked_mul(3).ok_or_else(|| Error::invalid_argument(format!("{what} overflows")))
+            n.checked_mul(3)
+                .ok_or_else(|| Error::invalid_argument(format!("{what} overflows")))
         };
         let p = slice(positions, n3(vertex_count, "vertex_count")?, "positions")?;
         let i = slice(indices, n3(triangle_count, "triangle_count")?, "indices")?;
@@ -234,7 +250,13 @@ pub unsafe extern "C" fn rt2_scene_load_file(
 ) -> Rt2Status {
     edit_with_id(scene, out_object, |s| {
         let mesh = loaders::load_mesh(&path_arg(path, "path")?)?;
-        s.add_object(Shape::Mesh { positions: mesh.positions, triangles: mesh.triangles }, material)
+        s.add_object(
+            Shape::Mesh {
+                positions: mesh.positions,
+                triangles: mesh.triangles,
+            },
+            material,
+        )
     })
 }
 
@@ -245,7 +267,11 @@ pub unsafe extern "C" fn rt2_scene_load_file(
 /// # Safety
 /// `scene` is a live scene; `m3x4` holds 12 floats.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_scene_set_transform(scene: *mut rt2_scene, object: u32, m3x4: *const f32) -> Rt2Status {
+pub unsafe extern "C" fn rt2_scene_set_transform(
+    scene: *mut rt2_scene,
+    object: u32,
+    m3x4: *const f32,
+) -> Rt2Status {
     guard(|| {
         let s = handle(scene, "scene")?;
         let m = array::<f32, 12>(m3x4, "m3x4")?;
@@ -260,7 +286,10 @@ pub unsafe extern "C" fn rt2_scene_set_transform(scene: *mut rt2_scene, object: 
 /// # Safety
 /// `scene` is a live scene; `options` points to an `rt2_build_options`.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_scene_set_build_options(scene: *mut rt2_scene, options: *const rt2_build_options) -> Rt2Status {
+pub unsafe extern "C" fn rt2_scene_set_build_options(
+    scene: *mut rt2_scene,
+    options: *const rt2_build_options,
+) -> Rt2Status {
     guard(|| {
         let s = handle(scene, "scene")?;
         if options.is_null() {
@@ -325,11 +354,17 @@ pub struct rt2_scene_statistics {
 /// # Safety
 /// `scene` is a live scene; `out` points to an `rt2_scene_statistics` whose `struct_size` is set.
 #[no_mangle]
-pub unsafe extern "C" fn rt2_scene_stats(scene: *const rt2_scene, out: *mut rt2_scene_statistics) -> Rt2Status {
+pub unsafe extern "C" fn rt2_scene_stats(
+    scene: *const rt2_scene,
+    out: *mut rt2_scene_statistics,
+) -> Rt2Status {
     guard(|| {
         let s = handle(scene, "scene")?;
         check_out(out, "out")?;
-        super::ffi::check_struct_size::<rt2_scene_statistics>((*out).struct_size, "rt2_scene_statistics")?;
+        super::ffi::check_struct_size::<rt2_scene_statistics>(
+            (*out).struct_size,
+            "rt2_scene_statistics",
+        )?;
         let r = s.read();
         let c = r.committed()?;
         let t = &c.tree;

@@ -47,18 +47,33 @@ impl<'a> Tracer<'a> {
     pub fn intersect(&self, ray: &Ray) -> Hit {
         let mut stats = TraversalStats::default();
         let s = self.scene;
-        traverse::intersect(&s.tree, &s.prims, ray, self.traversal, &self.traverse_options(), &mut stats)
+        traverse::intersect(
+            &s.tree,
+            &s.prims,
+            ray,
+            self.traversal,
+            &self.traverse_options(),
+            &mut stats,
+        )
     }
 
     pub fn occluded(&self, ray: &Ray) -> bool {
         let mut stats = TraversalStats::default();
         let s = self.scene;
-        traverse::occluded(&s.tree, &s.prims, ray, self.traversal, &self.traverse_options(), &mut stats)
+        traverse::occluded(
+            &s.tree,
+            &s.prims,
+            ray,
+            self.traversal,
+            &self.traverse_options(),
+            &mut stats,
+        )
     }
 
     /// Radiance along a primary ray: pops pending rays until none is left.
     pub fn radiance(&self, primary: Ray) -> Vec3 {
-        let mut pending: Vec<(Ray, Vec3, u32)> = Vec::with_capacity(2 * self.opts.max_depth as usize + 2);
+        let mut pending: Vec<(Ray, Vec3, u32)> =
+            Vec::with_capacity(2 * self.opts.max_depth as usize + 2);
         pending.push((primary, Vec3::ONE, 1));
         let mut color = Vec3::ZERO;
         while let Some((ray, weight, depth)) = pending.pop() {
@@ -94,7 +109,11 @@ impl<'a> Tracer<'a> {
             let mut push = |dir: Vec3, side: f32, w: f32| {
                 let w = weight * w;
                 if w.max_element() >= MIN_WEIGHT {
-                    pending.push((Ray::new(p + side * self.eps * n, dir, 0.0, f32::INFINITY), w, depth + 1));
+                    pending.push((
+                        Ray::new(p + side * self.eps * n, dir, 0.0, f32::INFINITY),
+                        w,
+                        depth + 1,
+                    ));
                 }
             };
             let mut mirror = m.reflectivity;
@@ -126,7 +145,11 @@ impl<'a> Tracer<'a> {
 /// render does not depend on thread scheduling.
 fn sample_offset(x: u32, y: u32, s: u32, n: u32, salt: u32) -> Vec2 {
     let h = |k: u32| {
-        let mut v = x.wrapping_mul(0x9E37_79B1) ^ y.wrapping_mul(0x85EB_CA77) ^ s.wrapping_mul(0xC2B2_AE3D) ^ k ^ salt;
+        let mut v = x.wrapping_mul(0x9E37_79B1)
+            ^ y.wrapping_mul(0x85EB_CA77)
+            ^ s.wrapping_mul(0xC2B2_AE3D)
+            ^ k
+            ^ salt;
         v ^= v >> 16;
         v = v.wrapping_mul(0x7FEB_352D);
         v ^= v >> 15;
@@ -138,32 +161,45 @@ fn sample_offset(x: u32, y: u32, s: u32, n: u32, salt: u32) -> Vec2 {
         return Vec2::new(0.5, 0.5);
     }
     let side = (n as f32).sqrt().ceil() as u32;
-    Vec2::new(((s % side) as f32 + h(1)) / side as f32, ((s / side) as f32 + h(2)) / side as f32)
+    Vec2::new(
+        ((s % side) as f32 + h(1)) / side as f32,
+        ((s / side) as f32 + h(2)) / side as f32,
+    )
 }
 
 /// Renders `frame` in the current rayon pool (the caller installs the context's pool).
-pub fn render(scene: &Committed, camera: &Camera, opts: &RenderOptions, traversal: Traversal, frame: &mut Frame) {
+pub fn render(
+    scene: &Committed,
+    camera: &Camera,
+    opts: &RenderOptions,
+    traversal: Traversal,
+    frame: &mut Frame,
+) {
     let (w, h) = (frame.width(), frame.height());
     let rays = camera.rays(w, h);
     let tracer = Tracer::new(scene, opts, traversal);
     let size = Vec2::new(w as f32, h as f32);
     let row_bytes = w as usize * 4;
     let (pixels, mask) = frame.pixels_and_mask_mut();
-    pixels.par_chunks_mut(row_bytes * BAND_ROWS).enumerate().for_each(|(band, chunk)| {
-        for (i, px) in chunk.chunks_exact_mut(4).enumerate() {
-            let idx = band * BAND_ROWS * w as usize + i;
-            if mask.is_some_and(|m| m[idx] == 0) {
-                continue;
+    pixels
+        .par_chunks_mut(row_bytes * BAND_ROWS)
+        .enumerate()
+        .for_each(|(band, chunk)| {
+            for (i, px) in chunk.chunks_exact_mut(4).enumerate() {
+                let idx = band * BAND_ROWS * w as usize + i;
+                if mask.is_some_and(|m| m[idx] == 0) {
+                    continue;
+                }
+                let (x, y) = ((idx % w as usize) as u32, (idx / w as usize) as u32);
+                let mut c = Vec3::ZERO;
+                for s in 0..opts.samples {
+                    let pixel =
+                        Vec2::new(x as f32, y as f32) + sample_offset(x, y, s, opts.samples, 0);
+                    let lens = sample_offset(x, y, s, opts.samples.max(2), 0x5bd1_e995);
+                    c += tracer.radiance(rays.ray(pixel, size, lens));
+                }
+                let c = (c / opts.samples as f32).clamp(Vec3::ZERO, Vec3::ONE) * 255.0 + 0.5;
+                px.copy_from_slice(&[c.x as u8, c.y as u8, c.z as u8, 255]);
             }
-            let (x, y) = ((idx % w as usize) as u32, (idx / w as usize) as u32);
-            let mut c = Vec3::ZERO;
-            for s in 0..opts.samples {
-                let pixel = Vec2::new(x as f32, y as f32) + sample_offset(x, y, s, opts.samples, 0);
-                let lens = sample_offset(x, y, s, opts.samples.max(2), 0x5bd1_e995);
-                c += tracer.radiance(rays.ray(pixel, size, lens));
-            }
-            let c = (c / opts.samples as f32).clamp(Vec3::ZERO, Vec3::ONE) * 255.0 + 0.5;
-            px.copy_from_slice(&[c.x as u8, c.y as u8, c.z as u8, 255]);
-        }
-    });
+        });
 }

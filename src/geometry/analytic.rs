@@ -99,7 +99,13 @@ impl Ellipsoid {
         let inv = Mat3::from_cols_array(&self.inv);
         let o = inv * (ray.org - Vec3::from(self.center));
         let d = inv * ray.dir;
-        nearest_root(d.length_squared(), o.dot(d), o.length_squared() - 1.0, ray.tmin, tmax)
+        nearest_root(
+            d.length_squared(),
+            o.dot(d),
+            o.length_squared() - 1.0,
+            ray.tmin,
+            tmax,
+        )
     }
 
     pub fn normal(&self, p: Vec3) -> Vec3 {

@@ -84,7 +84,9 @@ impl PrimitiveSet {
         let found = match self.locate(i as usize) {
             (PrimKind::Triangle, k) => self.triangles[k].intersect(ray, tmax),
             (PrimKind::Sphere, k) => self.spheres[k].intersect(ray, tmax).map(|t| (t, 0.0, 0.0)),
-            (PrimKind::Ellipsoid, k) => self.ellipsoids[k].intersect(ray, tmax).map(|t| (t, 0.0, 0.0)),
+            (PrimKind::Ellipsoid, k) => self.ellipsoids[k]
+                .intersect(ray, tmax)
+                .map(|t| (t, 0.0, 0.0)),
             (PrimKind::Box, k) => box_intersect(&self.boxes[k], ray, tmax).map(|t| (t, 0.0, 0.0)),
         };
         match found {

@@ -14,7 +14,12 @@ pub struct Ray {
 
 impl Ray {
     pub fn new(org: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
-        Ray { org, dir, tmin, tmax }
+        Ray {
+            org,
+            dir,
+            tmin,
+            tmax,
+        }
     }
 
     pub fn at(&self, t: f32) -> Vec3 {

@@ -72,7 +72,13 @@ impl Triangle {
                 for i in 0..poly.len() {
                     let a = poly[i];
                     let b = poly[(i + 1) % poly.len()];
-                    let inside = |p: Vec3| if keep_below { p[axis] <= plane } else { p[axis] >= plane };
+                    let inside = |p: Vec3| {
+                        if keep_below {
+                            p[axis] <= plane
+                        } else {
+                            p[axis] >= plane
+                        }
+                    };
                     let (ia, ib) = (inside(a), inside(b));
                     if ia {
                         next.push(a);

@@ -77,7 +77,10 @@ impl Default for Scene {
 
 fn check_finite(name: &str, v: &[f32]) -> Result<()> {
     match v.iter().position(|x| !x.is_finite()) {
-        Some(i) => Err(Error::invalid_argument(format!("{name}[{i}] is {} (must be finite)", v[i]))),
+        Some(i) => Err(Error::invalid_argument(format!(
+            "{name}[{i}] is {} (must be finite)",
+            v[i]
+        ))),
         None => Ok(()),
     }
 }
@@ -85,14 +88,18 @@ fn check_finite(name: &str, v: &[f32]) -> Result<()> {
 fn check_color(name: &str, c: Vec3) -> Result<()> {
     check_finite(name, &c.to_array())?;
     if c.min_element() < 0.0 {
-        return Err(Error::invalid_argument(format!("{name} has a negative component: {c}")));
+        return Err(Error::invalid_argument(format!(
+            "{name} has a negative component: {c}"
+        )));
     }
     Ok(())
 }
 
 fn check_unit_range(name: &str, v: f32) -> Result<()> {
     if !(0.0..=1.0).contains(&v) {
-        return Err(Error::invalid_argument(format!("{name} is {v} (must be in [0, 1])")));
+        return Err(Error::invalid_argument(format!(
+            "{name} is {v} (must be in [0, 1])"
+        )));
     }
     Ok(())
 }
@@ -116,15 +123,24 @@ impl Material {
             )));
         }
         if !(self.shininess.is_finite() && self.shininess >= 0.0) {
-            return Err(Error::invalid_argument(format!("material.shininess is {} (must be >= 0)", self.shininess)));
+            return Err(Error::invalid_argument(format!(
+                "material.shininess is {} (must be >= 0)",
+                self.shininess
+            )));
         }
         if !(self.ior.is_finite() && self.ior > 0.0) {
-            return Err(Error::invalid_argument(format!("material.ior is {} (must be > 0)", self.ior)));
+            return Err(Error::invalid_argument(format!(
+                "material.ior is {} (must be > 0)",
+                self.ior
+            )));
         }
         if let Some(c) = self.checker {
             check_color("material.checker_color", c.color2)?;
             if !(c.scale.is_finite() && c.scale > 0.0) {
-                return Err(Error::invalid_argument(format!("material.checker_scale is {} (must be > 0)", c.scale)));
+                return Err(Error::invalid_argument(format!(
+                    "material.checker_scale is {} (must be > 0)",
+                    c.scale
+                )));
             }
         }
         Ok(())
@@ -134,7 +150,10 @@ impl Material {
 impl Shape {
     pub fn validate(&self) -> Result<()> {
         match self {
-            Shape::Mesh { positions, triangles } => {
+            Shape::Mesh {
+                positions,
+                triangles,
+            } => {
                 for (i, p) in positions.iter().enumerate() {
                     check_finite(&format!("positions[vertex {i}]"), &p.to_array())?;
                 }
@@ -152,21 +171,27 @@ impl Shape {
             Shape::Sphere { center, radius } => {
                 check_finite("center", &center.to_array())?;
                 if !(radius.is_finite() && *radius > 0.0) {
-                    return Err(Error::invalid_argument(format!("radius is {radius} (must be finite and > 0)")));
+                    return Err(Error::invalid_argument(format!(
+                        "radius is {radius} (must be finite and > 0)"
+                    )));
                 }
             }
             Shape::Ellipsoid { center, radii } => {
                 check_finite("center", &center.to_array())?;
                 check_finite("radii", &radii.to_array())?;
                 if radii.min_element() <= 0.0 {
-                    return Err(Error::invalid_argument(format!("radii are {radii} (each must be > 0)")));
+                    return Err(Error::invalid_argument(format!(
+                        "radii are {radii} (each must be > 0)"
+                    )));
                 }
             }
             Shape::Box { min, max } => {
                 check_finite("min", &min.to_array())?;
                 check_finite("max", &max.to_array())?;
                 if min.cmpgt(*max).any() {
-                    return Err(Error::invalid_argument(format!("box min {min} exceeds max {max}")));
+                    return Err(Error::invalid_argument(format!(
+                        "box min {min} exceeds max {max}"
+                    )));
                 }
             }
             Shape::Plane { normal, offset } => {
@@ -213,7 +238,10 @@ impl Scene {
         check_finite("position", &l.position.to_array())?;
         check_color("rgb", l.color)?;
         if !(l.intensity.is_finite() && l.intensity >= 0.0) {
-            return Err(Error::invalid_argument(format!("intensity is {} (must be finite and >= 0)", l.intensity)));
+            return Err(Error::invalid_argument(format!(
+                "intensity is {} (must be finite and >= 0)",
+                l.intensity
+            )));
         }
         self.lights.push(l);
         self.dirty = true;
@@ -230,7 +258,9 @@ impl Scene {
         }
         let prims: usize = self.objects.iter().map(|o| o.shape.prim_count()).sum();
         if prims + shape.prim_count() >= (1 << 30) {
-            return Err(Error::unsupported("a scene holds fewer than 2^30 primitives"));
+            return Err(Error::unsupported(
+                "a scene holds fewer than 2^30 primitives",
+            ));
         }
         self.objects.push(Object {
             shape,
@@ -244,12 +274,17 @@ impl Scene {
     /// Sets an object's object-to-world transform (replacing the previous one).
     pub fn set_transform(&mut self, object: u32, t: Affine3A) -> Result<()> {
         let obj = self.objects.get(object as usize).ok_or_else(|| {
-            Error::invalid_argument(format!("object is {object}, but the scene has {} objects", self.objects.len()))
+            Error::invalid_argument(format!(
+                "object is {object}, but the scene has {} objects",
+                self.objects.len()
+            ))
         })?;
         check_finite("transform", &t.to_cols_array())?;
         let det = t.matrix3.determinant();
         if det == 0.0 || !det.is_finite() {
-            return Err(Error::invalid_argument("transform is singular (its 3x3 part has determinant 0)"));
+            return Err(Error::invalid_argument(
+                "transform is singular (its 3x3 part has determinant 0)",
+            ));
         }
         obj.shape.accepts(&t)?;
         self.objects[object as usize].transform = t;
@@ -304,7 +339,9 @@ impl Scene {
             (Some(_), true) => Err(Error::invalid_operation(
                 "the scene was modified after its last commit: call rt2_scene_commit first",
             )),
-            (None, _) => Err(Error::invalid_operation("the scene was never committed: call rt2_scene_commit first")),
+            (None, _) => Err(Error::invalid_operation(
+                "the scene was never committed: call rt2_scene_commit first",
+            )),
         }
     }
 }

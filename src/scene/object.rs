@@ -45,7 +45,8 @@ impl Shape {
     pub fn accepts(&self, t: &Affine3A) -> Result<()> {
         if let Shape::Box { .. } = self {
             let m = Mat3::from(t.matrix3);
-            let axis_aligned = (0..3).all(|c| m.col(c).to_array().iter().filter(|v| **v != 0.0).count() == 1);
+            let axis_aligned =
+                (0..3).all(|c| m.col(c).to_array().iter().filter(|v| **v != 0.0).count() == 1);
             if !axis_aligned {
                 return Err(Error::unsupported(
                     "boxes are axis-aligned: their transform may only translate, scale and swap axes",
@@ -72,28 +73,46 @@ pub struct PrimOrigin {
 
 /// Appends the world-space primitives of `obj` to `set`; `origins` receives one entry per
 /// bounded primitive, `plane_origins` per plane (they are indexed after the bounded ones).
-pub fn place(obj: &Object, object_id: u32, set: &mut PrimitiveSet, origins: &mut Vec<Vec<PrimOrigin>>) {
+pub fn place(
+    obj: &Object,
+    object_id: u32,
+    set: &mut PrimitiveSet,
+    origins: &mut Vec<Vec<PrimOrigin>>,
+) {
     let t = obj.transform;
     let lin = Mat3::from(t.matrix3);
-    let one = PrimOrigin { object: object_id, prim: 0 };
+    let one = PrimOrigin {
+        object: object_id,
+        prim: 0,
+    };
     match &obj.shape {
-        Shape::Mesh { positions, triangles } => {
+        Shape::Mesh {
+            positions,
+            triangles,
+        } => {
             let world: Vec<Vec3> = positions.iter().map(|&p| t.transform_point3(p)).collect();
             for (k, tri) in triangles.iter().enumerate() {
                 let [a, b, c] = tri.map(|i| world[i as usize]);
                 set.triangles.push(Triangle::from_vertices(a, b, c));
-                origins[0].push(PrimOrigin { object: object_id, prim: k as u32 });
+                origins[0].push(PrimOrigin {
+                    object: object_id,
+                    prim: k as u32,
+                });
             }
         }
         Shape::Sphere { center, radius } => {
             let c = t.transform_point3(*center);
             let cols = [lin.x_axis, lin.y_axis, lin.z_axis].map(|v| v.length());
-            let similarity = (lin.transpose() * lin - Mat3::from_diagonal(Vec3::splat(cols[0] * cols[0])))
-                .to_cols_array()
-                .iter()
-                .all(|e| e.abs() <= 1e-6 * cols[0] * cols[0]);
+            let similarity = (lin.transpose() * lin
+                - Mat3::from_diagonal(Vec3::splat(cols[0] * cols[0])))
+            .to_cols_array()
+            .iter()
+            .all(|e| e.abs() <= 1e-6 * cols[0] * cols[0]);
             if similarity {
-                set.spheres.push(Sphere { center: c.to_array(), radius: radius * cols[0] });
+                set.spheres.push(Sphere {
+                    center: c.to_array(),
+                    radius: radius * cols[0],
+                });
                 origins[1].push(one);
             } else if let Some(e) = Ellipsoid::new(c, lin * *radius) {
                 set.ellipsoids.push(e);
@@ -101,7 +120,10 @@ pub fn place(obj: &Object, object_id: u32, set: &mut PrimitiveSet, origins: &mut
             }
         }
         Shape::Ellipsoid { center, radii } => {
-            if let Some(e) = Ellipsoid::new(t.transform_point3(*center), lin * Mat3::from_diagonal(*radii)) {
+            if let Some(e) = Ellipsoid::new(
+                t.transform_point3(*center),
+                lin * Mat3::from_diagonal(*radii),
+            ) {
                 set.ellipsoids.push(e);
                 origins[2].push(one);
             }
@@ -114,7 +136,10 @@ pub fn place(obj: &Object, object_id: u32, set: &mut PrimitiveSet, origins: &mut
         Shape::Plane { normal, offset } => {
             let n = (lin.inverse().transpose() * *normal).normalize();
             let p0 = t.transform_point3(*normal * (*offset / normal.length_squared()));
-            set.planes.push(Plane { normal: n.to_array(), offset: n.dot(p0) });
+            set.planes.push(Plane {
+                normal: n.to_array(),
+                offset: n.dot(p0),
+            });
             origins[4].push(one);
         }
     }

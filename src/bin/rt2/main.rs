@@ -1,6 +1,9 @@
 //! The `rt2` command line: `render` draws a built-in scene or a model file to a PNG, `bench`
 //! measures (see `rt2 bench --help`).
 
+mod bench;
+
+use glam::Vec3;
 use rt2::camera::Camera;
 use rt2::context::Context;
 use rt2::cpu::traverse::Traversal;
@@ -9,7 +12,6 @@ use rt2::error::{Error, Result};
 use rt2::frame::Frame;
 use rt2::render::{RenderOptions, Transparency};
 use rt2::scene::{builtin, loaders, Material, PointLight, Scene, Shape};
-use glam::Vec3;
 use std::path::Path;
 use std::time::Instant;
 
@@ -24,17 +26,21 @@ const USAGE: &str = "usage:
       --depth N             maximum ray depth (default: the scene's)
       --samples N           samples per pixel (default: 1)
       --straight            RT² transparency (no refraction)
-      --threads N           worker threads (default: all cores)";
+      --threads N           worker threads (default: all cores)
+  rt2 bench [frames|build|rays|all]    measure (rt2 bench --help)";
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("render") => render(&args[1..]),
+        Some("bench") => bench::run(&args[1..]),
         Some("-h" | "--help") | None => {
             println!("{USAGE}");
             Ok(())
         }
-        Some(other) => Err(Error::invalid_argument(format!("unknown command '{other}'\n{USAGE}"))),
+        Some(other) => Err(Error::invalid_argument(format!(
+            "unknown command '{other}'\n{USAGE}"
+        ))),
     };
     if let Err(e) = result {
         eprintln!("rt2: {}", e.message);
@@ -53,26 +59,52 @@ pub struct Loaded {
 pub fn load_scene(name: &str) -> Result<Loaded> {
     if builtin::NAMES.contains(&name) {
         let b = builtin::by_name(name)?;
-        return Ok(Loaded { scene: b.scene, camera: b.camera, max_depth: b.max_depth });
+        return Ok(Loaded {
+            scene: b.scene,
+            camera: b.camera,
+            max_depth: b.max_depth,
+        });
     }
     let mesh = loaders::load_mesh(Path::new(name))?;
     let bounds = rt2::geometry::Aabb::from_points(&mesh.positions);
     let (c, diag) = (bounds.center(), bounds.diagonal().max(1e-6));
     let mut scene = Scene::new();
-    let m = scene.add_material(Material { color: Vec3::new(0.85, 0.8, 0.7), ..Material::default() })?;
-    scene.add_object(Shape::Mesh { positions: mesh.positions, triangles: mesh.triangles }, m)?;
+    let m = scene.add_material(Material {
+        color: Vec3::new(0.85, 0.8, 0.7),
+        ..Material::default()
+    })?;
+    scene.add_object(
+        Shape::Mesh {
+            positions: mesh.positions,
+            triangles: mesh.triangles,
+        },
+        m,
+    )?;
     for offset in [Vec3::new(0.5, 1.0, 0.3), Vec3::new(-0.8, 0.6, 1.0)] {
-        scene.add_light(PointLight { position: c + diag * offset, color: Vec3::ONE, intensity: 0.6 })?;
+        scene.add_light(PointLight {
+            position: c + diag * offset,
+            color: Vec3::ONE,
+            intensity: 0.6,
+        })?;
     }
     let mut camera = Camera::default();
-    camera.look_at(c + 0.9 * diag * Vec3::new(0.3, 0.35, 1.0).normalize(), c, Vec3::Y)?;
+    camera.look_at(
+        c + 0.9 * diag * Vec3::new(0.3, 0.35, 1.0).normalize(),
+        c,
+        Vec3::Y,
+    )?;
     camera.set_fov(60.0)?;
-    Ok(Loaded { scene, camera, max_depth: 1 })
+    Ok(Loaded {
+        scene,
+        camera,
+        max_depth: 1,
+    })
 }
 
 fn parse<T: std::str::FromStr>(flag: &str, v: Option<&String>) -> Result<T> {
     let v = v.ok_or_else(|| Error::invalid_argument(format!("{flag} needs a value")))?;
-    v.parse().map_err(|_| Error::invalid_argument(format!("{flag}: cannot parse '{v}'")))
+    v.parse()
+        .map_err(|_| Error::invalid_argument(format!("{flag}: cannot parse '{v}'")))
 }
 
 fn render(args: &[String]) -> Result<()> {
@@ -89,7 +121,9 @@ fn render(args: &[String]) -> Result<()> {
             "-o" | "--output" => output = parse(a, it.next())?,
             "-s" | "--size" => {
                 let s: String = parse(a, it.next())?;
-                let (w, h) = s.split_once('x').ok_or_else(|| Error::invalid_argument("--size takes WxH"))?;
+                let (w, h) = s
+                    .split_once('x')
+                    .ok_or_else(|| Error::invalid_argument("--size takes WxH"))?;
                 width = parse(a, Some(&w.to_string()))?;
                 height = parse(a, Some(&h.to_string()))?;
             }
@@ -112,7 +146,11 @@ fn render(args: &[String]) -> Result<()> {
             "--threads" => threads = parse(a, it.next())?,
             "--straight" => opts.transparency = Transparency::Straight,
             s if !s.starts_with('-') => name = s.to_string(),
-            s => return Err(Error::invalid_argument(format!("unknown option '{s}'\n{USAGE}"))),
+            s => {
+                return Err(Error::invalid_argument(format!(
+                    "unknown option '{s}'\n{USAGE}"
+                )))
+            }
         }
     }
     let ctx = Context::new(backend, threads)?;

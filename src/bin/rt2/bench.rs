@@ -1,0 +1,418 @@
+//! `rt2 bench`: the measurements quoted in BENCHMARKS.md. Every figure is a median of several
+//! runs; Embree (the peer of `../shared/peers`) is measured in the same invocation when its
+//! harness is built, so ratios compare like with like on a noisy shared machine.
+
+use crate::load_scene;
+use rt2::context::{Context, QueryOptions};
+use rt2::cpu::traverse::Traversal;
+use rt2::dispatch::BackendRequest;
+use rt2::error::{Error, Result};
+use rt2::frame::Frame;
+use rt2::geometry::{Hit, Ray};
+use rt2::kdtree::{BuildOptions, Builder};
+use rt2::rayset::{self, HitRecord};
+use rt2::render::RenderOptions;
+use rt2::scene::{loaders, Scene, Shape};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+const USAGE: &str = "usage: rt2 bench [frames|build|rays|all] [--runs N] [--write FILE]
+  frames   ms per 1376x768 frame on the CPU: spheres3 and the bunny, with build time and memory
+  build    kd-tree build time (SAH+perfect splits, midpoint) at 1 and 2 threads, Embree beside
+  rays     Mrays/s per traversal on ../shared/raysets, agreement with Embree's hits, Embree beside
+  --runs N       timed runs per figure (default 5; the median is reported)
+  --write FILE   also replace this benchmark's section in FILE (e.g. BENCHMARKS.md)
+Model files come from $RT2_SHARED (default ../shared); Embree from $RT2_EMBREE_BENCH or
+target/peers/bench_embree (make -C ../shared/peers BUILD=$PWD/target/peers).";
+
+struct Args {
+    runs: usize,
+    write: Option<PathBuf>,
+}
+
+pub fn run(args: &[String]) -> Result<()> {
+    let mut what = "all".to_string();
+    let mut a = Args {
+        runs: 5,
+        write: None,
+    };
+    let mut it = args.iter();
+    while let Some(x) = it.next() {
+        match x.as_str() {
+            "--runs" => a.runs = crate::parse(x, it.next())?,
+            "--write" => a.write = Some(PathBuf::from(crate::parse::<String>(x, it.next())?)),
+            "-h" | "--help" => {
+                println!("{USAGE}");
+                return Ok(());
+            }
+            s if !s.starts_with('-') => what = s.to_string(),
+            s => {
+                return Err(Error::invalid_argument(format!(
+                    "unknown option '{s}'\n{USAGE}"
+                )))
+            }
+        }
+    }
+    a.runs = a.runs.max(1);
+    let sections: Vec<(&str, fn(&Args) -> Result<String>)> = match what.as_str() {
+        "frames" => vec![("frames", frames)],
+        "build" => vec![("build", build)],
+        "rays" => vec![("rays", rays)],
+        "all" => vec![("frames", frames), ("build", build), ("rays", rays)],
+        _ => {
+            return Err(Error::invalid_argument(format!(
+                "unknown benchmark '{what}'\n{USAGE}"
+            )))
+        }
+    };
+    for (name, f) in sections {
+        let body = f(&a)?;
+        let text = format!(
+            "Machine: {}. Command: `cargo run --release --bin rt2 -- bench {name} --runs {}`.\n\n{body}",
+            machine(),
+            a.runs
+        );
+        println!("\n{text}");
+        if let Some(path) = &a.write {
+            replace_section(path, name, &text)?;
+        }
+    }
+    Ok(())
+}
+
+fn shared() -> PathBuf {
+    std::env::var_os("RT2_SHARED")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("../shared"))
+}
+
+fn machine() -> String {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
+    format!("{cpu}, {cores} cores")
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+/// Median wall time in ms of `runs` calls of `f` after one warm-up call.
+fn time_ms(runs: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    median(
+        (0..runs)
+            .map(|_| {
+                let t = Instant::now();
+                f();
+                t.elapsed().as_secs_f64() * 1e3
+            })
+            .collect(),
+    )
+}
+
+/// Replaces the text between `<!-- bench:NAME -->` markers in `path` (appending if absent).
+fn replace_section(path: &Path, name: &str, text: &str) -> Result<()> {
+    let (open, close) = (
+        format!("<!-- bench:{name} -->"),
+        format!("<!-- /bench:{name} -->"),
+    );
+    let old = std::fs::read_to_string(path).unwrap_or_else(|_| "# Benchmarks\n".into());
+    let block = format!("{open}\n{text}\n{close}");
+    let new = match (old.find(&open), old.find(&close)) {
+        (Some(a), Some(b)) if b > a => format!("{}{block}{}", &old[..a], &old[b + close.len()..]),
+        _ => format!("{}\n{block}\n", old.trim_end()),
+    };
+    std::fs::write(path, new)
+        .map_err(|e| Error::io(format!("cannot write {}: {e}", path.display())))
+}
+
+fn mib(bytes: usize) -> f64 {
+    bytes as f64 / 1048576.0
+}
+
+fn frames(a: &Args) -> Result<String> {
+    let ctx = Context::new(BackendRequest::Cpu, 0)?;
+    let mut out = String::from(
+        "### Whitted frames on the CPU (1376x768, 1 sample, AUTO traversal)\n\n\
+         | scene | primitives | commit ms | ms/frame (median) | M primary rays/s | nodes MiB | leaf lists MiB | primitives MiB |\n\
+         |---|---|---|---|---|---|---|---|\n",
+    );
+    let bunny = shared().join("models/bunny.ply");
+    let mut names = vec!["spheres3".to_string()];
+    if bunny.exists() {
+        names.push(bunny.display().to_string());
+    } else {
+        eprintln!(
+            "bench frames: {} is missing; the bunny row is skipped",
+            bunny.display()
+        );
+    }
+    for name in names {
+        let mut l = load_scene(&name)?;
+        let opts = RenderOptions {
+            max_depth: l.max_depth,
+            ..RenderOptions::default()
+        };
+        let commit_ms = time_ms(a.runs, || {
+            let _ = ctx.install(|| l.scene.commit());
+        });
+        let c = l.scene.committed()?;
+        let mut frame = Frame::new(1376, 768)?;
+        let ms = time_ms(a.runs, || {
+            let _ = ctx.render(c, &l.camera, &opts, &mut frame);
+        });
+        let label = Path::new(&name)
+            .file_stem()
+            .map_or(name.clone(), |s| s.to_string_lossy().into());
+        writeln!(
+            out,
+            "| {label} (depth {}) | {} | {commit_ms:.1} | {ms:.1} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            l.max_depth,
+            c.prims.len() + c.prims.planes.len(),
+            1376.0 * 768.0 / ms / 1e3,
+            mib(c.tree.node_bytes()),
+            mib(c.tree.leaf_list_bytes()),
+            mib(c.prims.bytes())
+        )
+        .ok();
+    }
+    Ok(out)
+}
+
+/// A mesh from the shared models as a scene with one object.
+fn model_scene(name: &str) -> Result<Option<Scene>> {
+    let path = shared().join("models").join(name);
+    if !path.exists() {
+        eprintln!("bench: {} is missing; skipped", path.display());
+        return Ok(None);
+    }
+    let mesh = loaders::load_mesh(&path)?;
+    let mut s = Scene::new();
+    s.add_object(
+        Shape::Mesh {
+            positions: mesh.positions,
+            triangles: mesh.triangles,
+        },
+        0,
+    )?;
+    Ok(Some(s))
+}
+
+fn embree_harness() -> Option<PathBuf> {
+    let p = std::env::var_os("RT2_EMBREE_BENCH")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("target/peers/bench_embree"));
+    p.exists().then_some(p)
+}
+
+/// Runs Embree's harness and returns its TSV rows (split into fields).
+fn embree_rows(mesh: &Path, rays: &[PathBuf], runs: usize) -> Vec<Vec<String>> {
+    let Some(exe) = embree_harness() else {
+        eprintln!("bench: Embree's harness is not built; Embree columns are empty");
+        return Vec::new();
+    };
+    let tsv = std::env::temp_dir().join(format!("rt2-embree-{}.tsv", std::process::id()));
+    let _ = std::fs::remove_file(&tsv);
+    let status = Command::new(exe)
+        .arg(mesh)
+        .args(rays)
+        .args(["--runs", &runs.to_string(), "--threads", "1,2", "--tsv"])
+        .arg(&tsv)
+        .stdout(std::process::Stdio::null())
+        .status();
+    if !status.is_ok_and(|s| s.success()) {
+        eprintln!("bench: Embree's harness failed");
+        return Vec::new();
+    }
+    let text = std::fs::read_to_string(&tsv).unwrap_or_default();
+    let _ = std::fs::remove_file(&tsv);
+    text.lines()
+        .map(|l| l.split('\t').map(str::to_string).collect())
+        .collect()
+}
+
+fn build(a: &Args) -> Result<String> {
+    let mut out = String::from(
+        "### kd-tree build (median ms) and memory\n\n\
+         | model | triangles | builder | 1 thread ms | 2 threads ms | nodes | tree MiB | bytes/triangle | SAH cost |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut embree = String::new();
+    for model in ["bunny.ply", "snowden.ply", "dragon.ply"] {
+        let Some(scene) = model_scene(model)? else {
+            continue;
+        };
+        let mut scene = scene;
+        let tris = scene.objects()[0].shape.prim_count();
+        for builder in [Builder::Sah, Builder::Midpoint] {
+            scene.set_build_options(BuildOptions {
+                builder,
+                ..BuildOptions::default()
+            });
+            let mut ms = [0.0; 2];
+            for (k, threads) in [1u32, 2].into_iter().enumerate() {
+                let ctx = Context::new(BackendRequest::Cpu, threads)?;
+                let runs = if tris > 500_000 {
+                    a.runs.min(3)
+                } else {
+                    a.runs
+                };
+                ms[k] = median(
+                    (0..runs)
+                        .map(|_| {
+                            let _ = ctx.install(|| scene.commit());
+                            scene
+                                .committed()
+                                .map_or(f64::NAN, |c| c.tree.stats.build_ms as f64)
+                        })
+                        .collect(),
+                );
+            }
+            let c = scene.committed()?;
+            let bytes = c.tree.node_bytes() + c.tree.leaf_list_bytes();
+            writeln!(
+                out,
+                "| {model} | {tris} | {builder:?} | {:.1} | {:.1} | {} | {:.2} | {:.1} | {:.1} |",
+                ms[0],
+                ms[1],
+                c.tree.stats.node_count,
+                mib(bytes),
+                bytes as f64 / tris as f64,
+                c.tree.stats.sah_cost
+            )
+            .ok();
+        }
+        let stem = model.trim_end_matches(".ply");
+        let sets = shared().join("raysets").join(stem);
+        if let Some(shadow) = std::fs::read_dir(&sets).ok().and_then(|d| {
+            d.filter_map(|e| e.ok().map(|e| e.path())).find(|p| {
+                p.file_name().is_some_and(|n| {
+                    n.to_string_lossy().starts_with("shadow_")
+                        && n.to_string_lossy().ends_with(".rays")
+                })
+            })
+        }) {
+            for r in embree_rows(&shared().join("models").join(model), &[shadow], a.runs) {
+                if r.get(2).is_some_and(|s| s == "BUILD") {
+                    writeln!(
+                        embree,
+                        "| {model} | {} | {} | {} | {:.2} |",
+                        r[3],
+                        r[4],
+                        r[6],
+                        r[5].parse::<f64>().unwrap_or(0.0) / 1048576.0
+                    )
+                    .ok();
+                }
+            }
+        }
+    }
+    if !embree.is_empty() {
+        out += "\nEmbree 3 in the same run:\n\n| model | build | threads | median ms | MiB |\n|---|---|---|---|---|\n";
+        out += &embree;
+    }
+    Ok(out)
+}
+
+fn rays(a: &Args) -> Result<String> {
+    let mut out = String::from(
+        "### Ray queries on the shared ray sets (single rays, CPU)\n\n\
+         Disagreement with Embree's hits counts hit/miss differences and different triangles with \
+         |Δt| > 1e-4·diag (`rt2cmp`'s rule); ties on shared edges are not disagreements.\n\n\
+         | set | method | 1 thread Mrays/s | 2 threads Mrays/s | nodes/ray | leaves/ray | tests/ray | disagreements |\n\
+         |---|---|---|---|---|---|---|---|\n",
+    );
+    for model in ["bunny", "dragon"] {
+        let Some(mut scene) = model_scene(&format!("{model}.ply"))? else {
+            continue;
+        };
+        scene.commit()?;
+        scene.ensure_ropes()?;
+        let c = scene.committed()?;
+        let diag = c.bounds.diagonal();
+        let dir = shared().join("raysets").join(model);
+        let mut sets: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .map_err(|e| Error::io(format!("{}: {e}", dir.display())))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "rays"))
+            .collect();
+        sets.sort();
+        let embree = embree_rows(
+            &shared().join("models").join(format!("{model}.ply")),
+            &sets,
+            a.runs,
+        );
+        for set in &sets {
+            let rays: Vec<Ray> = rayset::read_rays(set)?;
+            let stem = set
+                .file_stem()
+                .map_or(String::new(), |s| s.to_string_lossy().into());
+            let reference = rayset::read_hits(&set.with_extension("embree.hits")).ok();
+            for how in Traversal::ALL {
+                let q = QueryOptions {
+                    traversal: Some(how),
+                    ..QueryOptions::default()
+                };
+                let mut hits = vec![Hit::MISS; rays.len()];
+                let mut mrays = [0.0; 2];
+                let mut stats = Default::default();
+                for (k, threads) in [1u32, 2].into_iter().enumerate() {
+                    let ctx = Context::new(BackendRequest::Cpu, threads)?;
+                    let ms = time_ms(a.runs, || {
+                        stats = ctx.intersect(c, &rays, &mut hits, &q).unwrap_or_default();
+                    });
+                    mrays[k] = rays.len() as f64 / ms / 1e3;
+                }
+                let mine: Vec<HitRecord> = hits
+                    .iter()
+                    .map(|h| HitRecord {
+                        t: h.t,
+                        prim: h.prim,
+                        u: h.u,
+                        v: h.v,
+                    })
+                    .collect();
+                let agree = reference.as_ref().map_or("no reference".into(), |r| {
+                    let g = rayset::compare(&mine, r, diag, 1e-4);
+                    format!("{} of {} ({} ties)", g.disagreements(), g.rays, g.ties)
+                });
+                let n = rays.len() as f64;
+                writeln!(
+                    out,
+                    "| {model} {stem} | RT2 {} | {:.2} | {:.2} | {:.1} | {:.1} | {:.1} | {agree} |",
+                    how.name(),
+                    mrays[0],
+                    mrays[1],
+                    stats.nodes_visited as f64 / n,
+                    stats.leaves_visited as f64 / n,
+                    stats.prim_tests as f64 / n
+                )
+                .ok();
+            }
+            for r in embree
+                .iter()
+                .filter(|r| r.get(2).is_some_and(|s| *s == stem))
+            {
+                if r[4] == "1" || r[3] == "intersect1" {
+                    writeln!(
+                        out,
+                        "| {model} {stem} | Embree {} ({} thr) | {} | | | | | reference |",
+                        r[3], r[4], r[7]
+                    )
+                    .ok();
+                }
+            }
+        }
+    }
+    Ok(out)
+}
