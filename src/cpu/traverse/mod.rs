@@ -1,1 +1,181 @@
-//! The seven single-ray kd-tree traversals of the RT² thesis.
+//! The seven single-ray kd-tree traversals of the RT² thesis (§2.4, §3.4, tables 1–2), all
+//! returning the same closest hit as a brute-force search (ties to the lowest primitive index).
+//!
+//! - [`Traversal::Standard`]: stack of far children (algorithm 2), in `standard`.
+//! - [`Traversal::KdRestart`], [`Traversal::PushDown`], [`Traversal::ShortStack`],
+//!   [`Traversal::PushDownShortStack`]: algorithms 3–6, one parameterised loop in `restart`.
+//! - [`Traversal::Ropes`], [`Traversal::RopesPlusPlus`]: algorithms 7–8, in `ropes`.
+//!
+//! The leaf work (closest hit or any hit) is a [`common::LeafQuery`], so each traversal is
+//! written once for both [`intersect`] and [`occluded`].
+
+mod common;
+mod restart;
+mod ropes;
+mod standard;
+
+pub use common::MAX_SHORT_STACK;
+
+use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
+use crate::kdtree::KdTree;
+use common::{clip, AnyHit, Closest, LeafQuery, TRay};
+use restart::Restart;
+
+/// A kd-tree traversal algorithm.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Traversal {
+    Standard,
+    KdRestart,
+    PushDown,
+    ShortStack,
+    PushDownShortStack,
+    Ropes,
+    RopesPlusPlus,
+}
+
+impl Traversal {
+    pub const ALL: [Traversal; 7] = [
+        Traversal::Standard,
+        Traversal::KdRestart,
+        Traversal::PushDown,
+        Traversal::ShortStack,
+        Traversal::PushDownShortStack,
+        Traversal::Ropes,
+        Traversal::RopesPlusPlus,
+    ];
+
+    /// The command-line spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            Traversal::Standard => "standard",
+            Traversal::KdRestart => "kd-restart",
+            Traversal::PushDown => "push-down",
+            Traversal::ShortStack => "short-stack",
+            Traversal::PushDownShortStack => "push-down-short-stack",
+            Traversal::Ropes => "ropes",
+            Traversal::RopesPlusPlus => "ropes++",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|t| t.name() == name)
+    }
+
+    /// Whether the tree must carry ropes and leaf boxes (`KdTree::ensure_ropes`). Without them a
+    /// rope traversal falls back to [`Traversal::Standard`] (same answer, other statistics).
+    pub fn needs_ropes(self) -> bool {
+        matches!(self, Traversal::Ropes | Traversal::RopesPlusPlus)
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TraverseOptions {
+    /// Entries of the short stack (thesis: 3), clamped to [`MAX_SHORT_STACK`].
+    pub short_stack_size: usize,
+    /// Ropes++ only: the leaf node holding the ray's start point `at(tmin)` (a secondary ray's
+    /// origin, from `KdTree::locate_leaf`), so the walk starts there instead of at the root.
+    /// Checked against the leaf's box; the other traversals ignore it.
+    pub start_node: Option<u32>,
+}
+
+impl Default for TraverseOptions {
+    fn default() -> Self {
+        TraverseOptions {
+            short_stack_size: 3,
+            start_node: None,
+        }
+    }
+}
+
+/// Closest hit of `ray` in `[tmin, tmax)` among the tree's primitives and the planes.
+/// Degenerate rays are misses that touch nothing.
+pub fn intersect(
+    tree: &KdTree,
+    prims: &PrimitiveSet,
+    ray: &Ray,
+    how: Traversal,
+    opts: &TraverseOptions,
+    stats: &mut TraversalStats,
+) -> Hit {
+    if ray.is_degenerate() {
+        return Hit::MISS;
+    }
+    let mut query = Closest {
+        prims,
+        ray,
+        hit: Hit::MISS,
+    };
+    // Planes first: their hit bounds the tree search and ends it early.
+    prims.intersect_planes(ray, &mut query.hit);
+    traverse(tree, ray, how, opts, &mut query, stats);
+    query.hit
+}
+
+/// Whether anything is hit in `[tmin, tmax)` (shadow rays); stops at the first hit found.
+pub fn occluded(
+    tree: &KdTree,
+    prims: &PrimitiveSet,
+    ray: &Ray,
+    how: Traversal,
+    opts: &TraverseOptions,
+    stats: &mut TraversalStats,
+) -> bool {
+    if ray.is_degenerate() {
+        return false;
+    }
+    let mut planes = Hit::MISS;
+    prims.intersect_planes(ray, &mut planes);
+    if planes.is_hit() {
+        return true;
+    }
+    let mut query = AnyHit {
+        prims,
+        ray,
+        found: false,
+    };
+    traverse(tree, ray, how, opts, &mut query, stats);
+    query.found
+}
+
+fn traverse(
+    tree: &KdTree,
+    ray: &Ray,
+    how: Traversal,
+    opts: &TraverseOptions,
+    query: &mut impl LeafQuery,
+    stats: &mut TraversalStats,
+) {
+    if tree.nodes.is_empty() {
+        return;
+    }
+    let ray = TRay::new(ray);
+    let restart = |short_stack, push_down| Restart {
+        short_stack,
+        push_down,
+    };
+    // Ropes++ does its own, entry-only, scene test.
+    if let (Traversal::RopesPlusPlus, Some(ropes)) = (how, &tree.ropes) {
+        return ropes::ropes_plus_plus(tree, ropes, &ray, opts.start_node, query, stats);
+    }
+    let Some(scene) = clip(&tree.bounds, &ray) else {
+        return;
+    };
+    let short = opts.short_stack_size;
+    match (how, &tree.ropes) {
+        (Traversal::KdRestart, _) => {
+            restart::traverse(tree, &ray, scene, restart(0, false), query, stats)
+        }
+        (Traversal::PushDown, _) => {
+            restart::traverse(tree, &ray, scene, restart(0, true), query, stats)
+        }
+        (Traversal::ShortStack, _) => {
+            restart::traverse(tree, &ray, scene, restart(short, false), query, stats)
+        }
+        (Traversal::PushDownShortStack, _) => {
+            restart::traverse(tree, &ray, scene, restart(short, true), query, stats)
+        }
+        (Traversal::Ropes, Some(ropes)) => ropes::ropes(tree, ropes, &ray, scene, query, stats),
+        // Standard, and rope traversals on a tree without ropes.
+        _ => standard::traverse(tree, &ray, scene, query, stats),
+    }
+}

@@ -1,0 +1,297 @@
+//! Pieces every traversal shares: the prepared ray, the one inner-node decision, the descent to
+//! a leaf, the leaf visit (closest hit or any hit) and the two stacks.
+//!
+//! Every distance to a split or face plane is computed by [`TRay::dist`], `(plane - org) *
+//! inv_dir`. The thesis divides by the direction; one formula with one rounding everywhere is what
+//! makes the seven traversals return bit-identical hits, because they then agree on every leaf's
+//! exit distance and on every side decision.
+
+use crate::geometry::{Aabb, Hit, PrimitiveSet, Ray, TraversalStats};
+use crate::kdtree::{KdNode, KdTree};
+use glam::Vec3;
+
+/// The ray as the traversals read it, with the reciprocal direction (`±inf` for `±0` components).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct TRay {
+    pub ray: Ray,
+    pub inv_dir: Vec3,
+}
+
+impl TRay {
+    pub fn new(ray: &Ray) -> Self {
+        TRay {
+            ray: *ray,
+            inv_dir: ray.dir.recip(),
+        }
+    }
+
+    /// Ray parameter where the ray meets the plane `x[axis] = plane`. NaN when the ray lies in
+    /// the plane (zero direction component, origin on the plane); `±inf` when it runs parallel.
+    #[inline]
+    pub fn dist(&self, axis: usize, plane: f32) -> f32 {
+        (plane - self.ray.org[axis]) * self.inv_dir[axis]
+    }
+
+    /// Direction sign on `axis`, with `-0.0` negative: the sign of a zero component still picks
+    /// a side, so a ray lying in a split plane is sent to exactly one child, consistently.
+    #[inline]
+    pub fn positive(&self, axis: usize) -> bool {
+        self.ray.dir[axis].is_sign_positive()
+    }
+}
+
+/// The parametric segment `[t0, t1]` of the ray inside the closed box, clamped to the ray's window,
+/// or `None` when the ray misses it. Like `Aabb::clip_ray`, but with the slab's near and far planes
+/// chosen by the direction sign: a ray lying in a face plane (NaN distance) is inside the closed
+/// slab for either sign of zero, where `clip_ray` rejects it for `+0.0` and keeps it for `-0.0`.
+pub(super) fn clip(bounds: &Aabb, ray: &TRay) -> Option<(f32, f32)> {
+    let (mut t0, mut t1) = (ray.ray.tmin, ray.ray.tmax);
+    for axis in 0..3 {
+        let (near, far) = if ray.positive(axis) {
+            (bounds.min[axis], bounds.max[axis])
+        } else {
+            (bounds.max[axis], bounds.min[axis])
+        };
+        let (near, far) = (ray.dist(axis, near), ray.dist(axis, far));
+        // NaN compares false: no clipping by a plane the ray lies in.
+        if near > t0 {
+            t0 = near;
+        }
+        if far < t1 {
+            t1 = far;
+        }
+    }
+    // `t0 = inf` is a ray outside a slab it runs parallel to.
+    (t0 <= t1 && t0 < f32::INFINITY).then_some((t0, t1))
+}
+
+/// What the segment `[t0, t1]` does at an inner node (the three cases of the thesis' pseudo-code).
+/// `near` is the child the ray enters first (by the direction sign), `far` the other.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Crossing {
+    /// Only one child is crossed; the descent continues there with the same segment.
+    One { child: u32 },
+    /// Both: the descent goes on in `near` with `[t0, t_split]`; `far` is left for `[t_split, t1]`.
+    Both {
+        near: u32,
+        far: u32,
+        t_split: f32,
+        t1: f32,
+    },
+}
+
+/// One inner-node step for the segment `[t0, t1]`. Ties go to the far child when the split is at
+/// `t0` (the segment starts on the plane and moves into `far`) and to the near child when it is at
+/// `t1`. A NaN `t_split` (the ray lies in the split plane) also goes to `far`: for `+0.0` that is the
+/// child above, for `-0.0` the child below — the side the direction sign points to, the same rule
+/// point location uses for a point on the plane.
+#[inline]
+fn step(node: KdNode, ray: &TRay, t0: f32, t1: f32) -> Crossing {
+    let axis = node.axis();
+    let t_split = ray.dist(axis, node.split);
+    let (below, above) = (node.index(), node.index() + 1);
+    let (near, far) = if ray.positive(axis) {
+        (below, above)
+    } else {
+        (above, below)
+    };
+    if t_split <= t0 || t_split.is_nan() {
+        Crossing::One { child: far }
+    } else if t_split >= t1 {
+        Crossing::One { child: near }
+    } else {
+        Crossing::Both {
+            near,
+            far,
+            t_split,
+            t1,
+        }
+    }
+}
+
+/// Descends from `node` to the leaf holding the start of the segment `[t0, t1]`, telling `seen`
+/// about every crossing (the stack-based traversals push there, push-down moves its root there).
+/// Counts every node fetched, the leaf included. Returns the leaf's node and its exit distance
+/// (`t1` shrunk to the near part at every two-child crossing).
+#[inline]
+pub(super) fn descend(
+    tree: &KdTree,
+    ray: &TRay,
+    mut node: u32,
+    t0: f32,
+    mut t1: f32,
+    stats: &mut TraversalStats,
+    mut seen: impl FnMut(Crossing),
+) -> (KdNode, f32) {
+    loop {
+        let n = tree.nodes[node as usize];
+        stats.nodes_visited += 1;
+        if n.is_leaf() {
+            return (n, t1);
+        }
+        let c = step(n, ray, t0, t1);
+        node = match c {
+            Crossing::One { child } => child,
+            Crossing::Both { near, t_split, .. } => {
+                t1 = t_split;
+                near
+            }
+        };
+        seen(c);
+    }
+}
+
+/// What a traversal does with the primitives of a leaf: the closest hit or any hit. Written once,
+/// so every traversal serves both `intersect` and `occluded`.
+pub(super) trait LeafQuery {
+    /// Tests the leaf's primitives; `t_exit` is where the ray leaves the leaf. True when the
+    /// traversal can stop.
+    fn visit(&mut self, prims: &[u32], t_exit: f32, stats: &mut TraversalStats) -> bool;
+}
+
+/// Closest hit. Primitives are tested against the whole ray window (`Hit::bound`), so a hit may lie
+/// beyond the current leaf; the traversal stops only when the hit is *before* the leaf's exit:
+/// every later leaf starts at or after `t_exit`. Strictly before — a primitive in a later leaf may
+/// be hit at exactly `t_exit` with a lower index, and the tie rule wants it.
+pub(super) struct Closest<'a> {
+    pub prims: &'a PrimitiveSet,
+    pub ray: &'a Ray,
+    pub hit: Hit,
+}
+
+impl LeafQuery for Closest<'_> {
+    #[inline]
+    fn visit(&mut self, prims: &[u32], t_exit: f32, stats: &mut TraversalStats) -> bool {
+        stats.prim_tests += prims.len() as u64;
+        for &p in prims {
+            self.prims.intersect(p, self.ray, &mut self.hit);
+        }
+        self.hit.t < t_exit
+    }
+}
+
+/// Any hit in the ray window (shadow rays): stops at the first primitive hit.
+pub(super) struct AnyHit<'a> {
+    pub prims: &'a PrimitiveSet,
+    pub ray: &'a Ray,
+    pub found: bool,
+}
+
+impl LeafQuery for AnyHit<'_> {
+    #[inline]
+    fn visit(&mut self, prims: &[u32], _t_exit: f32, stats: &mut TraversalStats) -> bool {
+        for &p in prims {
+            stats.prim_tests += 1;
+            let mut hit = Hit::MISS;
+            if self.prims.intersect(p, self.ray, &mut hit) {
+                self.found = true;
+                return true;
+            }
+        }
+        false
+    }
+}
+
+/// Visits leaf node `leaf` (counting it) and says whether the traversal can stop.
+#[inline]
+pub(super) fn visit_leaf(
+    tree: &KdTree,
+    leaf: KdNode,
+    t_exit: f32,
+    query: &mut impl LeafQuery,
+    stats: &mut TraversalStats,
+) -> bool {
+    stats.leaves_visited += 1;
+    query.visit(tree.leaf_prims(leaf.index()), t_exit, stats)
+}
+
+/// A subtree still to traverse for the segment `[t0, t1]`.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Entry {
+    pub node: u32,
+    pub t0: f32,
+    pub t1: f32,
+}
+
+/// Entries kept without allocating: enough for any tree the builders make (depth ≤ 32 is typical);
+/// deeper trees spill into a heap vector rather than lose work.
+const INLINE: usize = 32;
+
+/// The standard traversal's stack: unbounded, inline for the first [`INLINE`] entries.
+pub(super) struct Stack {
+    inline: [Entry; INLINE],
+    len: usize,
+    spill: Vec<Entry>,
+}
+
+impl Stack {
+    pub fn new() -> Self {
+        Stack {
+            inline: [Entry::default(); INLINE],
+            len: 0,
+            spill: Vec::new(),
+        }
+    }
+
+    #[inline]
+    pub fn push(&mut self, e: Entry) {
+        if self.len < INLINE {
+            self.inline[self.len] = e;
+        } else {
+            self.spill.push(e);
+        }
+        self.len += 1;
+    }
+
+    #[inline]
+    pub fn pop(&mut self) -> Option<Entry> {
+        self.len = self.len.checked_sub(1)?;
+        if self.len < INLINE {
+            Some(self.inline[self.len])
+        } else {
+            self.spill.pop()
+        }
+    }
+}
+
+/// Largest short stack; larger requests are clamped (the thesis uses 3).
+pub const MAX_SHORT_STACK: usize = INLINE;
+
+/// The short stack of Horn et al.: circular, so a push onto a full stack overwrites the oldest
+/// (farthest) entry. Losing it is safe: when the stack runs dry the traversal restarts and finds
+/// that part of the ray again.
+pub(super) struct ShortStack {
+    buf: [Entry; INLINE],
+    cap: usize,
+    top: usize,
+    len: usize,
+}
+
+impl ShortStack {
+    pub fn new(size: usize) -> Self {
+        ShortStack {
+            buf: [Entry::default(); INLINE],
+            cap: size.min(INLINE),
+            top: 0,
+            len: 0,
+        }
+    }
+
+    #[inline]
+    pub fn push(&mut self, e: Entry) {
+        if self.cap == 0 {
+            return;
+        }
+        self.top = (self.top + 1) % self.cap;
+        self.buf[self.top] = e;
+        self.len = (self.len + 1).min(self.cap);
+    }
+
+    #[inline]
+    pub fn pop(&mut self) -> Option<Entry> {
+        self.len = self.len.checked_sub(1)?;
+        let e = self.buf[self.top];
+        self.top = (self.top + self.cap - 1) % self.cap;
+        Some(e)
+    }
+}

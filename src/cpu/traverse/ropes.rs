@@ -1,0 +1,167 @@
+//! Rope traversals: ropes (Popov et al. 2007, thesis algorithm 7) and the thesis' ropes++
+//! (algorithm 8). Each leaf knows its box and, per face, the node on the other side; after a leaf
+//! the ray follows the rope of its exit face and descends from there to the leaf it enters — no
+//! stack and no restart.
+//!
+//! The descent from a rope target is point location of the entry point written with ray
+//! distances (`t_split <= t_entry` means "the ray is past the plane"), which is the coordinate
+//! comparison of the pseudo-code with the direction sign deciding points on a split plane, and
+//! rounds exactly like the other traversals' descent.
+
+use super::common::{descend, visit_leaf, LeafQuery, TRay};
+use crate::geometry::{Aabb, TraversalStats, INVALID};
+use crate::kdtree::{KdTree, Ropes};
+
+/// Exit distance and rope face of a leaf box, Popov's way: both planes of every slab are read
+/// and the farther one is where the ray leaves the slab. A NaN distance (the ray lies in a face
+/// plane) never exits: the ray stays inside the closed slab.
+fn exit_six_faces(b: &Aabb, ray: &TRay) -> (f32, usize) {
+    let mut best = (f32::INFINITY, 0);
+    for axis in 0..3 {
+        let (ta, tb) = (ray.dist(axis, b.min[axis]), ray.dist(axis, b.max[axis]));
+        let (t, face) = if ta > tb {
+            (ta, 2 * axis)
+        } else if tb >= ta {
+            (tb, 2 * axis + 1)
+        } else {
+            continue;
+        };
+        if t < best.0 {
+            best = (t, face);
+        }
+    }
+    best
+}
+
+/// Exit distance and rope face, ropes++'s way: the exit face of each slab follows from the
+/// direction sign, so only three of the six box planes are read.
+fn exit_three_faces(b: &Aabb, ray: &TRay) -> (f32, usize) {
+    let mut best = (f32::INFINITY, 0);
+    for axis in 0..3 {
+        let positive = ray.positive(axis);
+        let plane = if positive { b.max[axis] } else { b.min[axis] };
+        let t = ray.dist(axis, plane);
+        // NaN and +inf (parallel, or lying in the plane) never win.
+        if t < best.0 {
+            best = (t, 2 * axis + positive as usize);
+        }
+    }
+    best
+}
+
+/// ropes++'s "entry-only" scene test: the distance to the scene box's entry point (the three
+/// planes facing the ray), no exit. A ray that misses the box is caught at the first leaf.
+fn entry_three_faces(b: &Aabb, ray: &TRay) -> f32 {
+    let mut t = ray.ray.tmin;
+    for axis in 0..3 {
+        let plane = if ray.positive(axis) {
+            b.min[axis]
+        } else {
+            b.max[axis]
+        };
+        let tn = ray.dist(axis, plane);
+        if tn > t {
+            t = tn;
+        }
+    }
+    t
+}
+
+/// Where a rope walk starts and how it reads leaf boxes.
+struct Walk {
+    node: u32,
+    t_entry: f32,
+    /// Stop once the ray has left the leaf at or beyond this distance.
+    t_end: f32,
+    exit: fn(&Aabb, &TRay) -> (f32, usize),
+    /// ropes++ from the root: a first leaf left before it is entered means the ray missed the
+    /// scene box (the entry-only scene test is completed here).
+    miss_test: bool,
+}
+
+/// The loop of algorithms 7 and 8: locate the leaf, test its primitives, follow the exit rope.
+fn walk(
+    tree: &KdTree,
+    ropes: &Ropes,
+    ray: &TRay,
+    w: Walk,
+    query: &mut impl LeafQuery,
+    stats: &mut TraversalStats,
+) {
+    let (mut node, mut t_entry, mut miss_test) = (w.node, w.t_entry, w.miss_test);
+    // Leaves are crossed in a strict front-to-back order: more steps than leaves would be a bug.
+    for _ in 0..tree.leaves.len() {
+        let (leaf, _) = descend(tree, ray, node, t_entry, f32::INFINITY, stats, |_| {});
+        let leaf_index = leaf.index() as usize;
+        let (t_exit, face) = (w.exit)(&ropes.leaf_bounds[leaf_index], ray);
+        if miss_test && t_exit < t_entry {
+            return;
+        }
+        miss_test = false;
+        if visit_leaf(tree, leaf, t_exit, query, stats) || t_exit >= w.t_end {
+            return;
+        }
+        node = ropes.links[leaf_index][face];
+        if node == INVALID {
+            return;
+        }
+        t_entry = t_entry.max(t_exit);
+    }
+    debug_assert!(false, "rope walk visited more steps than there are leaves");
+}
+
+/// Ropes (Popov et al. 2007; algorithm 7): the scene box is clipped first (entry and exit), every
+/// leaf exit reads all six planes of the leaf box.
+pub(super) fn ropes(
+    tree: &KdTree,
+    ropes: &Ropes,
+    ray: &TRay,
+    (scene_min, scene_max): (f32, f32),
+    query: &mut impl LeafQuery,
+    stats: &mut TraversalStats,
+) {
+    let w = Walk {
+        node: 0,
+        t_entry: scene_min,
+        t_end: scene_max,
+        exit: exit_six_faces,
+        miss_test: false,
+    };
+    walk(tree, ropes, ray, w, query, stats);
+}
+
+/// Ropes++ (the thesis' algorithm 8): exits from the three planes the direction selects, an
+/// entry-only scene test, and secondary rays start at `start`, the leaf node holding their origin
+/// (checked against its box: a wrong hint falls back to the descent from the root, never to a
+/// wrong answer).
+pub(super) fn ropes_plus_plus(
+    tree: &KdTree,
+    ropes: &Ropes,
+    ray: &TRay,
+    start: Option<u32>,
+    query: &mut impl LeafQuery,
+    stats: &mut TraversalStats,
+) {
+    let origin = ray.ray.at(ray.ray.tmin);
+    let holds_origin = |node: u32| {
+        let n = tree.nodes.get(node as usize);
+        n.is_some_and(|n| {
+            n.is_leaf() && ropes.leaf_bounds[n.index() as usize].contains_point(origin)
+        })
+    };
+    let (node, t_entry, miss_test) = match start {
+        Some(s) if holds_origin(s) => (s, ray.ray.tmin, false),
+        _ => (0, entry_three_faces(&tree.bounds, ray), true),
+    };
+    if t_entry > ray.ray.tmax {
+        return;
+    }
+    let w = Walk {
+        node,
+        t_entry,
+        t_end: ray.ray.tmax,
+        exit: exit_three_faces,
+        miss_test,
+    };
+    walk(tree, ropes, ray, w, query, stats);
+}
