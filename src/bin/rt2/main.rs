@@ -159,6 +159,9 @@ fn render(args: &[String]) -> Result<()> {
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     opts.max_depth = depth.unwrap_or(loaded.max_depth);
     ctx.install(|| loaded.scene.commit())?;
+    if opts.traversal.is_some_and(|t| t.needs_ropes()) {
+        loaded.scene.ensure_ropes()?;
+    }
     let committed = loaded.scene.committed()?;
     let mut frame = Frame::new(width, height)?;
     let t1 = Instant::now();

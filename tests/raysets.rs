@@ -1,0 +1,94 @@
+//! Cross-check with Embree: every traversal on the bunny's ray sets of `../shared/raysets`
+//! (Embree 3's robust closest hits). The bar: at most 1 disagreement (hit vs miss, or a
+//! different triangle with |Δt| > 1e-4·diag, the rule of `../shared/peers/src/rt2cmp.cpp`) in
+//! 100,000 rays per set. Needs `$RT2_SHARED/models/bunny.ply` and `$RT2_SHARED/raysets/bunny/`.
+
+use rt2::context::{Context, QueryOptions};
+use rt2::cpu::traverse::Traversal;
+use rt2::dispatch::BackendRequest;
+use rt2::geometry::Hit;
+use rt2::rayset::{self, HitRecord};
+use rt2::scene::{loaders, Scene, Shape};
+use std::path::PathBuf;
+
+fn shared() -> PathBuf {
+    std::env::var_os("RT2_SHARED")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared"))
+}
+
+#[test]
+fn every_traversal_agrees_with_embree_on_the_bunny_ray_sets() {
+    let model = shared().join("models/bunny.ply");
+    let dir = shared().join("raysets/bunny");
+    if !model.exists() || !dir.exists() {
+        eprintln!(
+            "SKIPPED: {} or {} is missing (set RT2_SHARED)",
+            model.display(),
+            dir.display()
+        );
+        return;
+    }
+    let mesh = loaders::load_mesh(&model).unwrap();
+    let mut scene = Scene::new();
+    scene
+        .add_object(
+            Shape::Mesh {
+                positions: mesh.positions,
+                triangles: mesh.triangles,
+            },
+            0,
+        )
+        .unwrap();
+    scene.commit().unwrap();
+    scene.ensure_ropes().unwrap();
+    let c = scene.committed().unwrap();
+    let diag = c.bounds.diagonal();
+    let ctx = Context::new(BackendRequest::Cpu, 0).unwrap();
+    let sets = [
+        "primary_262144",
+        "incoherent_262144",
+        "diffuse_68202",
+        "shadow_68202",
+    ];
+    for set in sets {
+        let rays = rayset::read_rays(&dir.join(format!("{set}.rays"))).unwrap();
+        let reference = rayset::read_hits(&dir.join(format!("{set}.embree.hits"))).unwrap();
+        assert_eq!(rays.len(), reference.len());
+        for how in Traversal::ALL {
+            let q = QueryOptions {
+                traversal: Some(how),
+                ..QueryOptions::default()
+            };
+            let mut hits = vec![Hit::MISS; rays.len()];
+            ctx.intersect(c, &rays, &mut hits, &q).unwrap();
+            let mine: Vec<HitRecord> = hits
+                .iter()
+                .map(|h| HitRecord {
+                    t: h.t,
+                    prim: h.prim,
+                    u: h.u,
+                    v: h.v,
+                })
+                .collect();
+            let g = rayset::compare(&mine, &reference, diag, 1e-4);
+            println!(
+                "{set} {:<22} rays {} disagreements {} (a-only {}, b-only {}, mismatches {}), ties {}",
+                how.name(),
+                g.rays,
+                g.disagreements(),
+                g.a_only,
+                g.b_only,
+                g.mismatches,
+                g.ties
+            );
+            let allowed = g.rays.div_ceil(100_000);
+            assert!(
+                g.disagreements() <= allowed,
+                "{set} with {}: {} disagreements, at most {allowed} allowed",
+                how.name(),
+                g.disagreements()
+            );
+        }
+    }
+}
