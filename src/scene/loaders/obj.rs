@@ -84,7 +84,9 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
         return Err(Error::parse(format!("{name}: empty file")));
     }
     if mesh.triangles.is_empty() {
-        return Err(Error::parse(format!("{name}: no faces ('f' lines) in the file")));
+        return Err(Error::parse(format!(
+            "{name}: no faces ('f' lines) in the file"
+        )));
     }
     Ok(mesh)
 }

@@ -218,9 +218,7 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
             .map_err(|_| err("PLY header line is not ASCII text".into()))?;
         if line_no == 1 {
             if line.trim_end() != "ply" {
-                return Err(err(
-                    "not a PLY file (the first line must be 'ply')".into(),
-                ));
+                return Err(err("not a PLY file (the first line must be 'ply')".into()));
             }
             continue;
         }
@@ -279,8 +277,7 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                 };
                 let scalar = |t: Option<&str>| -> Result<Scalar> {
                     let t = t.ok_or_else(|| err("property line is incomplete".into()))?;
-                    Scalar::from_name(t)
-                        .ok_or_else(|| err(format!("unknown property type '{t}'")))
+                    Scalar::from_name(t).ok_or_else(|| err(format!("unknown property type '{t}'")))
                 };
                 let kind = match tok.next() {
                     Some("list") => {
@@ -308,8 +305,8 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
             return Err(err(format!("unexpected '{extra}' at the end of the line")));
         }
     }
-    let format = format
-        .ok_or_else(|| line_error(name, line_no, "PLY header has no format line"))?;
+    let format =
+        format.ok_or_else(|| line_error(name, line_no, "PLY header has no format line"))?;
     Ok(Header {
         format,
         elements,
@@ -330,7 +327,9 @@ fn plan(header: &Header, name: &str) -> Result<Vec<Role>> {
                 let mut axes = vec![None; el.props.len()];
                 for (axis, axis_name) in ["x", "y", "z"].into_iter().enumerate() {
                     let Some(i) = el.props.iter().position(|p| p.name == axis_name) else {
-                        return Err(err(format!("element 'vertex' has no '{axis_name}' property")));
+                        return Err(err(format!(
+                            "element 'vertex' has no '{axis_name}' property"
+                        )));
                     };
                     if matches!(el.props[i].kind, Kind::List { .. }) {
                         return Err(err(format!("vertex property '{axis_name}' is a list")));
@@ -372,10 +371,18 @@ fn plan(header: &Header, name: &str) -> Result<Vec<Role>> {
         roles.push(role);
     }
     if !have_vertex {
-        return Err(line_error(name, header.end_line, "PLY header declares no 'vertex' element"));
+        return Err(line_error(
+            name,
+            header.end_line,
+            "PLY header declares no 'vertex' element",
+        ));
     }
     if !have_face {
-        return Err(line_error(name, header.end_line, "PLY header declares no 'face' element"));
+        return Err(line_error(
+            name,
+            header.end_line,
+            "PLY header declares no 'face' element",
+        ));
     }
     Ok(roles)
 }
@@ -411,9 +418,9 @@ fn check_counts(header: &Header, body_len: usize, name: &str) -> Result<()> {
                     name,
                     el.line,
                     format!(
-                        "element '{}' claims {} entries, more than the {} bytes after the \
-                         header can hold",
-                        el.name, el.count, body_len
+                        "file truncated or element count wrong: element '{}' declares {} \
+                         entries, more than the {body_len} bytes after the header can hold",
+                        el.name, el.count
                     ),
                 ))
             }
@@ -515,7 +522,7 @@ impl<'a> Cursor<'a> {
                         format!("{}: negative list length {n}", what()),
                     ));
                 }
-                let len = (n as usize).checked_mul(item.size()).unwrap_or(usize::MAX);
+                let len = (n as usize).saturating_mul(item.size());
                 self.take(len, what)?;
             }
         }
@@ -548,8 +555,10 @@ fn read_binary(
                     .sum();
                 if let Some(stride) = fixed {
                     // All-scalar elements are skipped in one step.
-                    let len = el.count.checked_mul(stride).unwrap_or(usize::MAX);
-                    cur.take(len, || format!("element '{}' ({} entries)", el.name, el.count))?;
+                    let len = el.count.saturating_mul(stride);
+                    cur.take(len, || {
+                        format!("element '{}' ({} entries)", el.name, el.count)
+                    })?;
                 } else {
                     for i in 0..el.count {
                         for p in &el.props {
@@ -676,9 +685,9 @@ fn read_ascii(
             let err = |msg: String| line_error(name, line, msg);
             let mut toks = text.split_ascii_whitespace();
             let mut value = |ty: Scalar, what: &str| -> Result<f64> {
-                let tok = toks.next().ok_or_else(|| {
-                    err(format!("{} {i}: missing value for {what}", el.name))
-                })?;
+                let tok = toks
+                    .next()
+                    .ok_or_else(|| err(format!("{} {i}: missing value for {what}", el.name)))?;
                 ty.parse_token(tok).ok_or_else(|| {
                     err(format!(
                         "{} {i}: '{tok}' is not a valid {} value for {what}",
