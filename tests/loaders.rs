@@ -499,7 +499,8 @@ fn malformed_ascii_ply_errors_name_file_and_line() {
         (
             "garbage.ply",
             format!("{PLY_HEAD}{good_verts}\u{1}\u{2}\u{3}\n"),
-            vec!["line 13:"],
+            // Control characters are shown escaped.
+            vec!["line 13:", r"'\u{1}\u{2}\u{3}'"],
         ),
     ];
     for (name, text, needles) in cases {
@@ -788,6 +789,12 @@ fn malformed_obj_errors_name_file_and_line() {
     }
     let bytes = b"v 0 0 0\nv 1 0 0\n\xff\xfe\n";
     assert_parse_err(parse_obj(bytes, "bin.obj"), "bin.obj", &["line 3:"]);
+    // A huge garbage token is cut short in the message.
+    let long = format!("v 0 0 0\nv 0 {} 0\n", "z".repeat(10_000));
+    let err = parse_obj(long.as_bytes(), "long.obj").unwrap_err();
+    assert!(err.message.contains("line 2:"), "{}", err.message);
+    assert!(err.message.contains("zzz...'"), "{}", err.message);
+    assert!(err.message.len() < 200, "{}", err.message);
 }
 
 // ---------------------------------------------------------------------------------------------

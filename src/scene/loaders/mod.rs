@@ -54,6 +54,20 @@ pub fn load_mesh(path: &Path) -> Result<Mesh> {
     parse(&bytes, &name)
 }
 
+/// Shows a token from the file in an error message: quoted, control characters escaped (so
+/// binary garbage stays readable) and cut to a sensible length (a garbage "token" can be huge).
+struct Quoted<'a>(&'a str);
+
+impl std::fmt::Display for Quoted<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        const MAX_CHARS: usize = 40;
+        let mut chars = self.0.chars();
+        let head: String = chars.by_ref().take(MAX_CHARS).collect();
+        let more = if chars.next().is_some() { "..." } else { "" };
+        write!(f, "'{}{more}'", head.escape_debug())
+    }
+}
+
 /// A parse error located at a 1-based line of a text file (or of a PLY header).
 fn line_error(name: &str, line: usize, msg: impl std::fmt::Display) -> Error {
     Error::parse(format!("{name}: line {line}: {msg}"))
