@@ -268,6 +268,20 @@ fn ply_binary_little_and_big_endian_with_extras() {
 }
 
 #[test]
+fn ply_faces_may_come_before_vertices() {
+    // Indices are checked against the header's vertex count, not the vertices read so far.
+    let text = "ply\nformat ascii 1.0\nelement face 2\nproperty list uchar int vertex_indices\n\
+        element vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n\
+        3 2 1 0\n3 0 1 2\n1 0 0\n0 1 0\n0 0 1\n";
+    let mesh = parse_ply(text.as_bytes(), "order.ply").unwrap();
+    assert_eq!(mesh.triangles, vec![[2, 1, 0], [0, 1, 2]]);
+    assert_eq!(
+        mesh.positions,
+        vec![v(1.0, 0.0, 0.0), v(0.0, 1.0, 0.0), v(0.0, 0.0, 1.0)]
+    );
+}
+
+#[test]
 fn ply_zero_faces_is_an_empty_mesh_not_an_error() {
     let text = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
         property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n\

@@ -32,6 +32,9 @@ pub struct Mesh {
 /// The format is chosen by extension rather than by sniffing so that a mislabelled file fails
 /// with a parse error of the format the user asked for, not a confusing guess.
 ///
+/// Triangles follow the file's face order, polygons fan-triangulated in place (see
+/// [`parse_ply`] / [`parse_obj`]), because ray sets identify triangles by face index.
+///
 /// Errors: `Unsupported` for other extensions, `Io` when the file cannot be read (the message
 /// names the path and the OS error), `Parse` for malformed content.
 pub fn load_mesh(path: &Path) -> Result<Mesh> {
