@@ -32,6 +32,9 @@ pub struct Mesh {
 /// The format is chosen by extension rather than by sniffing so that a mislabelled file fails
 /// with a parse error of the format the user asked for, not a confusing guess.
 ///
+/// Triangles follow the file's face order, polygons fan-triangulated in place (see
+/// [`parse_ply`] / [`parse_obj`]), because ray sets identify triangles by face index.
+///
 /// Errors: `Unsupported` for other extensions, `Io` when the file cannot be read (the message
 /// names the path and the OS error), `Parse` for malformed content.
 pub fn load_mesh(path: &Path) -> Result<Mesh> {
@@ -52,6 +55,20 @@ pub fn load_mesh(path: &Path) -> Result<Mesh> {
     let bytes =
         std::fs::read(path).map_err(|e| Error::io(format!("{name}: cannot read file: {e}")))?;
     parse(&bytes, &name)
+}
+
+/// Shows a token from the file in an error message: quoted, control characters escaped (so
+/// binary garbage stays readable) and cut to a sensible length (a garbage "token" can be huge).
+struct Quoted<'a>(&'a str);
+
+impl std::fmt::Display for Quoted<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        const MAX_CHARS: usize = 40;
+        let mut chars = self.0.chars();
+        let head: String = chars.by_ref().take(MAX_CHARS).collect();
+        let more = if chars.next().is_some() { "..." } else { "" };
+        write!(f, "'{}{more}'", head.escape_debug())
+    }
 }
 
 /// A parse error located at a 1-based line of a text file (or of a PLY header).

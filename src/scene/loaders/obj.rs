@@ -5,7 +5,7 @@
 
 use glam::Vec3;
 
-use super::{finite_coord, line_error, Mesh};
+use super::{finite_coord, line_error, Mesh, Quoted};
 use crate::error::{Error, Result};
 
 /// Parses an OBJ file held in memory; `name` is used in error messages.
@@ -28,7 +28,8 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
         let line_no = i + 1;
         let err = |msg: String| line_error(name, line_no, msg);
         let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
-        let line = std::str::from_utf8(raw).map_err(|_| err("line is not UTF-8 text".into()))?;
+        let line =
+            std::str::from_utf8(raw).map_err(|_| err("line is not text (invalid UTF-8)".into()))?;
         let line = line.split('#').next().unwrap_or_default();
         let mut toks = line.split_whitespace();
         let Some(keyword) = toks.next() else {
@@ -44,22 +45,26 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
                         .ok_or_else(|| err("vertex needs 3 coordinates".into()))?;
                     let v = tok
                         .parse::<f32>()
-                        .map_err(|_| err(format!("'{tok}' is not a number")))?;
+                        .map_err(|_| err(format!("{} is not a number", Quoted(tok))))?;
                     *c = finite_coord(v.into(), axis).map_err(err)?;
                 }
                 if let Some(w) = toks.next() {
                     w.parse::<f32>()
-                        .map_err(|_| err(format!("'{w}' is not a number")))?;
+                        .map_err(|_| err(format!("{} is not a number", Quoted(w))))?;
                 }
                 if let Some(extra) = toks.next() {
-                    return Err(err(format!("unexpected '{extra}' after the vertex")));
+                    return Err(err(format!(
+                        "unexpected {} after the vertex",
+                        Quoted(extra)
+                    )));
                 }
                 mesh.positions.push(Vec3::from_array(xyz));
             }
             "f" => {
                 let defined = mesh.positions.len();
                 let index = |tok: &str| -> Result<u32> {
-                    vertex_ref(tok, defined).map_err(|m| err(format!("face vertex '{tok}': {m}")))
+                    vertex_ref(tok, defined)
+                        .map_err(|m| err(format!("face vertex {}: {m}", Quoted(tok))))
                 };
                 let (Some(a), Some(b)) = (toks.next(), toks.next()) else {
                     return Err(err("face has fewer than 3 vertices".into()));
@@ -77,7 +82,7 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
                 }
             }
             "vt" | "vn" | "vp" | "g" | "o" | "s" | "usemtl" | "mtllib" => {}
-            other => return Err(err(format!("unsupported OBJ statement '{other}'"))),
+            other => return Err(err(format!("unsupported OBJ statement {}", Quoted(other)))),
         }
     }
     if !saw_statement {
@@ -109,7 +114,9 @@ fn vertex_ref(tok: &str, defined: usize) -> std::result::Result<u32, String> {
         (Some(t), Some(n)) if (t.is_empty() || is_int(t)) && is_int(n) => {}
         _ => return Err("malformed texture/normal index".into()),
     }
-    let i: i64 = v.parse().map_err(|_| format!("'{v}' is not an integer"))?;
+    let i: i64 = v
+        .parse()
+        .map_err(|_| format!("{} is not an integer", Quoted(v)))?;
     let resolved = match i {
         0 => return Err("index 0 is invalid (OBJ indices start at 1)".into()),
         i if i > 0 => i - 1,

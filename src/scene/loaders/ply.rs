@@ -7,7 +7,7 @@
 
 use glam::Vec3;
 
-use super::{finite_coord, line_error, offset_error, Mesh};
+use super::{finite_coord, line_error, offset_error, Mesh, Quoted};
 use crate::error::{Error, Result};
 
 /// The scalar types of the PLY spec, under either of their two spellings.
@@ -215,7 +215,7 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
         let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
         let err = |msg: String| line_error(name, line_no, msg);
         let line = std::str::from_utf8(raw)
-            .map_err(|_| err("PLY header line is not ASCII text".into()))?;
+            .map_err(|_| err("PLY header line is not text (invalid UTF-8)".into()))?;
         if line_no == 1 {
             if line.trim_end() != "ply" {
                 return Err(err("not a PLY file (the first line must be 'ply')".into()));
@@ -238,8 +238,9 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                     Some("binary_big_endian") => Format::BinaryBe,
                     Some(other) => {
                         return Err(err(format!(
-                            "unknown format '{other}' (expected ascii, \
-                             binary_little_endian or binary_big_endian)"
+                            "unknown format {} (expected ascii, \
+                             binary_little_endian or binary_big_endian)",
+                            Quoted(other)
                         )))
                     }
                     None => return Err(err("format line names no format".into())),
@@ -258,7 +259,9 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                     .and_then(|c| usize::try_from(c).ok())
                     .ok_or_else(|| {
                         err(format!(
-                            "element '{el_name}' count '{count}' is not a valid count"
+                            "element {} count {} is not a valid count",
+                            Quoted(el_name),
+                            Quoted(count)
                         ))
                     })?;
                 if elements.iter().any(|e| e.name == el_name) {
@@ -277,7 +280,8 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                 };
                 let scalar = |t: Option<&str>| -> Result<Scalar> {
                     let t = t.ok_or_else(|| err("property line is incomplete".into()))?;
-                    Scalar::from_name(t).ok_or_else(|| err(format!("unknown property type '{t}'")))
+                    Scalar::from_name(t)
+                        .ok_or_else(|| err(format!("unknown property type {}", Quoted(t))))
                 };
                 let kind = match tok.next() {
                     Some("list") => {
@@ -299,10 +303,13 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                 });
             }
             "end_header" => break,
-            other => return Err(err(format!("unknown PLY header keyword '{other}'"))),
+            other => return Err(err(format!("unknown PLY header keyword {}", Quoted(other)))),
         }
         if let Some(extra) = tok.next() {
-            return Err(err(format!("unexpected '{extra}' at the end of the line")));
+            return Err(err(format!(
+                "unexpected {} at the end of the line",
+                Quoted(extra)
+            )));
         }
     }
     let format =
@@ -418,9 +425,9 @@ fn check_counts(header: &Header, body_len: usize, name: &str) -> Result<()> {
                     name,
                     el.line,
                     format!(
-                        "element '{}' claims {} entries, more than the {} bytes after the \
-                         header can hold",
-                        el.name, el.count, body_len
+                        "file truncated or element count wrong: element '{}' declares {} \
+                         entries, more than the {body_len} bytes after the header can hold",
+                        el.name, el.count
                     ),
                 ))
             }
@@ -522,7 +529,7 @@ impl<'a> Cursor<'a> {
                         format!("{}: negative list length {n}", what()),
                     ));
                 }
-                let len = (n as usize).checked_mul(item.size()).unwrap_or(usize::MAX);
+                let len = (n as usize).saturating_mul(item.size());
                 self.take(len, what)?;
             }
         }
@@ -555,7 +562,7 @@ fn read_binary(
                     .sum();
                 if let Some(stride) = fixed {
                     // All-scalar elements are skipped in one step.
-                    let len = el.count.checked_mul(stride).unwrap_or(usize::MAX);
+                    let len = el.count.saturating_mul(stride);
                     cur.take(len, || {
                         format!("element '{}' ({} entries)", el.name, el.count)
                     })?;
@@ -644,8 +651,9 @@ impl<'a> Lines<'a> {
                 None => (self.rest, &self.rest[self.rest.len()..]),
             };
             self.rest = tail;
-            let text = std::str::from_utf8(raw)
-                .map_err(|_| line_error(self.name, self.line, "line is not ASCII text"))?;
+            let text = std::str::from_utf8(raw).map_err(|_| {
+                line_error(self.name, self.line, "line is not text (invalid UTF-8)")
+            })?;
             if !text.trim().is_empty() {
                 return Ok(Some((self.line, text)));
             }
@@ -690,8 +698,9 @@ fn read_ascii(
                     .ok_or_else(|| err(format!("{} {i}: missing value for {what}", el.name)))?;
                 ty.parse_token(tok).ok_or_else(|| {
                     err(format!(
-                        "{} {i}: '{tok}' is not a valid {} value for {what}",
+                        "{} {i}: {} is not a valid {} value for {what}",
                         el.name,
+                        Quoted(tok),
                         ty.spec_name()
                     ))
                 })
@@ -738,8 +747,9 @@ fn read_ascii(
             }
             if let Some(extra) = toks.next() {
                 return Err(err(format!(
-                    "{} {i}: unexpected extra value '{extra}'",
-                    el.name
+                    "{} {i}: unexpected extra value {}",
+                    el.name,
+                    Quoted(extra)
                 )));
             }
             if matches!(role, Role::Vertex(_)) {
