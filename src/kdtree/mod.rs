@@ -9,9 +9,14 @@
 
 mod build;
 mod layout;
+mod midpoint;
 mod ropes;
+mod sah;
+mod split;
+mod stats;
+mod walk;
 
-pub use build::{build, BuildInput, BuildOptions, Builder, Layout};
+pub use build::{build, BuildInput, BuildOptions, Builder, Layout, MAX_DEPTH_LIMIT};
 
 use crate::geometry::{Aabb, PrimitiveSet};
 
