@@ -88,7 +88,9 @@ impl<'a> Tracer<'a> {
             let n_geo = s.prims.normal(hit.prim, p);
             let entering = n_geo.dot(ray.dir) < 0.0;
             let n = if entering { n_geo } else { -n_geo };
-            let base = m.color_at(p);
+            // The pattern is sampled just inside the surface: a checker boundary lying in the
+            // surface itself (a checkered plane at y = 0) would otherwise flicker with rounding.
+            let base = m.color_at(p - self.eps * n);
             let local_weight = 1.0 - m.reflectivity - m.transparency;
             if local_weight > 0.0 {
                 let mut local = m.ambient * base;
