@@ -160,7 +160,7 @@ impl From<&Material> for rt2_material {
 }
 
 impl rt2_material {
-    pub(crate) fn to_material(&self) -> Result<Material> {
+    pub(crate) fn to_material(self) -> Result<Material> {
         check_struct_size::<rt2_material>(self.struct_size, "rt2_material")?;
         let m = Material {
             color: Vec3::from(self.color),
@@ -231,7 +231,7 @@ impl From<&BuildOptions> for rt2_build_options {
 }
 
 impl rt2_build_options {
-    pub(crate) fn to_options(&self) -> Result<BuildOptions> {
+    pub(crate) fn to_options(self) -> Result<BuildOptions> {
         check_struct_size::<rt2_build_options>(self.struct_size, "rt2_build_options")?;
         let bad = Error::invalid_argument;
         let builder = match self.builder {
@@ -301,7 +301,7 @@ pub struct rt2_render_options {
 }
 
 impl rt2_render_options {
-    pub(crate) fn to_options(&self) -> Result<RenderOptions> {
+    pub(crate) fn to_options(self) -> Result<RenderOptions> {
         check_struct_size::<rt2_render_options>(self.struct_size, "rt2_render_options")?;
         let bad = Error::invalid_argument;
         if !(1..=64).contains(&self.max_depth) {

@@ -95,7 +95,9 @@ unsafe fn query_options(opt: *const rt2_query_options) -> crate::error::Result<Q
     })
 }
 
-/// Shared prologue of both queries: checks, ropes on demand, the committed scene.
+/// Shared prologue of both queries: checks, ropes on demand, the committed scene. It takes
+/// the C call's arguments as they are, hence their number.
+#[allow(clippy::too_many_arguments)]
 unsafe fn run_query<T>(
     ctx: *const rt2_context,
     scene: *const rt2_scene,

@@ -77,7 +77,7 @@ pub fn place(
     obj: &Object,
     object_id: u32,
     set: &mut PrimitiveSet,
-    origins: &mut Vec<Vec<PrimOrigin>>,
+    origins: &mut [Vec<PrimOrigin>],
 ) {
     let t = obj.transform;
     let lin = Mat3::from(t.matrix3);

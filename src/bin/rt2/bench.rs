@@ -27,6 +27,9 @@ const USAGE: &str = "usage: rt2 bench [frames|build|rays|all] [--runs N] [--writ
 Model files come from $RT2_SHARED (default ../shared); Embree from $RT2_EMBREE_BENCH or
 target/peers/bench_embree (make -C ../shared/peers BUILD=$PWD/target/peers).";
 
+/// One benchmark: it returns the Markdown section it measured.
+type Bench = fn(&Args) -> Result<String>;
+
 struct Args {
     runs: usize,
     write: Option<PathBuf>,
@@ -56,7 +59,7 @@ pub fn run(args: &[String]) -> Result<()> {
         }
     }
     a.runs = a.runs.max(1);
-    let sections: Vec<(&str, fn(&Args) -> Result<String>)> = match what.as_str() {
+    let sections: Vec<(&str, Bench)> = match what.as_str() {
         "frames" => vec![("frames", frames)],
         "build" => vec![("build", build)],
         "rays" => vec![("rays", rays)],
