@@ -9,9 +9,14 @@
 
 mod build;
 mod layout;
+mod midpoint;
 mod ropes;
+mod sah;
+mod split;
+mod stats;
+mod walk;
 
-pub use build::{build, BuildInput, BuildOptions, Builder, Layout};
+pub use build::{build, BuildInput, BuildOptions, Builder, Layout, MAX_DEPTH_LIMIT};
 
 use crate::geometry::{Aabb, PrimitiveSet};
 
@@ -132,15 +137,20 @@ impl KdTree {
     }
 
     pub fn leaf_list_bytes(&self) -> usize {
-        std::mem::size_of_val(self.leaves.as_slice()) + std::mem::size_of_val(self.prim_indices.as_slice())
+        std::mem::size_of_val(self.leaves.as_slice())
+            + std::mem::size_of_val(self.prim_indices.as_slice())
     }
 
     pub fn rope_bytes(&self) -> usize {
-        self.ropes.as_ref().map_or(0, |r| std::mem::size_of_val(r.links.as_slice()))
+        self.ropes
+            .as_ref()
+            .map_or(0, |r| std::mem::size_of_val(r.links.as_slice()))
     }
 
     pub fn leaf_box_bytes(&self) -> usize {
-        self.ropes.as_ref().map_or(0, |r| std::mem::size_of_val(r.leaf_bounds.as_slice()))
+        self.ropes
+            .as_ref()
+            .map_or(0, |r| std::mem::size_of_val(r.leaf_bounds.as_slice()))
     }
 }
 
