@@ -64,39 +64,52 @@ impl Triangle {
     /// Bounds of the part of the triangle inside `voxel` (Sutherland–Hodgman clipping against
     /// the six slabs): the "perfect splits" of Havran's thesis used by the SAH builder.
     pub fn clipped_bounds(&self, voxel: &Aabb) -> Aabb {
-        let mut poly: Vec<Vec3> = self.vertices().to_vec();
-        let mut next = Vec::with_capacity(9);
+        let bounds = self.bounds();
+        if !bounds.overlaps(voxel) {
+            return Aabb::EMPTY;
+        }
+        if voxel.contains_point(bounds.min) && voxel.contains_point(bounds.max) {
+            return bounds;
+        }
+        // A triangle cut by six planes has at most 9 corners: fixed arrays, no allocation
+        // (the SAH builder clips every straddling triangle at every level).
+        let mut poly = [Vec3::ZERO; 9];
+        let mut next = [Vec3::ZERO; 9];
+        poly[..3].copy_from_slice(&self.vertices());
+        let mut len = 3;
         for axis in 0..3 {
             for (plane, keep_below) in [(voxel.min[axis], false), (voxel.max[axis], true)] {
-                next.clear();
-                for i in 0..poly.len() {
-                    let a = poly[i];
-                    let b = poly[(i + 1) % poly.len()];
-                    let inside = |p: Vec3| {
-                        if keep_below {
-                            p[axis] <= plane
-                        } else {
-                            p[axis] >= plane
-                        }
-                    };
+                let inside = |p: Vec3| {
+                    if keep_below {
+                        p[axis] <= plane
+                    } else {
+                        p[axis] >= plane
+                    }
+                };
+                let mut n = 0;
+                for i in 0..len {
+                    let (a, b) = (poly[i], poly[(i + 1) % len]);
                     let (ia, ib) = (inside(a), inside(b));
                     if ia {
-                        next.push(a);
+                        next[n] = a;
+                        n += 1;
                     }
                     if ia != ib {
                         let t = (plane - a[axis]) / (b[axis] - a[axis]);
                         let mut p = a + t * (b - a);
                         p[axis] = plane; // exact on the plane despite rounding
-                        next.push(p);
+                        next[n] = p;
+                        n += 1;
                     }
                 }
-                std::mem::swap(&mut poly, &mut next);
-                if poly.is_empty() {
+                if n == 0 {
                     return Aabb::EMPTY;
                 }
+                std::mem::swap(&mut poly, &mut next);
+                len = n;
             }
         }
         // Rounding in the interpolation can step a hair outside the voxel: clamp back.
-        Aabb::from_points(&poly).intersection(*voxel)
+        Aabb::from_points(&poly[..len]).intersection(*voxel)
     }
 }
