@@ -285,6 +285,8 @@ impl Sah<'_> {
         let mut moved = vec![[u32::MAX; 2]; n];
         for (p, &prim) in prims.iter().enumerate() {
             for child in 0..2 {
+                // One-sided primitives keep their events (`None`); straddling ones get new
+                // events from their part inside the child voxel, or are culled there.
                 let clipped = match (side[p], child) {
                     (Side::Both, _) => match clip(self.input, prim, &voxels[child]) {
                         Some(b) => Some(b),
