@@ -561,3 +561,58 @@ fn ensure_ropes_matches_ropes_built_with_the_tree() {
     assert_eq!(a.links, b.links);
     assert_eq!(a.leaf_bounds, b.leaf_bounds);
 }
+
+/// The shared Stanford models (`$RT2_SHARED/models`, default `../shared`), both builders: no
+/// triangle lost, every listed triangle touches its leaf, and on a sample of leaves (every 97th,
+/// to keep the brute force near a second) every triangle reaching into the leaf is listed.
+#[test]
+fn shared_models_keep_every_triangle_in_its_leaves() {
+    let dir = std::env::var_os("RT2_SHARED")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared"))
+        .join("models");
+    for model in ["bunny.ply", "snowden.ply"] {
+        let path = dir.join(model);
+        if !path.exists() {
+            eprintln!("SKIPPED: {} is missing (set RT2_SHARED)", path.display());
+            continue;
+        }
+        let mesh = rt2::scene::loaders::load_mesh(&path).unwrap();
+        let mut set = PrimitiveSet::default();
+        for t in &mesh.triangles {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+            set.triangles.push(Triangle::from_vertices(a, b, c));
+        }
+        for builder in [Builder::Sah, Builder::Midpoint] {
+            let tree = build(&set, &options(builder, Layout::DepthFirst));
+            let what = format!("{model} {builder:?}");
+            let leaves = leaves_of(&tree, &node_voxels(&tree));
+            let mut found = vec![false; set.len()];
+            for (k, &(leaf, voxel)) in leaves.iter().enumerate() {
+                let listed = tree.leaf_prims(leaf);
+                for &p in listed {
+                    assert!(
+                        !set.clipped_bounds(p as usize, &voxel).is_empty(),
+                        "{what}: {p} misses leaf {leaf}"
+                    );
+                    found[p as usize] = true;
+                }
+                if k % 97 != 0 {
+                    continue;
+                }
+                for p in 0..set.len() {
+                    if listed.contains(&(p as u32)) || !set.bounds(p).overlaps(&voxel) {
+                        continue;
+                    }
+                    let c = set.clipped_bounds(p, &voxel);
+                    assert!(
+                        c.is_empty() || !reaches_interior(&c, &voxel),
+                        "{what}: {p} missing from leaf {leaf}"
+                    );
+                }
+            }
+            let lost = found.iter().filter(|f| !**f).count();
+            assert_eq!(lost, 0, "{what}: {lost} triangles in no leaf");
+        }
+    }
+}

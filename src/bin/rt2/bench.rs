@@ -9,7 +9,7 @@ use rt2::dispatch::BackendRequest;
 use rt2::error::{Error, Result};
 use rt2::frame::Frame;
 use rt2::geometry::{Hit, Ray};
-use rt2::kdtree::{BuildOptions, Builder};
+use rt2::kdtree::{BuildOptions, Builder, Layout};
 use rt2::rayset::{self, HitRecord};
 use rt2::render::RenderOptions;
 use rt2::scene::{loaders, Scene, Shape};
@@ -197,7 +197,32 @@ fn frames(a: &Args) -> Result<String> {
         )
         .ok();
     }
+    out += &moving_objects(a, &ctx)?;
     Ok(out)
+}
+
+/// The RT² per-frame rebuild: every frame moves a tenth of spheres3's spheres
+/// (`set_transform`) and commits, which rebuilds the whole tree.
+fn moving_objects(a: &Args, ctx: &Context) -> Result<String> {
+    let mut l = load_scene("spheres3")?;
+    let objects = l.scene.objects().len() as u32;
+    let mut frame = 0u32;
+    let ms = time_ms(a.runs, || {
+        frame += 1;
+        for o in (frame % 10..objects).step_by(10) {
+            let dy = 0.1 * ((frame + o) % 7) as f32;
+            let _ = l.scene.set_transform(
+                o,
+                glam::Affine3A::from_translation(glam::Vec3::new(0.0, dy, 0.0)),
+            );
+        }
+        let _ = ctx.install(|| l.scene.commit());
+    });
+    Ok(format!(
+        "\nMoving objects (RT² per-frame rebuild): spheres3 with {} of its {objects} objects moved per frame, \
+         set_transform + commit: {ms:.2} ms per frame (median).\n",
+        objects / 10
+    ))
 }
 
 /// A mesh from the shared models as a scene with one object.
@@ -328,9 +353,50 @@ fn build(a: &Args) -> Result<String> {
             }
         }
     }
+    out += &layout_effect(a)?;
     if !embree.is_empty() {
         out += "\nEmbree 3 in the same run:\n\n| model | build | threads | median ms | MiB |\n|---|---|---|---|---|\n";
         out += &embree;
+    }
+    Ok(out)
+}
+
+/// Effect of the van Emde Boas node order on traversal speed: the standard traversal on the
+/// bunny's incoherent and primary sets, 1 thread, depth-first vs van Emde Boas trees.
+fn layout_effect(a: &Args) -> Result<String> {
+    let Some(mut scene) = model_scene("bunny.ply")? else {
+        return Ok(String::new());
+    };
+    let ctx = Context::new(BackendRequest::Cpu, 1)?;
+    let mut out = String::from(
+        "\nEffect of the node layout (bunny, standard traversal, 1 thread, Mrays/s):\n\n\
+         | set | depth-first | van Emde Boas |\n|---|---|---|\n",
+    );
+    for set in ["incoherent_262144", "primary_262144"] {
+        let path = shared().join("raysets/bunny").join(format!("{set}.rays"));
+        let Ok(rays) = rayset::read_rays(&path) else {
+            eprintln!("bench: {} is missing; skipped", path.display());
+            continue;
+        };
+        let mut row = format!("| {set} |");
+        for layout in [Layout::DepthFirst, Layout::VanEmdeBoas] {
+            scene.set_build_options(BuildOptions {
+                layout,
+                ..BuildOptions::default()
+            });
+            scene.commit()?;
+            let c = scene.committed()?;
+            let q = QueryOptions {
+                traversal: Some(Traversal::Standard),
+                ..QueryOptions::default()
+            };
+            let mut hits = vec![Hit::MISS; rays.len()];
+            let ms = time_ms(a.runs, || {
+                let _ = ctx.intersect(c, &rays, &mut hits, &q);
+            });
+            write!(row, " {:.2} |", rays.len() as f64 / ms / 1e3).ok();
+        }
+        writeln!(out, "{row}").ok();
     }
     Ok(out)
 }
