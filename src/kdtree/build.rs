@@ -1,6 +1,11 @@
-//! Builder entry point and options. (Stub interface; the SAH and midpoint builders land here.)
+//! Builder entry point and options: picks the root voxel and the primitives, runs one of the two
+//! builders into a temporary node tree, flattens it with the chosen layout, fills the statistics
+//! and adds ropes when asked.
 
-use super::KdTree;
+use std::time::Instant;
+
+use super::split::BuildNode;
+use super::{layout, midpoint, ropes, sah, stats, KdTree};
 use crate::geometry::Aabb;
 
 /// What a builder needs to know of the primitives.
@@ -21,21 +26,32 @@ pub enum Builder {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Layout {
+    /// Sibling pairs in depth-first (pre-)order: a subtree is one contiguous run of pairs.
     DepthFirst,
+    /// Cache-oblivious van Emde Boas order of the sibling pairs (see `layout.rs`).
     VanEmdeBoas,
 }
+
+/// Depth limit applied to every tree whatever `max_depth` asks for, so that a traversal stack
+/// of this many entries is always enough (GPU kernels size theirs statically).
+pub const MAX_DEPTH_LIMIT: u32 = 64;
+
+/// Midpoint trees default to depth 20, the best value of the vectorised-traversal paper.
+const MIDPOINT_DEFAULT_DEPTH: u32 = 20;
 
 #[derive(Clone, Copy, Debug)]
 pub struct BuildOptions {
     pub builder: Builder,
     pub layout: Layout,
     /// Maximum depth; `None` picks `8 + 1.3 log2 N` (Havran's rule) for SAH, 20 for midpoint.
+    /// Clamped to [`MAX_DEPTH_LIMIT`].
     pub max_depth: Option<u32>,
     /// Midpoint trees stop splitting at this many primitives.
     pub leaf_size: u32,
     /// SAH cost of one traversal step, relative to one primitive test (1.0).
     pub traversal_cost: f32,
-    /// Fraction of the cost saved when one side of a split is empty (the empty-space bonus).
+    /// Factor λ applied to the SAH cost of a split that leaves one side empty (Wald & Havran
+    /// 2006, §4.3 use 0.8): below 1 it favours cutting off empty space.
     pub empty_bonus: f32,
     pub ropes: bool,
 }
@@ -54,6 +70,48 @@ impl Default for BuildOptions {
     }
 }
 
-pub fn build(_input: &dyn BuildInput, _opts: &BuildOptions) -> KdTree {
-    unimplemented!("the builders are written in the kd-tree issue")
+impl BuildOptions {
+    /// The depth limit for `prim_count` primitives: the explicit one, else the builder's default.
+    pub fn depth_limit(&self, prim_count: usize) -> u32 {
+        let depth = self.max_depth.unwrap_or(match self.builder {
+            Builder::Sah => (8.0 + 1.3 * (prim_count.max(1) as f64).log2()).round() as u32,
+            Builder::Midpoint => MIDPOINT_DEFAULT_DEPTH,
+        });
+        depth.min(MAX_DEPTH_LIMIT)
+    }
+}
+
+/// Builds the tree of `input`.
+///
+/// The root voxel is the union of the primitive bounds. Primitives whose bounds are empty or not
+/// finite cannot be hit and are left out of the tree. With no primitive left, the tree is a
+/// single empty leaf and `bounds` is `Aabb::EMPTY` (infinite, never NaN), which overlaps nothing.
+///
+/// The result depends only on `input` and `opts`, not on the number of threads of the rayon
+/// pool the call runs in: the builders return a node tree that is flattened afterwards in a
+/// fixed order.
+pub fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
+    let start = Instant::now();
+    let prims: Vec<(u32, Aabb)> = (0..input.prim_count())
+        .map(|p| (p as u32, input.bounds(p)))
+        .filter(|(_, b)| !b.is_empty() && b.min.is_finite() && b.max.is_finite())
+        .collect();
+    let bounds = prims.iter().fold(Aabb::EMPTY, |acc, (_, b)| acc.union(*b));
+    let max_depth = opts.depth_limit(prims.len());
+    let root = if prims.is_empty() {
+        BuildNode::Leaf(Vec::new())
+    } else {
+        match opts.builder {
+            Builder::Sah => sah::build(input, prims, bounds, max_depth, opts),
+            Builder::Midpoint => midpoint::build(input, prims, bounds, max_depth, opts.leaf_size),
+        }
+    };
+    let mut tree = layout::flatten(&root, bounds, opts.layout);
+    drop(root);
+    tree.stats = stats::tree_stats(&tree, opts.traversal_cost);
+    if opts.ropes {
+        tree.ropes = Some(ropes::build_ropes(&tree));
+    }
+    tree.stats.build_ms = start.elapsed().as_secs_f32() * 1e3;
+    tree
 }

@@ -1,1 +1,150 @@
 //! Node layouts: depth-first and van Emde Boas.
+//!
+//! The unit of layout is the sibling pair: the format keeps the two children of a node side by
+//! side, so a layout is an order of pairs (the root sits alone at index 0). The leaves and
+//! their primitive lists are numbered in depth-first order by both layouts, so two trees that
+//! differ only in layout have identical `leaves` and `prim_indices`.
+
+use super::split::BuildNode;
+use super::{KdNode, KdTree, Layout, LeafRange, TreeStats};
+use crate::geometry::Aabb;
+
+/// Flattens the builder's node tree into the flat arrays.
+pub(super) fn flatten(root: &BuildNode, bounds: Aabb, layout: Layout) -> KdTree {
+    let mut tree = KdTree {
+        nodes: vec![KdNode::leaf(0)],
+        leaves: Vec::new(),
+        prim_indices: Vec::new(),
+        bounds,
+        ropes: None,
+        stats: TreeStats::default(),
+    };
+    depth_first(root, 0, &mut tree);
+    if layout == Layout::VanEmdeBoas {
+        tree.nodes = van_emde_boas(&tree.nodes);
+    }
+    tree
+}
+
+/// Writes `node` at `at`; its child pair is allocated when the node is visited, so the pairs
+/// come in pre-order and every subtree is one contiguous run.
+fn depth_first(node: &BuildNode, at: usize, tree: &mut KdTree) {
+    match node {
+        BuildNode::Leaf(prims) => {
+            let leaf = tree.leaves.len() as u32;
+            tree.leaves.push(LeafRange {
+                first: tree.prim_indices.len() as u32,
+                count: prims.len() as u32,
+            });
+            tree.prim_indices.extend_from_slice(prims);
+            tree.nodes[at] = KdNode::leaf(leaf);
+        }
+        BuildNode::Inner {
+            axis,
+            split,
+            children,
+        } => {
+            let child = tree.nodes.len();
+            tree.nodes[at] = KdNode::inner(*axis, *split, child as u32);
+            tree.nodes.extend([KdNode::leaf(0); 2]);
+            depth_first(&children[0], child, tree);
+            depth_first(&children[1], child + 1, tree);
+        }
+    }
+}
+
+/// Reorders the sibling pairs of a depth-first tree in van Emde Boas order (Prokop's
+/// cache-oblivious layout, as used for kd-trees in the RT² thesis): the pair tree of height
+/// `h` is cut at half its height, the top part is laid out recursively, then each bottom
+/// subtree, left to right, recursively. Any run of `B` pairs then holds a subtree of height
+/// about `log B`, whatever the cache line or page size, so a root-to-leaf path touches
+/// `O(log_B N)` blocks.
+fn van_emde_boas(nodes: &[KdNode]) -> Vec<KdNode> {
+    if nodes.len() == 1 {
+        return nodes.to_vec();
+    }
+    let pairs = PairTree::new(nodes);
+    let mut order = Vec::with_capacity(nodes.len() / 2);
+    let root_pair = nodes[0].index();
+    pairs.lay_out(root_pair, pairs.height(root_pair), &mut order);
+    // New position of each old pair.
+    let mut moved = vec![0u32; nodes.len()];
+    for (rank, &old) in order.iter().enumerate() {
+        moved[old as usize] = 1 + 2 * rank as u32;
+    }
+    let relink = |n: KdNode| {
+        if n.is_leaf() {
+            n
+        } else {
+            KdNode::inner(n.axis(), n.split, moved[n.index() as usize])
+        }
+    };
+    let mut out = Vec::with_capacity(nodes.len());
+    out.push(relink(nodes[0]));
+    for &old in &order {
+        out.push(relink(nodes[old as usize]));
+        out.push(relink(nodes[old as usize + 1]));
+    }
+    out
+}
+
+/// The tree of sibling pairs of a depth-first node array: a pair is named by the index of its
+/// first node, its children are the child pairs of its (up to two) inner nodes.
+struct PairTree<'a> {
+    nodes: &'a [KdNode],
+    /// Height (in pairs) of the subtree under each pair, indexed by the pair's first node.
+    heights: Vec<u32>,
+}
+
+impl<'a> PairTree<'a> {
+    fn new(nodes: &'a [KdNode]) -> Self {
+        let mut tree = PairTree {
+            nodes,
+            heights: vec![0; nodes.len()],
+        };
+        // Depth-first order puts every child pair after its parent: fill heights backwards.
+        for pair in (1..nodes.len()).step_by(2).rev() {
+            let below = tree.children(pair as u32).map(|c| tree.height(c)).max();
+            tree.heights[pair] = 1 + below.unwrap_or(0);
+        }
+        tree
+    }
+
+    fn height(&self, pair: u32) -> u32 {
+        self.heights[pair as usize]
+    }
+
+    fn children(&self, pair: u32) -> impl Iterator<Item = u32> + '_ {
+        let p = pair as usize;
+        self.nodes[p..p + 2]
+            .iter()
+            .filter(|n| !n.is_leaf())
+            .map(|n| n.index())
+    }
+
+    /// Appends the pairs of the subtree of `pair`, cut `height` levels down, in vEB order.
+    fn lay_out(&self, pair: u32, height: u32, order: &mut Vec<u32>) {
+        if height <= 1 {
+            order.push(pair);
+            return;
+        }
+        let top = height / 2;
+        self.lay_out(pair, top, order);
+        let mut frontier = Vec::new();
+        self.pairs_at_depth(pair, top, &mut frontier);
+        for bottom in frontier {
+            self.lay_out(bottom, height - top, order);
+        }
+    }
+
+    /// The pairs exactly `depth` levels below `pair`, left to right.
+    fn pairs_at_depth(&self, pair: u32, depth: u32, out: &mut Vec<u32>) {
+        if depth == 0 {
+            out.push(pair);
+        } else {
+            for child in self.children(pair) {
+                self.pairs_at_depth(child, depth - 1, out);
+            }
+        }
+    }
+}

@@ -6,12 +6,22 @@
 //! `child` (below the split) and `child + 1` (above). A voxel is split into
 //! `[min, split]` (below) and `[split, max]` (above) along `axis`. A leaf points into
 //! `leaves`, whose range selects primitive indices in `prim_indices`.
+//!
+//! Building: `build.rs` (entry point, options), `midpoint.rs` and `sah.rs` (the builders),
+//! `split.rs` (what they share: the side of a primitive, the parallel recursion), `layout.rs`
+//! (flattening, van Emde Boas order), `ropes.rs`, `stats.rs`, `walk.rs` (leaf voxels, point
+//! location).
 
 mod build;
 mod layout;
+mod midpoint;
 mod ropes;
+mod sah;
+mod split;
+mod stats;
+mod walk;
 
-pub use build::{build, BuildInput, BuildOptions, Builder, Layout};
+pub use build::{build, BuildInput, BuildOptions, Builder, Layout, MAX_DEPTH_LIMIT};
 
 use crate::geometry::{Aabb, PrimitiveSet};
 
@@ -101,7 +111,8 @@ pub struct KdTree {
     pub nodes: Vec<KdNode>,
     pub leaves: Vec<LeafRange>,
     pub prim_indices: Vec<u32>,
-    /// The root voxel.
+    /// The root voxel: the union of the primitive bounds, `Aabb::EMPTY` (never NaN) when the
+    /// tree holds no primitive.
     pub bounds: Aabb,
     pub ropes: Option<Ropes>,
     pub stats: TreeStats,
@@ -132,15 +143,20 @@ impl KdTree {
     }
 
     pub fn leaf_list_bytes(&self) -> usize {
-        std::mem::size_of_val(self.leaves.as_slice()) + std::mem::size_of_val(self.prim_indices.as_slice())
+        std::mem::size_of_val(self.leaves.as_slice())
+            + std::mem::size_of_val(self.prim_indices.as_slice())
     }
 
     pub fn rope_bytes(&self) -> usize {
-        self.ropes.as_ref().map_or(0, |r| std::mem::size_of_val(r.links.as_slice()))
+        self.ropes
+            .as_ref()
+            .map_or(0, |r| std::mem::size_of_val(r.links.as_slice()))
     }
 
     pub fn leaf_box_bytes(&self) -> usize {
-        self.ropes.as_ref().map_or(0, |r| std::mem::size_of_val(r.leaf_bounds.as_slice()))
+        self.ropes
+            .as_ref()
+            .map_or(0, |r| std::mem::size_of_val(r.leaf_bounds.as_slice()))
     }
 }
 

@@ -1,7 +1,66 @@
-//! Ropes and leaf boxes (Popov et al. 2007).
+//! Ropes and leaf boxes (Popov, Günther, Seidel & Slusallek 2007, "Stackless kd-tree traversal
+//! for high performance GPU ray tracing", §3.1).
+//!
+//! Every node passes its six ropes down: the child below the plane gets the child above as its
+//! `+axis` rope and vice versa, the other ropes are inherited. Each rope is then pushed down
+//! ("rope optimisation") to the deepest node whose voxel still covers the whole face, so that
+//! a traversal following it descends as little as possible. Ropes on the root box are
+//! `INVALID`.
 
-use super::{KdTree, Ropes};
+use super::split::child_voxels;
+use super::{KdTree, Ropes, ROPE_FACES};
+use crate::geometry::{Aabb, INVALID};
 
-pub(super) fn build_ropes(_tree: &KdTree) -> Ropes {
-    unimplemented!("ropes land in the kd-tree issue")
+pub(super) fn build_ropes(tree: &KdTree) -> Ropes {
+    let mut ropes = Ropes {
+        links: vec![[INVALID; ROPE_FACES]; tree.leaves.len()],
+        leaf_bounds: vec![Aabb::EMPTY; tree.leaves.len()],
+    };
+    descend(tree, 0, tree.bounds, [INVALID; ROPE_FACES], &mut ropes);
+    ropes
+}
+
+fn descend(tree: &KdTree, node: u32, voxel: Aabb, mut links: [u32; ROPE_FACES], out: &mut Ropes) {
+    for (face, link) in links.iter_mut().enumerate() {
+        *link = push_down(tree, *link, face, &voxel);
+    }
+    let n = tree.nodes[node as usize];
+    if n.is_leaf() {
+        out.links[n.index() as usize] = links;
+        out.leaf_bounds[n.index() as usize] = voxel;
+        return;
+    }
+    let axis = n.axis();
+    let (below, above) = (n.index(), n.index() + 1);
+    let [vb, va] = child_voxels(&voxel, axis, n.split);
+    let mut links_below = links;
+    links_below[2 * axis + 1] = above;
+    descend(tree, below, vb, links_below, out);
+    let mut links_above = links;
+    links_above[2 * axis] = below;
+    descend(tree, above, va, links_above, out);
+}
+
+/// Moves the rope of `face` of `voxel` from `node` down to the deepest descendant that still
+/// covers the whole face. `node` is adjacent to the face: its voxel starts at the face plane.
+fn push_down(tree: &KdTree, mut node: u32, face: usize, voxel: &Aabb) -> u32 {
+    let (face_axis, positive) = (face / 2, face % 2 == 1);
+    while node != INVALID {
+        let n = tree.nodes[node as usize];
+        if n.is_leaf() {
+            break;
+        }
+        let axis = n.axis();
+        node = if axis == face_axis {
+            // Across a +x face the child below the plane is the one touching the face.
+            n.index() + u32::from(!positive)
+        } else if n.split <= voxel.min[axis] {
+            n.index() + 1
+        } else if n.split >= voxel.max[axis] {
+            n.index()
+        } else {
+            break; // the plane cuts the face: this node is the deepest that covers it
+        };
+    }
+    node
 }

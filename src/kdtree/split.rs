@@ -1,0 +1,97 @@
+//! What both builders share: the temporary node tree they return, the rule that sends a
+//! primitive to one or both sides of a split plane, and the parallel recursion.
+
+use super::BuildInput;
+use crate::geometry::Aabb;
+
+/// Node tree produced by a builder before it is flattened by `layout::flatten`. Building this
+/// value first (instead of writing the flat arrays during the parallel recursion) is what makes
+/// the flat arrays independent of the thread count.
+pub(super) enum BuildNode {
+    /// Global primitive indices, ascending.
+    Leaf(Vec<u32>),
+    Inner {
+        axis: usize,
+        split: f32,
+        /// Below (`[min, split]`) and above (`[split, max]`) the plane.
+        children: Box<[BuildNode; 2]>,
+    },
+}
+
+impl BuildNode {
+    /// A leaf listing `prims` in ascending order, so that equal inputs give equal leaves and a
+    /// traversal meets the lowest index first.
+    pub(super) fn leaf(mut prims: Vec<u32>) -> Self {
+        prims.sort_unstable();
+        BuildNode::Leaf(prims)
+    }
+}
+
+/// Where a primitive goes when its voxel is split.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Side {
+    Below,
+    Above,
+    /// Straddles the plane: it is clipped to each child voxel (perfect splits) and kept in the
+    /// children whose clipped part is not empty.
+    Both,
+}
+
+/// Side of a primitive that spans `[lo, hi]` along the split axis inside the voxel, for the
+/// plane at `split`.
+///
+/// The interval is closed but a primitive that only touches the plane from one side goes to
+/// that side alone (Wald & Havran 2006, §4.2): the other child would only see it in its
+/// boundary face. A primitive lying in the plane (`lo == hi == split`) touches both child
+/// voxels only with their common face; it goes to `planar` — one side is enough for a
+/// traversal that treats voxels as closed intervals, `Both` keeps it in both.
+pub(super) fn classify(lo: f32, hi: f32, split: f32, planar: Side) -> Side {
+    if lo == split && hi == split {
+        planar
+    } else if hi <= split {
+        Side::Below
+    } else if lo >= split {
+        Side::Above
+    } else {
+        Side::Both
+    }
+}
+
+/// The two child voxels of `voxel` split at `axis = split`.
+pub(super) fn child_voxels(voxel: &Aabb, axis: usize, split: f32) -> [Aabb; 2] {
+    let (mut below, mut above) = (*voxel, *voxel);
+    below.max[axis] = split;
+    above.min[axis] = split;
+    [below, above]
+}
+
+/// Clipped bounds of `prim` in `voxel`, `None` when the prim does not reach into it.
+pub(super) fn clip(input: &dyn BuildInput, prim: u32, voxel: &Aabb) -> Option<Aabb> {
+    let b = input.clipped_bounds(prim as usize, voxel);
+    (!b.is_empty()).then_some(b)
+}
+
+/// Nodes above this depth with at least [`PARALLEL_MIN_PRIMS`] primitives are worked on in
+/// parallel; below that a rayon fork costs more than it saves.
+const PARALLEL_MAX_DEPTH: u32 = 10;
+const PARALLEL_MIN_PRIMS: usize = 2048;
+
+/// Whether a node at `depth` with `prims` primitives is worth parallel work.
+pub(super) fn parallel(depth: u32, prims: usize) -> bool {
+    depth < PARALLEL_MAX_DEPTH && prims >= PARALLEL_MIN_PRIMS
+}
+
+/// Builds the two children, in parallel near the root. The result does not depend on whether
+/// the closures ran in parallel.
+pub(super) fn fork<A, B>(depth: u32, prims: usize, below: A, above: B) -> [BuildNode; 2]
+where
+    A: FnOnce() -> BuildNode + Send,
+    B: FnOnce() -> BuildNode + Send,
+{
+    if parallel(depth, prims) {
+        let (b, a) = rayon::join(below, above);
+        [b, a]
+    } else {
+        [below(), above()]
+    }
+}

@@ -1,0 +1,563 @@
+//! kd-tree builders, layouts and ropes checked against brute force on random and degenerate
+//! scenes. Every check walks the flat arrays itself (voxels recomputed from the root box), so
+//! it does not trust the library's own walk.
+
+use glam::{Mat3, Vec3};
+use rt2::geometry::{Aabb, Ellipsoid, PrimitiveSet, Sphere, Triangle, INVALID};
+use rt2::kdtree::{build, BuildOptions, Builder, KdNode, KdTree, Layout};
+
+/// SplitMix64: a small deterministic generator, so every run sees the same scenes.
+struct Rng(u64);
+
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[0, 1)`.
+    fn f(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    fn vec(&mut self) -> Vec3 {
+        Vec3::new(self.f(), self.f(), self.f())
+    }
+}
+
+/// `n` triangles of size up to `size` around centres uniform in the unit cube, mapped by
+/// `offset + scale * p`.
+fn soup(n: usize, seed: u64, size: f32, scale: f32, offset: Vec3) -> PrimitiveSet {
+    let mut rng = Rng(seed);
+    let mut set = PrimitiveSet::default();
+    for _ in 0..n {
+        let c = rng.vec();
+        let mut v = || offset + scale * (c + size * (rng.vec() - 0.5));
+        set.triangles.push(Triangle::from_vertices(v(), v(), v()));
+    }
+    set
+}
+
+/// Triangles in a few tight clusters with empty space between them.
+fn clustered_soup(n: usize, seed: u64) -> PrimitiveSet {
+    let mut rng = Rng(seed);
+    let centres: Vec<Vec3> = (0..8).map(|_| rng.vec()).collect();
+    let mut set = PrimitiveSet::default();
+    for i in 0..n {
+        let c = centres[i % centres.len()] + 0.05 * (rng.vec() - 0.5);
+        let mut v = || c + 0.01 * (rng.vec() - 0.5);
+        set.triangles.push(Triangle::from_vertices(v(), v(), v()));
+    }
+    set
+}
+
+/// Triangles, spheres, ellipsoids and boxes together.
+fn mixed(n: usize, seed: u64) -> PrimitiveSet {
+    let mut set = soup(n, seed, 0.1, 1.0, Vec3::ZERO);
+    let mut rng = Rng(seed ^ 0xABCD);
+    for _ in 0..n / 2 {
+        set.spheres.push(Sphere {
+            center: rng.vec().to_array(),
+            radius: 0.05 * rng.f(),
+        });
+    }
+    for _ in 0..n / 4 {
+        let m = Mat3::from_cols(0.05 * rng.vec(), 0.05 * rng.vec(), 0.05 * rng.vec());
+        set.ellipsoids.extend(Ellipsoid::new(rng.vec(), m));
+    }
+    for _ in 0..n / 4 {
+        let min = rng.vec();
+        set.boxes.push(Aabb::new(min, min + 0.08 * rng.vec()));
+    }
+    set
+}
+
+fn options(builder: Builder, layout: Layout) -> BuildOptions {
+    BuildOptions {
+        builder,
+        layout,
+        ropes: true,
+        ..BuildOptions::default()
+    }
+}
+
+/// Every builder with every layout, ropes on.
+fn all_options() -> Vec<BuildOptions> {
+    let mut all = Vec::new();
+    for builder in [Builder::Sah, Builder::Midpoint] {
+        for layout in [Layout::DepthFirst, Layout::VanEmdeBoas] {
+            all.push(options(builder, layout));
+        }
+    }
+    all
+}
+
+/// Voxel and depth of every node, walking from the root; panics on an index out of range or a
+/// node reached twice (a cycle or shared child). `None` for unreachable nodes.
+fn node_voxels(tree: &KdTree) -> Vec<Option<(Aabb, u32)>> {
+    let mut voxels = vec![None; tree.nodes.len()];
+    let mut stack = vec![(0usize, tree.bounds, 0u32)];
+    while let Some((node, voxel, depth)) = stack.pop() {
+        assert!(node < tree.nodes.len(), "node {node} out of range");
+        assert!(voxels[node].is_none(), "node {node} reached twice");
+        voxels[node] = Some((voxel, depth));
+        let n = tree.nodes[node];
+        if !n.is_leaf() {
+            let (axis, split) = (n.axis(), n.split);
+            assert!(split.is_finite());
+            assert!(
+                voxel.min[axis] < split && split < voxel.max[axis],
+                "split outside voxel"
+            );
+            let (mut below, mut above) = (voxel, voxel);
+            below.max[axis] = split;
+            above.min[axis] = split;
+            let c = n.index() as usize;
+            stack.push((c, below, depth + 1));
+            stack.push((c + 1, above, depth + 1));
+        }
+    }
+    voxels
+}
+
+/// `(leaf index, voxel)` of every leaf node.
+fn leaves_of(tree: &KdTree, voxels: &[Option<(Aabb, u32)>]) -> Vec<(u32, Aabb)> {
+    tree.nodes
+        .iter()
+        .zip(voxels)
+        .filter(|(n, _)| n.is_leaf())
+        .map(|(n, v)| (n.index(), v.expect("unreachable node").0))
+        .collect()
+}
+
+/// Whether `c` (inside `voxel`) reaches into the open interior of `voxel` on every axis where
+/// the voxel has extent: a primitive for which this holds must be in the leaf; one that only
+/// lies in a face of the voxel may be in a neighbour instead. Clipping rounds, so a primitive
+/// that only touches a face can come back a few ulps deep: that much is tolerated.
+fn reaches_interior(c: &Aabb, voxel: &Aabb) -> bool {
+    (0..3).all(|a| {
+        let tol = 16.0 * f32::EPSILON * voxel.min[a].abs().max(voxel.max[a].abs());
+        voxel.min[a] == voxel.max[a]
+            || (c.max[a] > voxel.min[a] + tol && c.min[a] < voxel.max[a] - tol)
+    })
+}
+
+/// Structure, then brute-force leaf contents, then ropes (checks (a)–(d) and (f)).
+fn check_tree(set: &PrimitiveSet, tree: &KdTree, what: &str) {
+    let n = set.len();
+    // (f) structure: every node reached exactly once, every leaf used once, indices in range.
+    let voxels = node_voxels(tree);
+    assert!(
+        voxels.iter().all(Option::is_some),
+        "{what}: unreachable nodes"
+    );
+    let leaves = leaves_of(tree, &voxels);
+    assert_eq!(leaves.len(), tree.leaves.len(), "{what}: leaf count");
+    let mut seen = vec![false; tree.leaves.len()];
+    for &(leaf, _) in &leaves {
+        assert!(
+            !std::mem::replace(&mut seen[leaf as usize], true),
+            "{what}: leaf shared"
+        );
+        let r = tree.leaves[leaf as usize];
+        assert!(
+            (r.first + r.count) as usize <= tree.prim_indices.len(),
+            "{what}: leaf range"
+        );
+    }
+    assert!(
+        tree.prim_indices.iter().all(|&p| (p as usize) < n),
+        "{what}: prim index"
+    );
+    assert!(
+        !tree.bounds.min.is_nan() && !tree.bounds.max.is_nan(),
+        "{what}: NaN bounds"
+    );
+
+    let mut found = vec![false; n];
+    for &(leaf, voxel) in &leaves {
+        let listed = tree.leaf_prims(leaf);
+        let mut in_leaf = vec![false; n];
+        for &p in listed {
+            // (b) a listed primitive touches the leaf voxel.
+            let c = set.clipped_bounds(p as usize, &voxel);
+            assert!(
+                !c.is_empty(),
+                "{what}: prim {p} listed in leaf {leaf} {voxel:?} it misses"
+            );
+            in_leaf[p as usize] = true;
+            found[p as usize] = true;
+        }
+        // (a) every primitive reaching into the voxel is listed.
+        for (p, &listed) in in_leaf.iter().enumerate() {
+            if listed || !set.bounds(p).overlaps(&voxel) {
+                continue;
+            }
+            let c = set.clipped_bounds(p, &voxel);
+            assert!(
+                c.is_empty() || !reaches_interior(&c, &voxel),
+                "{what}: prim {p} {c:?} missing from leaf {leaf} {voxel:?}"
+            );
+        }
+    }
+    // (c) nothing lost.
+    for (p, &f) in found.iter().enumerate() {
+        assert!(f || set.bounds(p).is_empty(), "{what}: prim {p} in no leaf");
+    }
+    check_ropes(tree, &voxels, &leaves, what);
+}
+
+/// (d) each rope leads to the deepest node covering the face, `INVALID` exactly on the root box.
+fn check_ropes(tree: &KdTree, voxels: &[Option<(Aabb, u32)>], leaves: &[(u32, Aabb)], what: &str) {
+    let Some(ropes) = &tree.ropes else { return };
+    assert_eq!(ropes.links.len(), tree.leaves.len());
+    for &(leaf, voxel) in leaves {
+        assert_eq!(ropes.leaf_bounds[leaf as usize], voxel, "{what}: leaf box");
+        for (face, &rope) in ropes.links[leaf as usize].iter().enumerate() {
+            let (axis, positive) = (face / 2, face % 2 == 1);
+            let plane = if positive {
+                voxel.max[axis]
+            } else {
+                voxel.min[axis]
+            };
+            let root_plane = if positive {
+                tree.bounds.max[axis]
+            } else {
+                tree.bounds.min[axis]
+            };
+            if plane == root_plane {
+                assert_eq!(
+                    rope, INVALID,
+                    "{what}: rope out of the scene, leaf {leaf} face {face}"
+                );
+                continue;
+            }
+            assert!(
+                (rope as usize) < tree.nodes.len(),
+                "{what}: rope {rope} out of range"
+            );
+            let (target, _) = voxels[rope as usize].unwrap();
+            let across = if positive {
+                target.min[axis]
+            } else {
+                target.max[axis]
+            };
+            assert_eq!(
+                across, plane,
+                "{what}: rope target not across face {face} of leaf {leaf}"
+            );
+            for b in (0..3).filter(|&b| b != axis) {
+                assert!(
+                    target.min[b] <= voxel.min[b] && voxel.max[b] <= target.max[b],
+                    "{what}: rope target does not cover face {face} of leaf {leaf}"
+                );
+            }
+            // Deepest: an inner target's plane must cut the face.
+            let t = tree.nodes[rope as usize];
+            if !t.is_leaf() {
+                let a = t.axis();
+                assert!(
+                    a != axis && voxel.min[a] < t.split && t.split < voxel.max[a],
+                    "{what}: rope of leaf {leaf} face {face} could go deeper"
+                );
+            }
+        }
+    }
+}
+
+fn check_all_options(set: &PrimitiveSet, what: &str) {
+    for opts in all_options() {
+        let tree = build(set, &opts);
+        check_tree(
+            set,
+            &tree,
+            &format!("{what} {:?}/{:?}", opts.builder, opts.layout),
+        );
+    }
+}
+
+#[test]
+fn random_soups_are_brute_force_exact() {
+    for seed in 1..4 {
+        check_all_options(
+            &soup(600, seed, 0.15, 1.0, Vec3::ZERO),
+            &format!("soup {seed}"),
+        );
+    }
+}
+
+#[test]
+fn mixed_scenes_are_brute_force_exact() {
+    for seed in 1..3 {
+        check_all_options(&mixed(400, seed), &format!("mixed {seed}"));
+    }
+}
+
+#[test]
+fn large_triangles_are_clipped_per_leaf() {
+    // Long thin triangles cross many voxels: perfect splits must drop them where their clipped
+    // part is empty and keep them everywhere else.
+    check_all_options(&soup(300, 7, 1.5, 1.0, Vec3::ZERO), "large triangles");
+}
+
+#[test]
+fn degenerate_scenes_give_valid_trees() {
+    let mut rng = Rng(99);
+    let mut point = PrimitiveSet::default();
+    for _ in 0..50 {
+        let p = Vec3::splat(0.25);
+        point.triangles.push(Triangle::from_vertices(p, p, p));
+        point.spheres.push(Sphere {
+            center: p.to_array(),
+            radius: 0.0,
+        });
+    }
+    let mut flat = PrimitiveSet::default();
+    for _ in 0..300 {
+        // Small triangles: large overlapping ones would drive the midpoint tree to 2^20 leaves.
+        let c = rng.vec();
+        let mut v = || (c + 0.2 * rng.vec()) * Vec3::new(1.0, 1.0, 0.0) + Vec3::Z * 0.5;
+        flat.triangles.push(Triangle::from_vertices(v(), v(), v()));
+    }
+    let mut zero_area = PrimitiveSet::default();
+    for _ in 0..300 {
+        let (a, b) = (rng.vec(), rng.vec());
+        zero_area
+            .triangles
+            .push(Triangle::from_vertices(a, b, a.lerp(b, rng.f())));
+    }
+    // Triangles lying in the planes the midpoint builder picks (x = 0.5, 0.25, 0.75) and boxes
+    // spanning the whole scene make planar-in-split and boundary cases.
+    let mut in_planes = soup(200, 5, 0.2, 1.0, Vec3::ZERO);
+    for x in [0.5f32, 0.25, 0.75] {
+        for _ in 0..40 {
+            let mut v = || Vec3::new(x, rng.f(), rng.f());
+            in_planes
+                .triangles
+                .push(Triangle::from_vertices(v(), v(), v()));
+        }
+    }
+    in_planes.boxes.push(Aabb::new(Vec3::ZERO, Vec3::ONE));
+    in_planes.boxes.push(Aabb::new(
+        Vec3::new(0.5, 0.0, 0.0),
+        Vec3::new(0.5, 1.0, 1.0),
+    ));
+    let mut one = PrimitiveSet::default();
+    one.spheres.push(Sphere {
+        center: [1.0, 2.0, 3.0],
+        radius: 0.5,
+    });
+
+    let cases = [
+        ("empty", PrimitiveSet::default()),
+        ("one", one),
+        ("one point", point),
+        ("coplanar", flat),
+        ("zero area", zero_area),
+        ("in split planes", in_planes),
+        ("huge", soup(300, 3, 0.2, 1e7, Vec3::splat(-5e6))),
+        ("tiny", soup(300, 4, 0.2, 1e-7, Vec3::splat(1e-7))),
+    ];
+    for (what, set) in &cases {
+        check_all_options(set, what);
+    }
+}
+
+#[test]
+fn empty_scene_is_one_empty_leaf() {
+    let tree = build(&PrimitiveSet::default(), &BuildOptions::default());
+    assert_eq!(tree.nodes, vec![KdNode::leaf(0)]);
+    assert_eq!(tree.leaves.len(), 1);
+    assert!(tree.prim_indices.is_empty());
+    assert!(tree.bounds.is_empty());
+    assert_eq!(tree.stats.empty_leaf_count, 1);
+}
+
+#[test]
+fn one_primitive_is_one_leaf() {
+    let mut set = PrimitiveSet::default();
+    set.triangles
+        .push(Triangle::from_vertices(Vec3::ZERO, Vec3::X, Vec3::Y));
+    for builder in [Builder::Sah, Builder::Midpoint] {
+        let tree = build(&set, &options(builder, Layout::DepthFirst));
+        assert_eq!(tree.nodes, vec![KdNode::leaf(0)], "{builder:?}");
+        assert_eq!(tree.prim_indices, vec![0]);
+        assert_eq!(tree.bounds, set.triangles[0].bounds());
+        assert_eq!(tree.ropes.unwrap().links, vec![[INVALID; 6]]);
+    }
+}
+
+#[test]
+fn midpoint_splits_at_the_centre_of_the_longest_axis() {
+    let set = mixed(1000, 13);
+    let tree = build(&set, &options(Builder::Midpoint, Layout::VanEmdeBoas));
+    let voxels = node_voxels(&tree);
+    let mut inner = 0;
+    for (n, v) in tree.nodes.iter().zip(&voxels) {
+        if !n.is_leaf() {
+            let (voxel, _) = v.unwrap();
+            let e = voxel.extent();
+            assert_eq!(e[n.axis()], e.max_element());
+            assert_eq!(n.split, voxel.center()[n.axis()]);
+            inner += 1;
+        }
+    }
+    assert!(inner > 100);
+}
+
+#[test]
+fn layouts_differ_only_in_node_order() {
+    let set = mixed(3000, 11);
+    for builder in [Builder::Sah, Builder::Midpoint] {
+        let df = build(&set, &options(builder, Layout::DepthFirst));
+        let veb = build(&set, &options(builder, Layout::VanEmdeBoas));
+        assert_eq!(df.leaves, veb.leaves);
+        assert_eq!(df.prim_indices, veb.prim_indices);
+        assert_eq!(df.nodes.len(), veb.nodes.len());
+        assert_ne!(
+            df.nodes, veb.nodes,
+            "{builder:?}: vEB should reorder a deep tree"
+        );
+        // Same structure: walk both trees in step.
+        let mut stack = vec![(0usize, 0usize)];
+        while let Some((a, b)) = stack.pop() {
+            let (na, nb) = (df.nodes[a], veb.nodes[b]);
+            assert_eq!(na.is_leaf(), nb.is_leaf());
+            if na.is_leaf() {
+                assert_eq!(na.index(), nb.index());
+            } else {
+                assert_eq!((na.axis(), na.split), (nb.axis(), nb.split));
+                let (ca, cb) = (na.index() as usize, nb.index() as usize);
+                stack.extend([(ca, cb), (ca + 1, cb + 1)]);
+            }
+        }
+        assert_eq!(df.stats.sah_cost, veb.stats.sah_cost);
+    }
+}
+
+#[test]
+fn builds_do_not_depend_on_thread_count() {
+    // Large enough that the top levels fork (nodes of 2048+ primitives above depth 10).
+    let set = soup(10_000, 21, 0.05, 1.0, Vec3::ZERO);
+    for opts in all_options() {
+        let trees: Vec<KdTree> = [1, 2, 4]
+            .iter()
+            .map(|&threads| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                pool.install(|| build(&set, &opts))
+            })
+            .collect();
+        for t in &trees[1..] {
+            let bits = |t: &KdTree| bytemuck::cast_slice::<KdNode, u32>(&t.nodes).to_vec();
+            assert_eq!(
+                bits(t),
+                bits(&trees[0]),
+                "{:?}/{:?}",
+                opts.builder,
+                opts.layout
+            );
+            assert_eq!(t.leaves, trees[0].leaves);
+            assert_eq!(t.prim_indices, trees[0].prim_indices);
+            assert_eq!(
+                t.ropes.as_ref().unwrap().links,
+                trees[0].ropes.as_ref().unwrap().links
+            );
+        }
+    }
+}
+
+#[test]
+fn sah_beats_midpoint_on_clustered_soup() {
+    let set = clustered_soup(5000, 8);
+    let sah = build(&set, &options(Builder::Sah, Layout::DepthFirst));
+    let mid = build(&set, &options(Builder::Midpoint, Layout::DepthFirst));
+    assert!(
+        sah.stats.sah_cost < mid.stats.sah_cost,
+        "SAH {} vs midpoint {}",
+        sah.stats.sah_cost,
+        mid.stats.sah_cost
+    );
+}
+
+#[test]
+fn stats_match_the_tree() {
+    let set = mixed(2000, 5);
+    for opts in all_options() {
+        let tree = build(&set, &opts);
+        let s = tree.stats;
+        let voxels = tree.leaf_voxels();
+        assert_eq!(s.node_count as usize, tree.nodes.len());
+        assert_eq!(s.leaf_count as usize, tree.leaves.len());
+        assert_eq!(voxels.len(), tree.leaves.len());
+        let empty = tree.leaves.iter().filter(|l| l.count == 0).count();
+        assert_eq!(s.empty_leaf_count as usize, empty);
+        assert_eq!(s.max_depth, voxels.iter().map(|v| v.2).max().unwrap());
+        assert!(s.max_depth <= opts.depth_limit(set.len()));
+        let mean = voxels.iter().map(|v| v.2 as f32).sum::<f32>() / voxels.len() as f32;
+        assert!((s.avg_leaf_depth - mean).abs() < 1e-3);
+        let refs = tree.prim_indices.len() as f32 / (tree.leaves.len() - empty) as f32;
+        assert!((s.avg_prims_per_leaf - refs).abs() < 1e-3);
+        assert!(s.sah_cost > 0.0 && s.build_ms >= 0.0);
+        // A midpoint tree stops at leaf_size unless the depth limit stopped it first.
+        if opts.builder == Builder::Midpoint {
+            for (leaf, _, depth) in &voxels {
+                let r = tree.leaves[*leaf as usize];
+                assert!(r.count <= opts.leaf_size || *depth == s.max_depth);
+            }
+        }
+    }
+}
+
+#[test]
+fn max_depth_is_respected() {
+    let set = soup(2000, 17, 0.05, 1.0, Vec3::ZERO);
+    for builder in [Builder::Sah, Builder::Midpoint] {
+        let opts = BuildOptions {
+            max_depth: Some(5),
+            ..options(builder, Layout::DepthFirst)
+        };
+        let tree = build(&set, &opts);
+        assert_eq!(tree.stats.max_depth, 5, "{builder:?}");
+        check_tree(&set, &tree, "depth 5");
+    }
+}
+
+#[test]
+fn locate_leaf_finds_the_voxel_of_a_point() {
+    let set = mixed(1000, 3);
+    let mut rng = Rng(1234);
+    for opts in all_options() {
+        let tree = build(&set, &opts);
+        let voxels = node_voxels(&tree);
+        for _ in 0..2000 {
+            let p = tree.bounds.min + rng.vec() * tree.bounds.extent();
+            let node = tree.locate_leaf(p) as usize;
+            assert!(tree.nodes[node].is_leaf());
+            assert!(voxels[node].unwrap().0.contains_point(p));
+        }
+    }
+}
+
+#[test]
+fn ensure_ropes_matches_ropes_built_with_the_tree() {
+    let set = soup(2000, 2, 0.1, 1.0, Vec3::ZERO);
+    let with = build(&set, &options(Builder::Sah, Layout::VanEmdeBoas));
+    let mut later = build(
+        &set,
+        &BuildOptions {
+            ropes: false,
+            ..options(Builder::Sah, Layout::VanEmdeBoas)
+        },
+    );
+    assert!(later.ropes.is_none());
+    later.ensure_ropes();
+    let (a, b) = (with.ropes.unwrap(), later.ropes.unwrap());
+    assert_eq!(a.links, b.links);
+    assert_eq!(a.leaf_bounds, b.leaf_bounds);
+}
