@@ -183,7 +183,7 @@ pub(crate) fn check_struct_size<T>(struct_size: u32, name: &str) -> Result<()> {
     let want = std::mem::size_of::<T>();
     if struct_size as usize != want {
         return Err(Error::invalid_argument(format!(
-            "{name}.struct_size is {struct_size}, expected {want}: start from {name}_default()"
+            "{name}.struct_size is {struct_size}, expected {want}: set it to sizeof({name})"
         )));
     }
     Ok(())

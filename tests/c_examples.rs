@@ -1,0 +1,359 @@
+//! Compiles the C examples in `c_examples/` against `include/rt2.h` with the `cc` crate, links
+//! them to the cdylib that `cargo test` built (`target/<profile>/librt2.so`, found through an
+//! rpath), runs them and checks their exit codes, their output and the PNGs they write.
+//!
+//! `load_model` renders `$RT2_SHARED/models/bunny.ply` (`RT2_SHARED` defaults to `../shared`
+//! next to the crate); if that file is absent the case says so and is skipped.
+//!
+//! Set `RT2_SANITIZE=valgrind` to run every example under
+//! `valgrind --error-exitcode=99 --leak-check=full --errors-for-leak-kinds=definite,indirect`:
+//! a memory error or a definite/indirect leak then makes the example exit with 99 and the test
+//! fail with valgrind's report. "Possibly lost" blocks are not counted: they are the stacks,
+//! TLS and crossbeam-epoch records of the context's rayon workers, which a destroyed context
+//! signals to stop but does not join, so they can still be running when `main` returns.
+//! (`load_model` renders 69k triangles; under valgrind that takes minutes.)
+
+mod support;
+
+use image::RgbaImage;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// Compiles `c_examples/<name>.c` into an executable in the scratch directory.
+fn build_example(name: &str) -> PathBuf {
+    let dir = support::scratch("c_examples");
+    let lib_dir = support::shared_library()
+        .parent()
+        .expect("library directory")
+        .to_path_buf();
+    let exe = dir.join(name);
+    let tool = support::compiler(false, &dir);
+    let mut cmd = tool.to_command();
+    cmd.args(["-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror"])
+        .arg("-I")
+        .arg(support::manifest_dir().join("include"))
+        .arg(
+            support::manifest_dir()
+                .join("c_examples")
+                .join(format!("{name}.c")),
+        )
+        .arg("-o")
+        .arg(&exe)
+        .arg(format!("-L{}", lib_dir.display()))
+        .arg("-lrt2")
+        .arg(format!("-Wl,-rpath,{}", lib_dir.display()))
+        .arg("-lm");
+    let out = cmd
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run the C compiler {:?}: {e}", tool.path()));
+    assert!(
+        out.status.success(),
+        "compiling {name}.c failed:\n{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    exe
+}
+
+/// Runs an example (under valgrind if `RT2_SANITIZE=valgrind`) and returns its output.
+fn run(exe: &Path, args: &[&std::ffi::OsStr]) -> Output {
+    let mut cmd = match std::env::var("RT2_SANITIZE").as_deref() {
+        Ok("valgrind") => {
+            let mut c = Command::new("valgrind");
+            c.args([
+                "--error-exitcode=99",
+                "--leak-check=full",
+                "--errors-for-leak-kinds=definite,indirect",
+                "--quiet",
+            ])
+            .arg(exe);
+            c
+        }
+        Ok("") | Err(_) => Command::new(exe),
+        Ok(other) => panic!("RT2_SANITIZE={other} is not supported (only \"valgrind\")"),
+    };
+    // Two workers keep runs of several test binaries at once from oversubscribing the machine.
+    cmd.args(args).env("RAYON_NUM_THREADS", "2");
+    let out = cmd
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));
+    println!(
+        "--- {} stdout:\n{}",
+        exe.display(),
+        String::from_utf8_lossy(&out.stdout)
+    );
+    println!(
+        "--- {} stderr:\n{}",
+        exe.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn assert_exit(out: &Output, want: i32, what: &str) {
+    assert_eq!(
+        out.status.code(),
+        Some(want),
+        "{what} exited with {:?}, expected {want} (99 = valgrind found errors)\nstdout:\n{}\nstderr:\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn stdout(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Mean RGB of the `r`-pixel square around (x, y).
+fn patch_mean(img: &RgbaImage, x: u32, y: u32, r: u32) -> [f32; 3] {
+    let mut sum = [0f32; 3];
+    let mut n = 0f32;
+    for py in y.saturating_sub(r)..=(y + r).min(img.height() - 1) {
+        for px in x.saturating_sub(r)..=(x + r).min(img.width() - 1) {
+            let p = img.get_pixel(px, py).0;
+            for k in 0..3 {
+                sum[k] += p[k] as f32;
+            }
+            n += 1.0;
+        }
+    }
+    sum.map(|s| s / n)
+}
+
+#[test]
+fn minimal_renders_the_triangle() {
+    let exe = build_example("minimal");
+    let out = run(&exe, &[]);
+    assert_exit(&out, 0, "minimal");
+    let text = stdout(&out);
+    // "centre pixel (32, 24): r=R g=G b=B a=A"
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("centre pixel"))
+        .expect("minimal prints the centre pixel");
+    let value = |key: &str| -> u32 {
+        let rest = &line[line
+            .find(key)
+            .unwrap_or_else(|| panic!("no {key} in {line:?}"))
+            + key.len()..];
+        rest.split_whitespace()
+            .next()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("bad {key} in {line:?}"))
+    };
+    let (r, g, b) = (value("r="), value("g="), value("b="));
+    // The background is pure blue (0, 0, 255) and the default material grey: a grey pixel with
+    // some red is the triangle.
+    assert!(
+        r > 0 && r == g && r == b,
+        "centre pixel {r},{g},{b} is not the grey triangle"
+    );
+}
+
+/// The scene of spheres.c: eye, target, vertical field of view and image size.
+const EYE: [f32; 3] = [0.0, 2.0, 7.0];
+const TARGET: [f32; 3] = [0.0, 0.75, 0.0];
+const FOV_Y: f32 = 45.0;
+const SIZE: (u32, u32) = (640, 360);
+const SKY: [f32; 3] = [0.2 * 255.0, 0.3 * 255.0, 0.5 * 255.0];
+
+/// Pixel where a world point projects through spheres.c's pinhole camera (up = +y).
+fn project(p: [f32; 3]) -> (u32, u32) {
+    let sub = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let cross = |a: [f32; 3], b: [f32; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let norm = |a: [f32; 3]| {
+        let l = dot(a, a).sqrt();
+        [a[0] / l, a[1] / l, a[2] / l]
+    };
+    let f = norm(sub(TARGET, EYE));
+    let r = norm(cross(f, [0.0, 1.0, 0.0]));
+    let u = cross(r, f);
+    let d = sub(p, EYE);
+    let half_h = (FOV_Y.to_radians() / 2.0).tan();
+    let half_w = half_h * SIZE.0 as f32 / SIZE.1 as f32;
+    let z = dot(d, f);
+    let x = (dot(d, r) / (z * half_w) + 1.0) / 2.0 * SIZE.0 as f32;
+    let y = (1.0 - dot(d, u) / (z * half_h)) / 2.0 * SIZE.1 as f32;
+    (x as u32, y as u32)
+}
+
+#[test]
+fn spheres_png_shows_the_spheres_and_the_sky() {
+    let exe = build_example("spheres");
+    let png = support::scratch("c_examples").join("spheres.png");
+    let _ = std::fs::remove_file(&png);
+    let out = run(&exe, &[png.as_os_str()]);
+    assert_exit(&out, 0, "spheres");
+    assert!(
+        stdout(&out).contains("spheres: OK"),
+        "spheres did not report OK"
+    );
+
+    let img = image::open(&png)
+        .unwrap_or_else(|e| panic!("cannot decode {}: {e}", png.display()))
+        .to_rgba8();
+    assert_eq!(img.dimensions(), SIZE, "PNG size");
+    // Sphere centres and material colours from spheres.c. Around each centre's projection
+    // (a 5x5 patch, well inside a sphere of radius >= 0.4 at distance <= 9, i.e. >= 20 px),
+    // the material's dominant channel must lead and the patch must not be sky.
+    for (name, center, channel) in [
+        ("red", [-1.8, 0.75, 0.0], 0),
+        ("green", [1.8, 0.75, 0.0], 1),
+        ("blue", [0.4, 0.4, 1.6], 2),
+    ] {
+        let (x, y) = project(center);
+        let m = patch_mean(&img, x, y, 2);
+        let others = (0..3)
+            .filter(|&k| k != channel)
+            .map(|k| m[k])
+            .fold(0.0, f32::max);
+        // 1.5x: the material colours are 0.8..0.9 in the dominant channel against 0.1..0.25
+        // elsewhere, so lit or only ambient, the ratio is > 3; 1.5 leaves room for highlights.
+        assert!(
+            m[channel] > 1.5 * others,
+            "{name} sphere at ({x},{y}): mean {m:?} is not {name}"
+        );
+        let dist_to_sky: f32 = (0..3).map(|k| (m[k] - SKY[k]).abs()).sum();
+        assert!(
+            dist_to_sky > 30.0,
+            "{name} sphere at ({x},{y}) looks like the sky: {m:?}"
+        );
+    }
+    // Above the horizon: the top rows look up (10.1 deg pitch down, 22.5 deg half field of
+    // view) and no sphere reaches that high, so the top 20 rows are all sky. Tolerance 2/255:
+    // rounding of the background colour to 8 bits.
+    let mut worst = 0f32;
+    for y in 0..20 {
+        for x in 0..SIZE.0 {
+            let p = img.get_pixel(x, y).0;
+            for k in 0..3 {
+                worst = worst.max((p[k] as f32 - SKY[k]).abs());
+            }
+        }
+    }
+    assert!(
+        worst <= 2.0,
+        "the sky above the horizon differs from the background by {worst}/255"
+    );
+}
+
+#[test]
+fn load_model_renders_the_bunny() {
+    let shared = std::env::var_os("RT2_SHARED")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| support::manifest_dir().join("../shared"));
+    let model = shared.join("models/bunny.ply");
+    if !model.is_file() {
+        eprintln!(
+            "SKIPPED load_model_renders_the_bunny: {} is missing (set RT2_SHARED)",
+            model.display()
+        );
+        return;
+    }
+    let exe = build_example("load_model");
+    let png = support::scratch("c_examples").join("bunny.png");
+    let _ = std::fs::remove_file(&png);
+    let out = run(&exe, &[model.as_os_str(), png.as_os_str()]);
+    assert_exit(&out, 0, "load_model");
+    let text = stdout(&out);
+    // 69,451 triangles: shared/models/README.md.
+    assert!(
+        text.lines().any(|l| l == "triangles: 69451"),
+        "wrong triangle count in:\n{text}"
+    );
+    assert!(text.contains("kd-tree: "), "no tree statistics in:\n{text}");
+
+    let img = image::open(&png)
+        .unwrap_or_else(|e| panic!("cannot decode {}: {e}", png.display()))
+        .to_rgba8();
+    let (w, h) = img.dimensions();
+    assert_eq!(
+        (w, h),
+        (200, 150),
+        "PNG size (load_model.c renders 200x150)"
+    );
+    // Camera of load_model.c: 2.4 x 0.156 from the bounding-box centre, 45 deg vertical field
+    // of view. The box's front face (0.06 nearer) projects to at most 59% of the height and
+    // 45% of the width; the silhouette lies inside it. Lit = not the black background (the
+    // ambient term alone gives >= 0.1 x 0.8 x 255 = 20).
+    let (half_w, half_h) = (0.45 * w as f32 / 2.0 + 2.0, 0.59 * h as f32 / 2.0 + 2.0);
+    let mut lit = 0u32;
+    for (x, y, p) in img.enumerate_pixels() {
+        if p.0[..3].iter().any(|&c| c > 0) {
+            lit += 1;
+            let (dx, dy) = (
+                (x as f32 + 0.5 - w as f32 / 2.0).abs(),
+                (y as f32 + 0.5 - h as f32 / 2.0).abs(),
+            );
+            assert!(
+                dx <= half_w && dy <= half_h,
+                "lit pixel ({x},{y}) outside the model's projected bounding box"
+            );
+        }
+    }
+    let fraction = lit as f32 / (w * h) as f32;
+    // At most the projected box (0.45 x 0.59 = 27%); at least 5%: the box's back face covers
+    // 14% and the bunny fills well over a third of its box (a loose lower bound).
+    assert!(
+        (0.05..=0.27).contains(&fraction),
+        "{:.1}% of the pixels show the model",
+        100.0 * fraction
+    );
+    for (x, y) in [(0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1)] {
+        assert_eq!(
+            &img.get_pixel(x, y).0[..3],
+            &[0, 0, 0],
+            "corner ({x},{y}) is not background"
+        );
+    }
+}
+
+#[test]
+fn load_model_reports_a_missing_file() {
+    let exe = build_example("load_model");
+    let missing = support::scratch("c_examples").join("no-such-model.ply");
+    let out = run(&exe, &[missing.as_os_str()]);
+    assert_exit(&out, 2, "load_model with a missing file");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("no-such-model.ply") && err.contains("missing"),
+        "unclear message: {err}"
+    );
+}
+
+#[test]
+fn errors_example_passes_every_check() {
+    let exe = build_example("errors");
+    let tmp = support::scratch("c_examples");
+    let out = run(&exe, &[tmp.as_os_str()]);
+    let text = stdout(&out);
+    let failed: Vec<&str> = text.lines().filter(|l| l.starts_with("FAIL")).collect();
+    assert!(
+        failed.is_empty(),
+        "errors.c checks failed:\n{}",
+        failed.join("\n")
+    );
+    assert_exit(&out, 0, "errors");
+    let summary = text.lines().last().unwrap_or("");
+    let (passed, failed_n) = summary
+        .strip_suffix(" failed")
+        .and_then(|s| s.split_once(" passed, "))
+        .and_then(|(p, f)| Some((p.parse::<usize>().ok()?, f.parse::<usize>().ok()?)))
+        .unwrap_or_else(|| panic!("no \"N passed, M failed\" summary, last line {summary:?}"));
+    assert_eq!(failed_n, 0, "summary line: {summary}");
+    let pass_lines = text.lines().filter(|l| l.starts_with("pass")).count();
+    assert_eq!(
+        passed, pass_lines,
+        "the summary disagrees with the pass lines"
+    );
+    // errors.c makes more than 80 checks; 80 catches a run that stopped early but exited 0.
+    assert!(passed >= 80, "only {passed} checks ran");
+}
