@@ -22,6 +22,12 @@
 /** Marks "no object / no primitive" in rt2_hit (rt2::api::RT2_INVALID_ID). */
 #define RT2_INVALID_ID 0xFFFFFFFFu
 
+/* Opaque handles. */
+typedef struct rt2_context rt2_context;
+typedef struct rt2_scene rt2_scene;
+typedef struct rt2_camera rt2_camera;
+typedef struct rt2_frame rt2_frame;
+
 
 /**
  * Where tracing runs (`rt2_context_desc.backend`).
@@ -158,28 +164,6 @@ enum rt2_traversal
 #ifndef __cplusplus
 typedef uint32_t rt2_traversal;
 #endif // __cplusplus
-
-/**
- * Opaque camera handle. Defaults: eye (0,0,5) looking at the origin, up +Y, 45° vertical
- * field of view, pinhole.
- */
-typedef struct rt2_camera rt2_camera;
-
-/**
- * Opaque context handle. Create with `rt2_context_create`, free with `rt2_context_destroy`.
- */
-typedef struct rt2_context rt2_context;
-
-/**
- * Opaque frame handle: `width × height` RGBA8 pixels, row-major from the top-left, initially
- * transparent black.
- */
-typedef struct rt2_frame rt2_frame;
-
-/**
- * Opaque scene handle. Material 0 exists from the start (the default material).
- */
-typedef struct rt2_scene rt2_scene;
 
 /**
  * Creation parameters of a context.
@@ -444,7 +428,7 @@ extern "C" {
  * # Safety
  * `out` points to writable storage.
  */
-enum rt2_status rt2_camera_create(struct rt2_camera **out);
+enum rt2_status rt2_camera_create(rt2_camera **out);
 
 /**
  * Frees a camera. NULL is a no-op.
@@ -452,7 +436,7 @@ enum rt2_status rt2_camera_create(struct rt2_camera **out);
  * # Safety
  * `camera` is NULL or a camera not yet destroyed.
  */
-void rt2_camera_destroy(struct rt2_camera *camera);
+void rt2_camera_destroy(rt2_camera *camera);
 
 /**
  * Places the camera at `eye` looking at `target`; `up` must not be parallel to the view.
@@ -460,7 +444,7 @@ void rt2_camera_destroy(struct rt2_camera *camera);
  * # Safety
  * `camera` is a live camera; the arrays hold 3 floats each.
  */
-enum rt2_status rt2_camera_look_at(struct rt2_camera *camera,
+enum rt2_status rt2_camera_look_at(rt2_camera *camera,
                                    const float *eye,
                                    const float *target,
                                    const float *up);
@@ -471,7 +455,7 @@ enum rt2_status rt2_camera_look_at(struct rt2_camera *camera,
  * # Safety
  * `camera` is a live camera.
  */
-enum rt2_status rt2_camera_set_fov(struct rt2_camera *camera, float vertical_degrees);
+enum rt2_status rt2_camera_set_fov(rt2_camera *camera, float vertical_degrees);
 
 /**
  * Sets the thin lens: `aperture` is the lens diameter (0 = pinhole), `focus_distance` the
@@ -480,9 +464,7 @@ enum rt2_status rt2_camera_set_fov(struct rt2_camera *camera, float vertical_deg
  * # Safety
  * `camera` is a live camera.
  */
-enum rt2_status rt2_camera_set_lens(struct rt2_camera *camera,
-                                    float aperture,
-                                    float focus_distance);
+enum rt2_status rt2_camera_set_lens(rt2_camera *camera, float aperture, float focus_distance);
 
 /**
  * Creates a context. `desc` may be NULL for the defaults. On failure `*out` is untouched.
@@ -490,7 +472,7 @@ enum rt2_status rt2_camera_set_lens(struct rt2_camera *camera,
  * # Safety
  * `desc` is NULL or points to an `rt2_context_desc`; `out` points to writable storage.
  */
-enum rt2_status rt2_context_create(const struct rt2_context_desc *desc, struct rt2_context **out);
+enum rt2_status rt2_context_create(const struct rt2_context_desc *desc, rt2_context **out);
 
 /**
  * Releases the caller's reference; scenes created from it keep working. NULL is a no-op.
@@ -498,7 +480,7 @@ enum rt2_status rt2_context_create(const struct rt2_context_desc *desc, struct r
  * # Safety
  * `ctx` is NULL or a context not yet destroyed.
  */
-void rt2_context_destroy(struct rt2_context *ctx);
+void rt2_context_destroy(rt2_context *ctx);
 
 /**
  * Reports the backend tracing runs on and why.
@@ -506,7 +488,7 @@ void rt2_context_destroy(struct rt2_context *ctx);
  * # Safety
  * `ctx` is a live context; `out` points to an `rt2_context_properties` whose `struct_size` is set.
  */
-enum rt2_status rt2_context_info(const struct rt2_context *ctx, struct rt2_context_properties *out);
+enum rt2_status rt2_context_info(const rt2_context *ctx, struct rt2_context_properties *out);
 
 /**
  * Creates a frame; each side must be in 1..=32768.
@@ -514,7 +496,7 @@ enum rt2_status rt2_context_info(const struct rt2_context *ctx, struct rt2_conte
  * # Safety
  * `out` points to writable storage.
  */
-enum rt2_status rt2_frame_create(uint32_t width, uint32_t height, struct rt2_frame **out);
+enum rt2_status rt2_frame_create(uint32_t width, uint32_t height, rt2_frame **out);
 
 /**
  * Frees a frame. NULL is a no-op.
@@ -522,7 +504,7 @@ enum rt2_status rt2_frame_create(uint32_t width, uint32_t height, struct rt2_fra
  * # Safety
  * `frame` is NULL or a frame not yet destroyed.
  */
-void rt2_frame_destroy(struct rt2_frame *frame);
+void rt2_frame_destroy(rt2_frame *frame);
 
 /**
  * Writes the frame's size.
@@ -530,7 +512,7 @@ void rt2_frame_destroy(struct rt2_frame *frame);
  * # Safety
  * `frame` is a live frame; `width` and `height` are writable.
  */
-enum rt2_status rt2_frame_size(const struct rt2_frame *frame, uint32_t *width, uint32_t *height);
+enum rt2_status rt2_frame_size(const rt2_frame *frame, uint32_t *width, uint32_t *height);
 
 /**
  * Sets the mask: one byte per pixel, 0 = not traced (left as it was, e.g. under a HUD).
@@ -539,7 +521,7 @@ enum rt2_status rt2_frame_size(const struct rt2_frame *frame, uint32_t *width, u
  * # Safety
  * `frame` is a live frame; `mask` is NULL or holds width × height bytes.
  */
-enum rt2_status rt2_frame_set_mask(struct rt2_frame *frame, const uint8_t *mask);
+enum rt2_status rt2_frame_set_mask(rt2_frame *frame, const uint8_t *mask);
 
 /**
  * The pixels, `4 × width × height` bytes (RGBA8); valid until the frame is destroyed.
@@ -548,7 +530,7 @@ enum rt2_status rt2_frame_set_mask(struct rt2_frame *frame, const uint8_t *mask)
  * # Safety
  * `frame` is a live frame.
  */
-const uint8_t *rt2_frame_pixels(const struct rt2_frame *frame);
+const uint8_t *rt2_frame_pixels(const rt2_frame *frame);
 
 /**
  * Saves the frame as a PNG file.
@@ -556,7 +538,7 @@ const uint8_t *rt2_frame_pixels(const struct rt2_frame *frame);
  * # Safety
  * `frame` is a live frame; `path` is a NUL-terminated string.
  */
-enum rt2_status rt2_frame_save_png(const struct rt2_frame *frame, const char *path);
+enum rt2_status rt2_frame_save_png(const rt2_frame *frame, const char *path);
 
 /**
  * A context descriptor with the defaults filled in.
@@ -590,8 +572,8 @@ struct rt2_query_options rt2_query_options_default(void);
  * # Safety
  * Handles are live; `rays` and `hits` hold `count` elements (may be NULL when count is 0).
  */
-enum rt2_status rt2_intersect(const struct rt2_context *ctx,
-                              const struct rt2_scene *scene,
+enum rt2_status rt2_intersect(const rt2_context *ctx,
+                              const rt2_scene *scene,
                               const struct rt2_ray *rays,
                               size_t count,
                               struct rt2_hit *hits,
@@ -605,8 +587,8 @@ enum rt2_status rt2_intersect(const struct rt2_context *ctx,
  * # Safety
  * Handles are live; `rays` and `occluded` hold `count` elements (may be NULL when count is 0).
  */
-enum rt2_status rt2_occluded(const struct rt2_context *ctx,
-                             const struct rt2_scene *scene,
+enum rt2_status rt2_occluded(const rt2_context *ctx,
+                             const rt2_scene *scene,
                              const struct rt2_ray *rays,
                              size_t count,
                              uint8_t *occluded,
@@ -622,11 +604,11 @@ enum rt2_status rt2_occluded(const struct rt2_context *ctx,
  * # Safety
  * Handles are live; `options` is NULL or points to an `rt2_render_options`.
  */
-enum rt2_status rt2_render(const struct rt2_context *ctx,
-                           const struct rt2_scene *scene,
-                           const struct rt2_camera *camera,
+enum rt2_status rt2_render(const rt2_context *ctx,
+                           const rt2_scene *scene,
+                           const rt2_camera *camera,
                            const struct rt2_render_options *options,
-                           struct rt2_frame *frame);
+                           rt2_frame *frame);
 
 /**
  * Creates an empty scene that keeps `ctx` alive.
@@ -634,7 +616,7 @@ enum rt2_status rt2_render(const struct rt2_context *ctx,
  * # Safety
  * `ctx` is a live context; `out` is writable.
  */
-enum rt2_status rt2_scene_create(const struct rt2_context *ctx, struct rt2_scene **out);
+enum rt2_status rt2_scene_create(const rt2_context *ctx, rt2_scene **out);
 
 /**
  * Frees a scene. NULL is a no-op. Must not overlap with other calls on the scene.
@@ -642,7 +624,7 @@ enum rt2_status rt2_scene_create(const struct rt2_context *ctx, struct rt2_scene
  * # Safety
  * `scene` is NULL or a scene not yet destroyed.
  */
-void rt2_scene_destroy(struct rt2_scene *scene);
+void rt2_scene_destroy(rt2_scene *scene);
 
 /**
  * Adds a material; `*out_id` (may be NULL) receives its id.
@@ -650,7 +632,7 @@ void rt2_scene_destroy(struct rt2_scene *scene);
  * # Safety
  * `scene` is a live scene; `material` points to an `rt2_material`.
  */
-enum rt2_status rt2_scene_add_material(struct rt2_scene *scene,
+enum rt2_status rt2_scene_add_material(rt2_scene *scene,
                                        const struct rt2_material *material,
                                        uint32_t *out_id);
 
@@ -660,7 +642,7 @@ enum rt2_status rt2_scene_add_material(struct rt2_scene *scene,
  * # Safety
  * `scene` is a live scene; the arrays hold 3 floats.
  */
-enum rt2_status rt2_scene_add_point_light(struct rt2_scene *scene,
+enum rt2_status rt2_scene_add_point_light(rt2_scene *scene,
                                           const float *position,
                                           const float *rgb,
                                           float intensity,
@@ -673,7 +655,7 @@ enum rt2_status rt2_scene_add_point_light(struct rt2_scene *scene,
  * # Safety
  * `positions` holds 3 × vertex_count floats, `indices` 3 × triangle_count integers.
  */
-enum rt2_status rt2_scene_add_mesh(struct rt2_scene *scene,
+enum rt2_status rt2_scene_add_mesh(rt2_scene *scene,
                                    const float *positions,
                                    size_t vertex_count,
                                    const uint32_t *indices,
@@ -687,7 +669,7 @@ enum rt2_status rt2_scene_add_mesh(struct rt2_scene *scene,
  * # Safety
  * `scene` is a live scene; `center` holds 3 floats.
  */
-enum rt2_status rt2_scene_add_sphere(struct rt2_scene *scene,
+enum rt2_status rt2_scene_add_sphere(rt2_scene *scene,
                                      const float *center,
                                      float radius,
                                      uint32_t material,
@@ -699,7 +681,7 @@ enum rt2_status rt2_scene_add_sphere(struct rt2_scene *scene,
  * # Safety
  * `scene` is a live scene; `center` and `radii` hold 3 floats.
  */
-enum rt2_status rt2_scene_add_ellipsoid(struct rt2_scene *scene,
+enum rt2_status rt2_scene_add_ellipsoid(rt2_scene *scene,
                                         const float *center,
                                         const float *radii,
                                         uint32_t material,
@@ -711,7 +693,7 @@ enum rt2_status rt2_scene_add_ellipsoid(struct rt2_scene *scene,
  * # Safety
  * `scene` is a live scene; `min` and `max` hold 3 floats.
  */
-enum rt2_status rt2_scene_add_box(struct rt2_scene *scene,
+enum rt2_status rt2_scene_add_box(rt2_scene *scene,
                                   const float *min,
                                   const float *max,
                                   uint32_t material,
@@ -723,7 +705,7 @@ enum rt2_status rt2_scene_add_box(struct rt2_scene *scene,
  * # Safety
  * `scene` is a live scene; `normal` holds 3 floats.
  */
-enum rt2_status rt2_scene_add_plane(struct rt2_scene *scene,
+enum rt2_status rt2_scene_add_plane(rt2_scene *scene,
                                     const float *normal,
                                     float offset,
                                     uint32_t material,
@@ -737,7 +719,7 @@ enum rt2_status rt2_scene_add_plane(struct rt2_scene *scene,
  * # Safety
  * `scene` is a live scene; `path` is a NUL-terminated string.
  */
-enum rt2_status rt2_scene_load_file(struct rt2_scene *scene,
+enum rt2_status rt2_scene_load_file(rt2_scene *scene,
                                     const char *path,
                                     uint32_t material,
                                     uint32_t *out_object);
@@ -750,9 +732,7 @@ enum rt2_status rt2_scene_load_file(struct rt2_scene *scene,
  * # Safety
  * `scene` is a live scene; `m3x4` holds 12 floats.
  */
-enum rt2_status rt2_scene_set_transform(struct rt2_scene *scene,
-                                        uint32_t object,
-                                        const float *m3x4);
+enum rt2_status rt2_scene_set_transform(rt2_scene *scene, uint32_t object, const float *m3x4);
 
 /**
  * Sets how the kd-tree is built; takes effect at the next commit.
@@ -760,7 +740,7 @@ enum rt2_status rt2_scene_set_transform(struct rt2_scene *scene,
  * # Safety
  * `scene` is a live scene; `options` points to an `rt2_build_options`.
  */
-enum rt2_status rt2_scene_set_build_options(struct rt2_scene *scene,
+enum rt2_status rt2_scene_set_build_options(rt2_scene *scene,
                                             const struct rt2_build_options *options);
 
 /**
@@ -769,7 +749,7 @@ enum rt2_status rt2_scene_set_build_options(struct rt2_scene *scene,
  * # Safety
  * `scene` is a live scene.
  */
-enum rt2_status rt2_scene_commit(struct rt2_scene *scene);
+enum rt2_status rt2_scene_commit(rt2_scene *scene);
 
 /**
  * Statistics of the committed scene. Fails with INVALID_OPERATION before the first commit
@@ -778,7 +758,7 @@ enum rt2_status rt2_scene_commit(struct rt2_scene *scene);
  * # Safety
  * `scene` is a live scene; `out` points to an `rt2_scene_statistics` whose `struct_size` is set.
  */
-enum rt2_status rt2_scene_stats(const struct rt2_scene *scene, struct rt2_scene_statistics *out);
+enum rt2_status rt2_scene_stats(const rt2_scene *scene, struct rt2_scene_statistics *out);
 
 /**
  * The library version as "MAJOR.MINOR.PATCH" (static storage).

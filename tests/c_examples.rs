@@ -74,6 +74,19 @@ fn run(exe: &Path, args: &[&std::ffi::OsStr]) -> Output {
     };
     // Two workers keep runs of several test binaries at once from oversubscribing the machine.
     cmd.args(args).env("RAYON_NUM_THREADS", "2");
+    // cargo test puts target/<profile> on LD_LIBRARY_PATH, which outranks the rpath and may
+    // hold a stale librt2.so from an earlier `cargo build`: the fresh one comes first.
+    let lib_dir = support::shared_library()
+        .parent()
+        .expect("library directory")
+        .to_path_buf();
+    let old = std::env::var_os("LD_LIBRARY_PATH").unwrap_or_default();
+    let mut paths = vec![lib_dir];
+    paths.extend(std::env::split_paths(&old));
+    cmd.env(
+        "LD_LIBRARY_PATH",
+        std::env::join_paths(paths).expect("library paths join"),
+    );
     let out = cmd
         .output()
         .unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));

@@ -15,19 +15,22 @@ fn header_text() -> String {
     std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()))
 }
 
-/// Same configuration as build.rs: cbindgen.toml plus the version macros after the includes.
-/// (Keep in step with build.rs; a difference shows up as a failure of this test.)
+/// The build script itself, so the test regenerates with exactly its configuration.
+mod build_script {
+    include!("../build.rs");
+}
+
 fn generate_header() -> Vec<u8> {
     let crate_dir = env!("CARGO_MANIFEST_DIR");
-    let mut config = cbindgen::Config::from_file(format!("{crate_dir}/cbindgen.toml"))
-        .expect("cbindgen.toml is valid");
-    config.after_includes = Some(format!(
-        "\n#define RT2_VERSION_MAJOR {}\n#define RT2_VERSION_MINOR {}\n#define RT2_VERSION_PATCH {}\n#define RT2_VERSION_STRING \"{}\"\n",
-        env!("CARGO_PKG_VERSION_MAJOR"),
-        env!("CARGO_PKG_VERSION_MINOR"),
-        env!("CARGO_PKG_VERSION_PATCH"),
-        env!("CARGO_PKG_VERSION"),
-    ));
+    let config = build_script::header_config(
+        crate_dir,
+        [
+            env!("CARGO_PKG_VERSION_MAJOR"),
+            env!("CARGO_PKG_VERSION_MINOR"),
+            env!("CARGO_PKG_VERSION_PATCH"),
+            env!("CARGO_PKG_VERSION"),
+        ],
+    );
     let bindings =
         cbindgen::generate_with_config(crate_dir, config).expect("cbindgen generates the header");
     let tmp = support::scratch("header").join("rt2.generated.h");

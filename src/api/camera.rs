@@ -8,7 +8,9 @@ use glam::Vec3;
 
 /// Opaque camera handle. Defaults: eye (0,0,5) looking at the origin, up +Y, 45° vertical
 /// field of view, pinhole.
+#[repr(C)]
 pub struct rt2_camera {
+    /// First field of every handle, so checking it never reads past a handle of another type.
     magic: u64,
     pub(crate) camera: Camera,
 }

@@ -10,7 +10,9 @@ use std::ffi::{c_char, CString};
 use std::sync::Arc;
 
 /// Opaque context handle. Create with `rt2_context_create`, free with `rt2_context_destroy`.
+#[repr(C)]
 pub struct rt2_context {
+    /// First field of every handle, so checking it never reads past a handle of another type.
     magic: u64,
     pub(crate) inner: Arc<Context>,
     reason: CString,

@@ -48,8 +48,9 @@ pub(crate) trait Handle: Sized {
 /// Borrows a handle after checking it is non-NULL and carries the right magic.
 ///
 /// # Safety
-/// `p` must be NULL or point to memory readable as `T` (the magic check catches handles of
-/// other types and destroyed handles whose memory was not reused).
+/// `p` must be NULL or point to a live RT2 handle. Every handle is `#[repr(C)]` with its magic
+/// first, so a handle of another type is read only within its own allocation and rejected;
+/// a destroyed handle is rejected as long as its memory was not reused.
 pub(crate) unsafe fn handle<'a, T: Handle>(p: *const T, arg: &str) -> Result<&'a T> {
     if p.is_null() {
         return Err(Error::invalid_argument(format!("{arg} is NULL")));

@@ -9,7 +9,9 @@ use crate::frame::Frame;
 
 /// Opaque frame handle: `width × height` RGBA8 pixels, row-major from the top-left, initially
 /// transparent black.
+#[repr(C)]
 pub struct rt2_frame {
+    /// First field of every handle, so checking it never reads past a handle of another type.
     magic: u64,
     pub(crate) frame: Frame,
 }

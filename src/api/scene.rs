@@ -12,7 +12,9 @@ use glam::{Affine3A, Mat3, Vec3};
 use std::sync::{Arc, RwLock, RwLockReadGuard, RwLockWriteGuard};
 
 /// Opaque scene handle. Material 0 exists from the start (the default material).
+#[repr(C)]
 pub struct rt2_scene {
+    /// First field of every handle, so checking it never reads past a handle of another type.
     magic: u64,
     pub(crate) context: Arc<Context>,
     scene: RwLock<Scene>,

@@ -17,14 +17,16 @@ pub fn profile_dir() -> PathBuf {
         .to_path_buf()
 }
 
-/// The built shared library, e.g. `target/debug/librt2.so`; panics with the path if missing.
+/// The shared library that `cargo test` built for this run: `target/<profile>/deps/librt2.so`,
+/// beside the test executable. (`target/<profile>/librt2.so` is only refreshed by `cargo build`,
+/// so it can be stale during `cargo test`, or absent on a fresh clone.)
 pub fn shared_library() -> PathBuf {
     let name = format!(
         "{}rt2{}",
         std::env::consts::DLL_PREFIX,
         std::env::consts::DLL_SUFFIX
     );
-    let path = profile_dir().join(name);
+    let path = profile_dir().join("deps").join(name);
     assert!(
         path.is_file(),
         "{} is missing: it is built by `cargo test` / `cargo build` as the crate's cdylib",
