@@ -85,8 +85,11 @@ pub(super) enum Crossing {
 /// `t1`. A NaN `t_split` (the ray lies in the split plane) also goes to `far`: for `+0.0` that is the
 /// child above, for `-0.0` the child below — the side the direction sign points to, the same rule
 /// point location uses for a point on the plane.
+///
+/// The second value is the near child when the segment starts exactly on the plane: its closed
+/// voxel holds the start point too, though no part of the segment after it.
 #[inline]
-fn step(node: KdNode, ray: &TRay, t0: f32, t1: f32) -> Crossing {
+fn step(node: KdNode, ray: &TRay, t0: f32, t1: f32) -> (Crossing, Option<u32>) {
     let axis = node.axis();
     let t_split = ray.dist(axis, node.split);
     let (below, above) = (node.index(), node.index() + 1);
@@ -95,7 +98,8 @@ fn step(node: KdNode, ray: &TRay, t0: f32, t1: f32) -> Crossing {
     } else {
         (above, below)
     };
-    if t_split <= t0 || t_split.is_nan() {
+    let touched = (t_split == t0).then_some(near);
+    let crossing = if t_split <= t0 || t_split.is_nan() {
         Crossing::One { child: far }
     } else if t_split >= t1 {
         Crossing::One { child: near }
@@ -106,6 +110,16 @@ fn step(node: KdNode, ray: &TRay, t0: f32, t1: f32) -> Crossing {
             t_split,
             t1,
         }
+    };
+    (crossing, touched)
+}
+
+/// The child a descent continues in after crossing `c`.
+#[inline]
+fn next(c: Crossing) -> u32 {
+    match c {
+        Crossing::One { child } => child,
+        Crossing::Both { near, .. } => near,
     }
 }
 
@@ -113,13 +127,20 @@ fn step(node: KdNode, ray: &TRay, t0: f32, t1: f32) -> Crossing {
 /// about every crossing (the stack-based traversals push there, push-down moves its root there).
 /// Counts every node fetched, the leaf included. Returns the leaf's node and its exit distance
 /// (`t1` shrunk to the near part at every two-child crossing).
+///
+/// `start` is given on a ray's first descent from the root: where the ray starts exactly on a
+/// split plane, the leaves behind the plane that hold the start point are searched first (see
+/// [`touch`]), so a hit at the very start is not lost when the builder listed the primitive on
+/// that side only (as it may for a primitive lying in or touching the plane).
 #[inline]
-pub(super) fn descend(
+#[allow(clippy::too_many_arguments)]
+pub(super) fn descend<Q: LeafQuery>(
     tree: &KdTree,
     ray: &TRay,
     mut node: u32,
     t0: f32,
     mut t1: f32,
+    mut start: Option<&mut Q>,
     stats: &mut TraversalStats,
     mut seen: impl FnMut(Crossing),
 ) -> (KdNode, f32) {
@@ -129,15 +150,49 @@ pub(super) fn descend(
         if n.is_leaf() {
             return (n, t1);
         }
-        let c = step(n, ray, t0, t1);
-        node = match c {
-            Crossing::One { child } => child,
-            Crossing::Both { near, t_split, .. } => {
-                t1 = t_split;
-                near
-            }
-        };
+        let (c, touched) = step(n, ray, t0, t1);
+        if let (Some(behind), Some(query)) = (touched, start.as_deref_mut()) {
+            touch(tree, ray, behind, t0, query, stats);
+        }
+        if let Crossing::Both { t_split, .. } = c {
+            t1 = t_split;
+        }
+        node = next(c);
         seen(c);
+    }
+}
+
+/// Visits every leaf under `node` whose closed voxel holds the ray's point at `t0`: a search of the
+/// zero-length segment `[t0, t0]` that takes both sides of every plane through the point.
+fn touch(
+    tree: &KdTree,
+    ray: &TRay,
+    node: u32,
+    t0: f32,
+    query: &mut impl LeafQuery,
+    stats: &mut TraversalStats,
+) {
+    let mut pending = Stack::new();
+    pending.push(Entry { node, t0, t1: t0 });
+    while let Some(Entry { mut node, .. }) = pending.pop() {
+        loop {
+            let n = tree.nodes[node as usize];
+            stats.nodes_visited += 1;
+            if n.is_leaf() {
+                // Zero length: nothing can end the traversal here.
+                visit_leaf(tree, n, t0, query, stats);
+                break;
+            }
+            let (c, touched) = step(n, ray, t0, t0);
+            if let Some(behind) = touched {
+                pending.push(Entry {
+                    node: behind,
+                    t0,
+                    t1: t0,
+                });
+            }
+            node = next(c);
+        }
     }
 }
 

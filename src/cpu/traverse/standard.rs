@@ -19,8 +19,10 @@ pub(super) fn traverse(
         t0: scene_min,
         t1: scene_max,
     });
+    let mut first = true;
     while let Some(Entry { node, t0, t1 }) = stack.pop() {
-        let (leaf, t_exit) = descend(tree, ray, node, t0, t1, stats, |c| {
+        let start = std::mem::take(&mut first).then_some(&mut *query);
+        let (leaf, t_exit) = descend(tree, ray, node, t0, t1, start, stats, |c| {
             if let Crossing::Both {
                 far, t_split, t1, ..
             } = c
