@@ -68,12 +68,12 @@ fn entry_three_faces(b: &Aabb, ray: &TRay) -> f32 {
 }
 
 /// Where a rope walk starts and how it reads leaf boxes.
-struct Walk {
+struct Walk<Exit> {
     node: u32,
     t_entry: f32,
     /// Stop once the ray has left the leaf at or beyond this distance.
     t_end: f32,
-    exit: fn(&Aabb, &TRay) -> (f32, usize),
+    exit: Exit,
     /// ropes++ from the root: a first leaf left before it is entered means the ray missed the
     /// scene box (the entry-only scene test is completed here).
     miss_test: bool,
@@ -84,7 +84,7 @@ fn walk(
     tree: &KdTree,
     ropes: &Ropes,
     ray: &TRay,
-    w: Walk,
+    w: Walk<impl Fn(&Aabb, &TRay) -> (f32, usize)>,
     query: &mut impl LeafQuery,
     stats: &mut TraversalStats,
 ) {
@@ -165,7 +165,8 @@ pub(super) fn ropes_plus_plus(
         Some(s) if holds_origin(s) => (s, ray.ray.tmin, false),
         _ => (0, entry_three_faces(&tree.bounds, ray), true),
     };
-    if t_entry > ray.ray.tmax {
+    // Past the window, or parallel to a slab it lies outside of.
+    if t_entry > ray.ray.tmax || t_entry == f32::INFINITY {
         return;
     }
     let w = Walk {
