@@ -350,3 +350,48 @@ impl ShortStack {
         Some(e)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry(node: u32) -> Entry {
+        Entry {
+            node,
+            t0: node as f32,
+            t1: node as f32 + 1.0,
+        }
+    }
+
+    #[test]
+    fn stack_spills_past_its_inline_part_without_losing_entries() {
+        let mut s = Stack::new();
+        for i in 0..3 * INLINE as u32 {
+            s.push(entry(i));
+        }
+        for i in (0..3 * INLINE as u32).rev() {
+            assert_eq!(s.pop().map(|e| e.node), Some(i));
+        }
+        assert!(s.pop().is_none());
+    }
+
+    #[test]
+    fn short_stack_keeps_the_newest_entries() {
+        let mut s = ShortStack::new(3);
+        for i in 0..5 {
+            s.push(entry(i));
+        }
+        let popped: Vec<u32> = std::iter::from_fn(|| s.pop()).map(|e| e.node).collect();
+        assert_eq!(popped, [4, 3, 2]);
+        s.push(entry(9));
+        assert_eq!(s.pop().map(|e| e.node), Some(9));
+        assert!(s.pop().is_none());
+    }
+
+    #[test]
+    fn empty_short_stack_is_kd_restart() {
+        let mut s = ShortStack::new(0);
+        s.push(entry(1));
+        assert!(s.pop().is_none());
+    }
+}
