@@ -377,6 +377,38 @@ fn empty_scene_is_one_empty_leaf() {
 }
 
 #[test]
+fn one_primitive_is_one_leaf() {
+    let mut set = PrimitiveSet::default();
+    set.triangles
+        .push(Triangle::from_vertices(Vec3::ZERO, Vec3::X, Vec3::Y));
+    for builder in [Builder::Sah, Builder::Midpoint] {
+        let tree = build(&set, &options(builder, Layout::DepthFirst));
+        assert_eq!(tree.nodes, vec![KdNode::leaf(0)], "{builder:?}");
+        assert_eq!(tree.prim_indices, vec![0]);
+        assert_eq!(tree.bounds, set.triangles[0].bounds());
+        assert_eq!(tree.ropes.unwrap().links, vec![[INVALID; 6]]);
+    }
+}
+
+#[test]
+fn midpoint_splits_at_the_centre_of_the_longest_axis() {
+    let set = mixed(1000, 13);
+    let tree = build(&set, &options(Builder::Midpoint, Layout::VanEmdeBoas));
+    let voxels = node_voxels(&tree);
+    let mut inner = 0;
+    for (n, v) in tree.nodes.iter().zip(&voxels) {
+        if !n.is_leaf() {
+            let (voxel, _) = v.unwrap();
+            let e = voxel.extent();
+            assert_eq!(e[n.axis()], e.max_element());
+            assert_eq!(n.split, voxel.center()[n.axis()]);
+            inner += 1;
+        }
+    }
+    assert!(inner > 100);
+}
+
+#[test]
 fn layouts_differ_only_in_node_order() {
     let set = mixed(3000, 11);
     for builder in [Builder::Sah, Builder::Midpoint] {
@@ -408,9 +440,10 @@ fn layouts_differ_only_in_node_order() {
 
 #[test]
 fn builds_do_not_depend_on_thread_count() {
-    let set = soup(20_000, 21, 0.05, 1.0, Vec3::ZERO);
+    // Large enough that the top levels fork (nodes of 2048+ primitives above depth 10).
+    let set = soup(10_000, 21, 0.05, 1.0, Vec3::ZERO);
     for opts in all_options() {
-        let trees: Vec<KdTree> = [1, 2, 3]
+        let trees: Vec<KdTree> = [1, 2, 4]
             .iter()
             .map(|&threads| {
                 let pool = rayon::ThreadPoolBuilder::new()

@@ -6,6 +6,11 @@
 //! `child` (below the split) and `child + 1` (above). A voxel is split into
 //! `[min, split]` (below) and `[split, max]` (above) along `axis`. A leaf points into
 //! `leaves`, whose range selects primitive indices in `prim_indices`.
+//!
+//! Building: `build.rs` (entry point, options), `midpoint.rs` and `sah.rs` (the builders),
+//! `split.rs` (what they share: the side of a primitive, the parallel recursion), `layout.rs`
+//! (flattening, van Emde Boas order), `ropes.rs`, `stats.rs`, `walk.rs` (leaf voxels, point
+//! location).
 
 mod build;
 mod layout;
@@ -106,7 +111,8 @@ pub struct KdTree {
     pub nodes: Vec<KdNode>,
     pub leaves: Vec<LeafRange>,
     pub prim_indices: Vec<u32>,
-    /// The root voxel.
+    /// The root voxel: the union of the primitive bounds, `Aabb::EMPTY` (never NaN) when the
+    /// tree holds no primitive.
     pub bounds: Aabb,
     pub ropes: Option<Ropes>,
     pub stats: TreeStats,

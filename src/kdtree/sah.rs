@@ -16,9 +16,9 @@
 
 use std::cmp::Ordering;
 
-use rayon::slice::ParallelSliceMut;
+use rayon::prelude::*;
 
-use super::split::{child_voxels, classify, clip, fork, BuildNode, Side};
+use super::split::{child_voxels, classify, clip, fork, parallel, BuildNode, Side};
 use super::{BuildInput, BuildOptions};
 use crate::geometry::Aabb;
 
@@ -146,7 +146,7 @@ impl Sah<'_> {
     fn node(&self, prims: Vec<u32>, events: Events, voxel: Aabb, depth: u32) -> BuildNode {
         let leaf_cost = INTERSECTION_COST * prims.len() as f32;
         let plane = if depth < self.max_depth && !prims.is_empty() {
-            self.best_plane(&events, prims.len(), &voxel)
+            self.best_plane(&events, prims.len(), &voxel, depth)
         } else {
             None
         };
@@ -170,36 +170,57 @@ impl Sah<'_> {
         }
     }
 
-    /// Sweeps the sorted events of each axis (Wald & Havran, Algorithm 4). Only planes strictly
-    /// inside the voxel are candidates: a plane on its boundary would leave a child equal to
-    /// the parent and never terminate.
-    fn best_plane(&self, events: &Events, n: usize, voxel: &Aabb) -> Option<Plane> {
+    /// The cheapest plane over the three axes; near the root the axes are swept in parallel.
+    /// Ties go to the lowest axis, then the lowest position, so the choice does not depend on
+    /// the thread count.
+    fn best_plane(&self, events: &Events, n: usize, voxel: &Aabb, depth: u32) -> Option<Plane> {
         let area = voxel.surface_area();
         if area <= 0.0 {
             return None;
         }
+        let sweep = |axis: usize| self.best_on_axis(&events[axis], axis, n, voxel, area);
+        let per_axis: Vec<Option<Plane>> = if parallel(depth, n) {
+            (0..3).into_par_iter().map(sweep).collect()
+        } else {
+            (0..3).map(sweep).collect()
+        };
+        per_axis
+            .into_iter()
+            .flatten()
+            .reduce(|best, p| if p.cost < best.cost { p } else { best })
+    }
+
+    /// Sweeps the sorted events of one axis (Wald & Havran, Algorithm 4). Only planes strictly
+    /// inside the voxel are candidates: a plane on its boundary would leave a child equal to
+    /// the parent and never terminate.
+    fn best_on_axis(
+        &self,
+        list: &[Event],
+        axis: usize,
+        n: usize,
+        voxel: &Aabb,
+        area: f32,
+    ) -> Option<Plane> {
         let mut best: Option<Plane> = None;
-        for (axis, list) in events.iter().enumerate() {
-            // Primitives entirely below, in, and above the current plane.
-            let (mut below, mut above) = (0usize, n);
-            let mut i = 0;
-            while i < list.len() {
-                let pos = list[i].pos;
-                let mut count = [0usize; 3];
-                while i < list.len() && list[i].pos == pos {
-                    count[list[i].kind as usize] += 1;
-                    i += 1;
-                }
-                let [ends, planar, starts] = count;
-                above -= ends + planar;
-                if pos > voxel.min[axis] && pos < voxel.max[axis] {
-                    let candidate = self.split_cost(voxel, area, axis, pos, [below, planar, above]);
-                    if best.as_ref().is_none_or(|b| candidate.cost < b.cost) {
-                        best = Some(candidate);
-                    }
-                }
-                below += starts + planar;
+        // Primitives entirely below and entirely above the current plane.
+        let (mut below, mut above) = (0usize, n);
+        let mut i = 0;
+        while i < list.len() {
+            let pos = list[i].pos;
+            let mut count = [0usize; 3];
+            while i < list.len() && list[i].pos == pos {
+                count[list[i].kind as usize] += 1;
+                i += 1;
             }
+            let [ends, planar, starts] = count;
+            above -= ends + planar;
+            if pos > voxel.min[axis] && pos < voxel.max[axis] {
+                let candidate = self.split_cost(voxel, area, axis, pos, [below, planar, above]);
+                if best.as_ref().is_none_or(|b| candidate.cost < b.cost) {
+                    best = Some(candidate);
+                }
+            }
+            below += starts + planar;
         }
         best
     }
@@ -264,6 +285,8 @@ impl Sah<'_> {
         let mut moved = vec![[u32::MAX; 2]; n];
         for (p, &prim) in prims.iter().enumerate() {
             for child in 0..2 {
+                // One-sided primitives keep their events (`None`); straddling ones get new
+                // events from their part inside the child voxel, or are culled there.
                 let clipped = match (side[p], child) {
                     (Side::Both, _) => match clip(self.input, prim, &voxels[child]) {
                         Some(b) => Some(b),

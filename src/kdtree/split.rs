@@ -71,10 +71,15 @@ pub(super) fn clip(input: &dyn BuildInput, prim: u32, voxel: &Aabb) -> Option<Aa
     (!b.is_empty()).then_some(b)
 }
 
-/// Subtrees above this depth with at least [`PARALLEL_MIN_PRIMS`] primitives are built with
-/// `rayon::join`; below that the fork costs more than it saves.
+/// Nodes above this depth with at least [`PARALLEL_MIN_PRIMS`] primitives are worked on in
+/// parallel; below that a rayon fork costs more than it saves.
 const PARALLEL_MAX_DEPTH: u32 = 10;
 const PARALLEL_MIN_PRIMS: usize = 2048;
+
+/// Whether a node at `depth` with `prims` primitives is worth parallel work.
+pub(super) fn parallel(depth: u32, prims: usize) -> bool {
+    depth < PARALLEL_MAX_DEPTH && prims >= PARALLEL_MIN_PRIMS
+}
 
 /// Builds the two children, in parallel near the root. The result does not depend on whether
 /// the closures ran in parallel.
@@ -83,7 +88,7 @@ where
     A: FnOnce() -> BuildNode + Send,
     B: FnOnce() -> BuildNode + Send,
 {
-    if depth < PARALLEL_MAX_DEPTH && prims >= PARALLEL_MIN_PRIMS {
+    if parallel(depth, prims) {
         let (b, a) = rayon::join(below, above);
         [b, a]
     } else {
