@@ -773,3 +773,28 @@ fn rope_traversals_without_ropes_fall_back_to_standard() {
         default_options,
     );
 }
+
+/// No bounded primitive: the tree is one empty leaf with an empty root box; only the plane is hit.
+#[test]
+fn scene_of_planes_only() {
+    let mut rng = Rng(13);
+    let mut prims = PrimitiveSet::default();
+    prims.planes.push(Plane {
+        normal: [0.0, 1.0, 0.0],
+        offset: -0.05,
+    });
+    let rays = random_rays(&mut rng, 300);
+    let trees = trees(&prims);
+    let stats = check_rays(
+        "planes only",
+        &prims,
+        &trees,
+        &rays,
+        Check::Full,
+        default_options,
+    );
+    assert!(rays.iter().any(|r| brute32(&prims, r).is_hit()));
+    for s in stats.iter().flatten() {
+        assert_eq!(s.prim_tests, 0);
+    }
+}
