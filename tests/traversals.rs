@@ -798,3 +798,35 @@ fn scene_of_planes_only() {
         assert_eq!(s.prim_tests, 0);
     }
 }
+
+/// Rays lying in the face planes of boxes, with `+0.0` and `-0.0` components: SAH splits there
+/// and lists the box on its own side only, while `box_intersect` hits the face for `-0.0`.
+#[test]
+fn rays_lying_in_box_face_planes() {
+    let mut rng = Rng(99);
+    let prims = mixed(&mut rng);
+    let trees = trees(&prims);
+    let mut rays = Vec::new();
+    for b in &prims.boxes {
+        for axis in 0..3 {
+            for face in [b.min[axis], b.max[axis]] {
+                for sign in [0.0f32, -0.0] {
+                    let mut org = b.center();
+                    org[axis] = face;
+                    let mut dir = rng.dir();
+                    dir[axis] = sign;
+                    let org = org - dir * 2.0;
+                    rays.push(Ray::new(org, dir, 0.0, f32::INFINITY));
+                }
+            }
+        }
+    }
+    check_rays(
+        "box faces",
+        &prims,
+        &trees,
+        &rays,
+        Check::SameCore,
+        default_options,
+    );
+}

@@ -41,21 +41,30 @@ pub(super) fn traverse(
             // The restart event.
             None => (root, t_max, scene_max, how.push_down),
         };
-        let start = (pass == 0).then_some(&mut *query);
-        let (leaf, t_exit) = descend(tree, ray, node, t0, t1, start, stats, |c| match c {
-            Crossing::One { child } if push_down => root = child,
-            Crossing::One { .. } => {}
-            Crossing::Both {
-                far, t_split, t1, ..
-            } => {
-                push_down = false;
-                stack.push(Entry {
-                    node: far,
-                    t0: t_split,
-                    t1,
-                });
-            }
-        });
+        let (leaf, t_exit) = descend(
+            tree,
+            ray,
+            node,
+            t0,
+            t1,
+            pass == 0,
+            query,
+            stats,
+            |c| match c {
+                Crossing::One { child } if push_down => root = child,
+                Crossing::One { .. } => {}
+                Crossing::Both {
+                    far, t_split, t1, ..
+                } => {
+                    push_down = false;
+                    stack.push(Entry {
+                        node: far,
+                        t0: t_split,
+                        t1,
+                    });
+                }
+            },
+        );
         if visit_leaf(tree, leaf, t_exit, query, stats) || t_exit >= scene_max {
             return;
         }

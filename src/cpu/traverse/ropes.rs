@@ -91,14 +91,15 @@ fn walk(
     let (mut node, mut t_entry, mut miss_test) = (w.node, w.t_entry, w.miss_test);
     // Leaves are crossed in a strict front-to-back order: more steps than leaves would be a bug.
     for step in 0..tree.leaves.len() {
-        let start = (step == 0).then_some(&mut *query);
+        let first = step == 0;
         let (leaf, _) = descend(
             tree,
             ray,
             node,
             t_entry,
             f32::INFINITY,
-            start,
+            first,
+            query,
             stats,
             |_| {},
         );

@@ -21,8 +21,8 @@ pub(super) fn traverse(
     });
     let mut first = true;
     while let Some(Entry { node, t0, t1 }) = stack.pop() {
-        let start = std::mem::take(&mut first).then_some(&mut *query);
-        let (leaf, t_exit) = descend(tree, ray, node, t0, t1, start, stats, |c| {
+        let first = std::mem::take(&mut first);
+        let (leaf, t_exit) = descend(tree, ray, node, t0, t1, first, query, stats, |c| {
             if let Crossing::Both {
                 far, t_split, t1, ..
             } = c
