@@ -21,7 +21,6 @@ pub(super) fn traverse(
     });
     let mut first = true;
     while let Some(Entry { node, t0, t1 }) = stack.pop() {
-        let first = std::mem::take(&mut first);
         let (leaf, t_exit) = descend(tree, ray, node, t0, t1, first, query, stats, |c| {
             if let Crossing::Both {
                 far, t_split, t1, ..
@@ -34,6 +33,7 @@ pub(super) fn traverse(
                 });
             }
         });
+        first = false;
         if visit_leaf(tree, leaf, t_exit, query, stats) {
             return;
         }
