@@ -6,7 +6,7 @@
 //!   [`Traversal::PushDownShortStack`]: algorithms 3–6, one parameterised loop in `restart`.
 //! - [`Traversal::Ropes`], [`Traversal::RopesPlusPlus`]: algorithms 7–8, in `ropes`.
 //!
-//! The leaf work (closest hit or any hit) is a [`common::LeafQuery`], so each traversal is
+//! The leaf work (closest hit or any hit) is a `LeafQuery` (in `common`), so each traversal is
 //! written once for both [`intersect`] and [`occluded`].
 
 mod common;

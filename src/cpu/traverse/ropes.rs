@@ -68,12 +68,12 @@ fn entry_three_faces(b: &Aabb, ray: &TRay) -> f32 {
 }
 
 /// Where a rope walk starts and how it reads leaf boxes.
-struct Walk {
+struct Walk<Exit> {
     node: u32,
     t_entry: f32,
     /// Stop once the ray has left the leaf at or beyond this distance.
     t_end: f32,
-    exit: fn(&Aabb, &TRay) -> (f32, usize),
+    exit: Exit,
     /// ropes++ from the root: a first leaf left before it is entered means the ray missed the
     /// scene box (the entry-only scene test is completed here).
     miss_test: bool,
@@ -84,14 +84,25 @@ fn walk(
     tree: &KdTree,
     ropes: &Ropes,
     ray: &TRay,
-    w: Walk,
+    w: Walk<impl Fn(&Aabb, &TRay) -> (f32, usize)>,
     query: &mut impl LeafQuery,
     stats: &mut TraversalStats,
 ) {
     let (mut node, mut t_entry, mut miss_test) = (w.node, w.t_entry, w.miss_test);
     // Leaves are crossed in a strict front-to-back order: more steps than leaves would be a bug.
-    for _ in 0..tree.leaves.len() {
-        let (leaf, _) = descend(tree, ray, node, t_entry, f32::INFINITY, stats, |_| {});
+    for step in 0..tree.leaves.len() {
+        let first = step == 0;
+        let (leaf, _) = descend(
+            tree,
+            ray,
+            node,
+            t_entry,
+            f32::INFINITY,
+            first,
+            query,
+            stats,
+            |_| {},
+        );
         let leaf_index = leaf.index() as usize;
         let (t_exit, face) = (w.exit)(&ropes.leaf_bounds[leaf_index], ray);
         if miss_test && t_exit < t_entry {
@@ -131,9 +142,10 @@ pub(super) fn ropes(
 }
 
 /// Ropes++ (the thesis' algorithm 8): exits from the three planes the direction selects, an
-/// entry-only scene test, and secondary rays start at `start`, the leaf node holding their origin
-/// (checked against its box: a wrong hint falls back to the descent from the root, never to a
-/// wrong answer).
+/// entry-only scene test, and secondary rays start at `start`, the leaf node holding their origin.
+/// The hint is checked against the leaf's box and used only when the origin is strictly inside:
+/// on the boundary the neighbour holds the origin too (its primitives may touch it), and the
+/// descent from the root searches both. A wrong hint costs the descent, never the answer.
 pub(super) fn ropes_plus_plus(
     tree: &KdTree,
     ropes: &Ropes,
@@ -145,15 +157,17 @@ pub(super) fn ropes_plus_plus(
     let origin = ray.ray.at(ray.ray.tmin);
     let holds_origin = |node: u32| {
         let n = tree.nodes.get(node as usize);
-        n.is_some_and(|n| {
-            n.is_leaf() && ropes.leaf_bounds[n.index() as usize].contains_point(origin)
+        n.filter(|n| n.is_leaf()).is_some_and(|n| {
+            let b = &ropes.leaf_bounds[n.index() as usize];
+            b.min.cmplt(origin).all() && origin.cmplt(b.max).all()
         })
     };
     let (node, t_entry, miss_test) = match start {
         Some(s) if holds_origin(s) => (s, ray.ray.tmin, false),
         _ => (0, entry_three_faces(&tree.bounds, ray), true),
     };
-    if t_entry > ray.ray.tmax {
+    // Past the window, or parallel to a slab it lies outside of.
+    if t_entry > ray.ray.tmax || t_entry == f32::INFINITY {
         return;
     }
     let w = Walk {
