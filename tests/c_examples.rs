@@ -1,5 +1,5 @@
 //! Compiles the C examples in `c_examples/` against `include/rt2.h` with the `cc` crate, links
-//! them to the cdylib that `cargo test` built (`target/<profile>/librt2.so`, found through an
+//! them to the cdylib that `cargo test` built (`target/<profile>/deps/librt2.so`, through an
 //! rpath), runs them and checks their exit codes, their output and the PNGs they write.
 //!
 //! `load_model` renders `$RT2_SHARED/models/bunny.ply` (`RT2_SHARED` defaults to `../shared`
@@ -74,19 +74,18 @@ fn run(exe: &Path, args: &[&std::ffi::OsStr]) -> Output {
     };
     // Two workers keep runs of several test binaries at once from oversubscribing the machine.
     cmd.args(args).env("RAYON_NUM_THREADS", "2");
-    // cargo test puts target/<profile> on LD_LIBRARY_PATH, which outranks the rpath and may
-    // hold a stale librt2.so from an earlier `cargo build`: the fresh one comes first.
+    // Cargo's LD_LIBRARY_PATH for tests also lists target/<profile>, whose librt2.so is only
+    // refreshed by `cargo build` and would win over the rpath: name the library's own directory.
     let lib_dir = support::shared_library()
         .parent()
         .expect("library directory")
         .to_path_buf();
-    let old = std::env::var_os("LD_LIBRARY_PATH").unwrap_or_default();
-    let mut paths = vec![lib_dir];
-    paths.extend(std::env::split_paths(&old));
-    cmd.env(
-        "LD_LIBRARY_PATH",
-        std::env::join_paths(paths).expect("library paths join"),
-    );
+    let var = if cfg!(target_os = "macos") {
+        "DYLD_LIBRARY_PATH"
+    } else {
+        "LD_LIBRARY_PATH"
+    };
+    cmd.env(var, lib_dir);
     let out = cmd
         .output()
         .unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));

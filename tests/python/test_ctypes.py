@@ -1,7 +1,7 @@
 """Drives librt2 through ctypes, as a Python user would.
 
 The library path comes from the RT2_LIBRARY environment variable (tests/python_ctypes.rs sets
-it to target/<profile>/librt2.so). Exits non-zero on the first failed check.
+it to the librt2.so that `cargo test` built). Exits non-zero on the first failed check.
 """
 
 import ctypes

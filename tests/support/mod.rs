@@ -5,34 +5,42 @@
 
 use std::path::{Path, PathBuf};
 
-/// `target/<profile>`: the test executable lives in `target/<profile>/deps`, and `cargo test`
-/// builds the library's cdylib next to it (the crate's `crate-type` list includes it).
-pub fn profile_dir() -> PathBuf {
+/// `target/<profile>/deps`, where the test executable lives.
+fn deps_dir() -> PathBuf {
     let exe = std::env::current_exe().expect("the test knows its own path");
-    let deps = exe
-        .parent()
-        .expect("the test executable has a parent directory");
-    deps.parent()
-        .expect("target/<profile>/deps has a parent")
+    exe.parent()
+        .expect("the test executable has a parent directory")
         .to_path_buf()
 }
 
-/// The shared library that `cargo test` built for this run: `target/<profile>/deps/librt2.so`,
-/// beside the test executable. (`target/<profile>/librt2.so` is only refreshed by `cargo build`,
-/// so it can be stale during `cargo test`, or absent on a fresh clone.)
+/// The shared library this `cargo test` run built, e.g. `target/debug/deps/librt2.so`.
+///
+/// `cargo test` compiles the library with all its crate types (cdylib included) into
+/// `target/<profile>/deps`, next to the test executable, but only `cargo build` copies it up
+/// to `target/<profile>/librt2.so`: that copy can be older than the sources under test, so it
+/// is used only when `deps/` has none. Panics with both paths if neither exists.
 pub fn shared_library() -> PathBuf {
     let name = format!(
         "{}rt2{}",
         std::env::consts::DLL_PREFIX,
         std::env::consts::DLL_SUFFIX
     );
-    let path = profile_dir().join("deps").join(name);
+    let deps = deps_dir();
+    let fresh = deps.join(&name);
+    if fresh.is_file() {
+        return fresh;
+    }
+    let uplifted = deps
+        .parent()
+        .expect("target/<profile>/deps has a parent")
+        .join(&name);
     assert!(
-        path.is_file(),
-        "{} is missing: it is built by `cargo test` / `cargo build` as the crate's cdylib",
-        path.display()
+        uplifted.is_file(),
+        "neither {} nor {} exists: the crate's cdylib is built by `cargo test` / `cargo build`",
+        fresh.display(),
+        uplifted.display()
     );
-    path
+    uplifted
 }
 
 pub fn manifest_dir() -> &'static Path {
