@@ -10,6 +10,7 @@ use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
 use rt2::error::{Error, Result};
 use rt2::frame::Frame;
+use rt2::kdtree::{BuildOptions, Builder};
 use rt2::render::{RenderOptions, Transparency};
 use rt2::scene::{builtin, loaders, Material, PointLight, Scene, Shape};
 use std::path::Path;
@@ -27,6 +28,7 @@ const USAGE: &str = "usage:
       --samples N           samples per pixel (default: 1)
       --straight            RT² transparency (no refraction)
       --threads N           worker threads (default: all cores)
+      --builder B           sah (default, perfect splits) or midpoint
   rt2 bench [frames|build|rays|all]    measure (rt2 bench --help)";
 
 fn main() {
@@ -115,6 +117,7 @@ fn render(args: &[String]) -> Result<()> {
     let mut opts = RenderOptions::default();
     let mut depth = None;
     let mut threads = 0u32;
+    let mut builder = Builder::Sah;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -145,6 +148,14 @@ fn render(args: &[String]) -> Result<()> {
             "--samples" => opts.samples = parse(a, it.next())?,
             "--threads" => threads = parse(a, it.next())?,
             "--straight" => opts.transparency = Transparency::Straight,
+            "--builder" => {
+                let b: String = parse(a, it.next())?;
+                builder = match b.as_str() {
+                    "sah" => Builder::Sah,
+                    "midpoint" => Builder::Midpoint,
+                    _ => return Err(Error::invalid_argument(format!("unknown builder '{b}'"))),
+                };
+            }
             s if !s.starts_with('-') => name = s.to_string(),
             s => {
                 return Err(Error::invalid_argument(format!(
@@ -158,6 +169,7 @@ fn render(args: &[String]) -> Result<()> {
     let mut loaded = load_scene(&name)?;
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     opts.max_depth = depth.unwrap_or(loaded.max_depth);
+    loaded.scene.set_build_options(BuildOptions { builder, ..loaded.scene.build_options() });
     ctx.install(|| loaded.scene.commit())?;
     if opts.traversal.is_some_and(|t| t.needs_ropes()) {
         loaded.scene.ensure_ropes()?;
