@@ -3,7 +3,7 @@
 //! rule of `../shared/peers/src/rt2cmp.cpp` used to compare hits with Embree's.
 
 use crate::error::{Error, Result};
-use crate::geometry::Ray;
+use crate::geometry::{Hit, Ray};
 use glam::Vec3;
 use std::path::Path;
 
@@ -17,6 +17,17 @@ pub struct HitRecord {
     pub prim: u32,
     pub u: f32,
     pub v: f32,
+}
+
+impl From<&Hit> for HitRecord {
+    fn from(h: &Hit) -> Self {
+        HitRecord {
+            t: h.t,
+            prim: h.prim,
+            u: h.u,
+            v: h.v,
+        }
+    }
 }
 
 fn records<'a>(bytes: &'a [u8], magic: &[u8; 8], rec: usize, path: &Path) -> Result<&'a [u8]> {

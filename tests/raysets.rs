@@ -62,15 +62,7 @@ fn every_traversal_agrees_with_embree_on_the_bunny_ray_sets() {
             };
             let mut hits = vec![Hit::MISS; rays.len()];
             ctx.intersect(c, &rays, &mut hits, &q).unwrap();
-            let mine: Vec<HitRecord> = hits
-                .iter()
-                .map(|h| HitRecord {
-                    t: h.t,
-                    prim: h.prim,
-                    u: h.u,
-                    v: h.v,
-                })
-                .collect();
+            let mine: Vec<HitRecord> = hits.iter().map(HitRecord::from).collect();
             let g = rayset::compare(&mine, &reference, diag, 1e-4);
             println!(
                 "{set} {:<22} rays {} disagreements {} (a-only {}, b-only {}, mismatches {}), ties {}",

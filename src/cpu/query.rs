@@ -9,6 +9,27 @@ use rayon::prelude::*;
 /// Rays per parallel task: the granularity Embree's peer harness uses too.
 const CHUNK: usize = 4096;
 
+/// Runs `query` on every ray, writing `out[i]` for `rays[i]`, and sums the statistics.
+fn batch<T: Send>(
+    rays: &[Ray],
+    out: &mut [T],
+    query: impl Fn(&Ray, &mut TraversalStats) -> T + Sync,
+) -> TraversalStats {
+    rays.par_chunks(CHUNK)
+        .zip(out.par_chunks_mut(CHUNK))
+        .map(|(r, o)| {
+            let mut stats = TraversalStats::default();
+            for (ray, slot) in r.iter().zip(o) {
+                *slot = query(ray, &mut stats);
+            }
+            stats
+        })
+        .reduce(TraversalStats::default, |mut a, b| {
+            a.add(&b);
+            a
+        })
+}
+
 /// Closest hits of `rays` into `hits` (same length).
 pub fn intersect(
     scene: &Committed,
@@ -17,19 +38,9 @@ pub fn intersect(
     how: Traversal,
     opts: &TraverseOptions,
 ) -> TraversalStats {
-    rays.par_chunks(CHUNK)
-        .zip(hits.par_chunks_mut(CHUNK))
-        .map(|(r, h)| {
-            let mut stats = TraversalStats::default();
-            for (ray, hit) in r.iter().zip(h) {
-                *hit = traverse::intersect(&scene.tree, &scene.prims, ray, how, opts, &mut stats);
-            }
-            stats
-        })
-        .reduce(TraversalStats::default, |mut a, b| {
-            a.add(&b);
-            a
-        })
+    batch(rays, hits, |ray, stats| {
+        traverse::intersect(&scene.tree, &scene.prims, ray, how, opts, stats)
+    })
 }
 
 /// Any-hit queries: `occluded[i]` is true when something lies in ray i's `[tmin, tmax)`.
@@ -40,17 +51,7 @@ pub fn occluded(
     how: Traversal,
     opts: &TraverseOptions,
 ) -> TraversalStats {
-    rays.par_chunks(CHUNK)
-        .zip(occluded.par_chunks_mut(CHUNK))
-        .map(|(r, o)| {
-            let mut stats = TraversalStats::default();
-            for (ray, out) in r.iter().zip(o) {
-                *out = traverse::occluded(&scene.tree, &scene.prims, ray, how, opts, &mut stats);
-            }
-            stats
-        })
-        .reduce(TraversalStats::default, |mut a, b| {
-            a.add(&b);
-            a
-        })
+    batch(rays, occluded, |ray, stats| {
+        traverse::occluded(&scene.tree, &scene.prims, ray, how, opts, stats)
+    })
 }

@@ -169,7 +169,10 @@ fn render(args: &[String]) -> Result<()> {
     let mut loaded = load_scene(&name)?;
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     opts.max_depth = depth.unwrap_or(loaded.max_depth);
-    loaded.scene.set_build_options(BuildOptions { builder, ..loaded.scene.build_options() });
+    loaded.scene.set_build_options(BuildOptions {
+        builder,
+        ..loaded.scene.build_options()
+    });
     ctx.install(|| loaded.scene.commit())?;
     if opts.traversal.is_some_and(|t| t.needs_ropes()) {
         loaded.scene.ensure_ropes()?;
