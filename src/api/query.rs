@@ -103,7 +103,7 @@ unsafe fn run_query<T>(
     scene: *const rt2_scene,
     rays: *const rt2_ray,
     count: usize,
-    out: *mut T,
+    (out, out_name): (*mut T, &str),
     opt: *const rt2_query_options,
     stats: *mut rt2_query_stats,
     f: impl FnOnce(
@@ -119,7 +119,7 @@ unsafe fn run_query<T>(
         let s = handle(scene, "scene")?;
         let q = query_options(opt)?;
         let rays = slice(rays, count, "rays")?;
-        let out = slice_mut(out, count, "hits")?;
+        let out = slice_mut(out, count, out_name)?;
         if q.traversal.is_some_and(|t| t.needs_ropes()) {
             s.write().ensure_ropes()?;
         }

@@ -1,7 +1,6 @@
 //! Status codes, the thread-local error message and the version.
 
 use super::ffi::guard_ptr;
-use crate::error::Rt2Status;
 use std::cell::RefCell;
 use std::ffi::{c_char, CString};
 
@@ -46,12 +45,4 @@ pub extern "C" fn rt2_status_string(status: u32) -> *const c_char {
 #[no_mangle]
 pub extern "C" fn rt2_last_error_message() -> *const c_char {
     guard_ptr(|| Ok(LAST_ERROR.with(|e| e.borrow().as_ptr())))
-}
-
-/// Keeps the Rust enum's numbering and the names above in one place for the tests.
-pub fn status_name(status: Rt2Status) -> &'static str {
-    // SAFETY: rt2_status_string returns a static NUL-terminated string.
-    unsafe { std::ffi::CStr::from_ptr(rt2_status_string(status as u32)) }
-        .to_str()
-        .unwrap_or("RT2_STATUS_UNKNOWN")
 }
