@@ -162,7 +162,7 @@ pub unsafe extern "C" fn rt2_intersect(
         scene,
         rays,
         count,
-        hits,
+        (hits, "hits"),
         opt,
         stats,
         |c, committed, rays, out, q| {
@@ -213,7 +213,7 @@ pub unsafe extern "C" fn rt2_occluded(
         scene,
         rays,
         count,
-        occluded,
+        (occluded, "occluded"),
         opt,
         stats,
         |c, committed, rays, out, q| {
