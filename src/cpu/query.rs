@@ -1,7 +1,10 @@
 //! Batch ray queries on the CPU: rays split into chunks that the context's pool traces, with
-//! the statistics of each chunk summed at the end (no shared counters in the hot loop).
+//! the statistics of each chunk summed at the end (no shared counters in the hot loop). A chunk
+//! is traced one ray at a time, in packets or as one stream ([`QueryMode`]).
 
+use super::simd::Width;
 use super::traverse::{self, Traversal, TraverseOptions};
+use super::{packet, stream};
 use crate::geometry::{Hit, Ray, TraversalStats};
 use crate::scene::Committed;
 use rayon::prelude::*;
@@ -9,23 +12,57 @@ use rayon::prelude::*;
 /// Rays per parallel task: the granularity Embree's peer harness uses too.
 const CHUNK: usize = 4096;
 
-/// Closest hits of `rays` into `hits` (same length).
+/// Rays per stream: a stream gains from more rays per node (the paper traces all rays of a
+/// frame at once), but each chunk is one task of the pool; 16384 rays keep two cores busy on a
+/// 256² frame and are within noise of larger streams on the 512² sets (`rt2 bench streams`).
+const STREAM_CHUNK: usize = 16384;
+
+/// How a batch is traced. Every mode returns the same closest hits, bit for bit (the packet and
+/// stream traversals take the standard traversal's decisions for every ray).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum QueryMode {
+    /// One ray at a time with the chosen [`Traversal`].
+    #[default]
+    Single,
+    /// Packets of 4/8/16 rays of one octant (Wald), width by CPU features ([`Width::best`]).
+    Packet,
+    /// The n-ray traversal of the vectorised-traversal paper: all rays of a chunk at once.
+    Stream,
+}
+
+impl QueryMode {
+    pub const ALL: [QueryMode; 3] = [QueryMode::Single, QueryMode::Packet, QueryMode::Stream];
+
+    /// The command-line spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            QueryMode::Single => "single",
+            QueryMode::Packet => "packet",
+            QueryMode::Stream => "stream",
+        }
+    }
+
+    fn chunk(self) -> usize {
+        match self {
+            QueryMode::Stream => STREAM_CHUNK,
+            _ => CHUNK,
+        }
+    }
+}
+
+/// Closest hits of `rays` into `hits` (same length). Packets and streams use the standard
+/// traversal's order whatever `how` says.
 pub fn intersect(
     scene: &Committed,
     rays: &[Ray],
     hits: &mut [Hit],
     how: Traversal,
     opts: &TraverseOptions,
+    mode: QueryMode,
 ) -> TraversalStats {
-    rays.par_chunks(CHUNK)
-        .zip(hits.par_chunks_mut(CHUNK))
-        .map(|(r, h)| {
-            let mut stats = TraversalStats::default();
-            for (ray, hit) in r.iter().zip(h) {
-                *hit = traverse::intersect(&scene.tree, &scene.prims, ray, how, opts, &mut stats);
-            }
-            stats
-        })
+    rays.par_chunks(mode.chunk())
+        .zip(hits.par_chunks_mut(mode.chunk()))
+        .map(|(r, h)| intersect_serial(scene, r, h, how, opts, mode))
         .reduce(TraversalStats::default, |mut a, b| {
             a.add(&b);
             a
@@ -39,18 +76,59 @@ pub fn occluded(
     occluded: &mut [bool],
     how: Traversal,
     opts: &TraverseOptions,
+    mode: QueryMode,
 ) -> TraversalStats {
-    rays.par_chunks(CHUNK)
-        .zip(occluded.par_chunks_mut(CHUNK))
-        .map(|(r, o)| {
-            let mut stats = TraversalStats::default();
-            for (ray, out) in r.iter().zip(o) {
-                *out = traverse::occluded(&scene.tree, &scene.prims, ray, how, opts, &mut stats);
-            }
-            stats
-        })
+    rays.par_chunks(mode.chunk())
+        .zip(occluded.par_chunks_mut(mode.chunk()))
+        .map(|(r, o)| occluded_serial(scene, r, o, how, opts, mode))
         .reduce(TraversalStats::default, |mut a, b| {
             a.add(&b);
             a
         })
+}
+
+/// One chunk of [`intersect`], on the calling thread.
+fn intersect_serial(
+    scene: &Committed,
+    rays: &[Ray],
+    hits: &mut [Hit],
+    how: Traversal,
+    opts: &TraverseOptions,
+    mode: QueryMode,
+) -> TraversalStats {
+    let (tree, prims) = (&scene.tree, &scene.prims);
+    match mode {
+        QueryMode::Single => {
+            let mut stats = TraversalStats::default();
+            for (ray, hit) in rays.iter().zip(hits) {
+                *hit = traverse::intersect(tree, prims, ray, how, opts, &mut stats);
+            }
+            stats
+        }
+        QueryMode::Packet => packet::intersect(tree, prims, rays, hits, Width::best()),
+        QueryMode::Stream => stream::intersect(tree, prims, rays, hits, Width::best()).0,
+    }
+}
+
+/// One chunk of [`occluded`], on the calling thread.
+fn occluded_serial(
+    scene: &Committed,
+    rays: &[Ray],
+    out: &mut [bool],
+    how: Traversal,
+    opts: &TraverseOptions,
+    mode: QueryMode,
+) -> TraversalStats {
+    let (tree, prims) = (&scene.tree, &scene.prims);
+    match mode {
+        QueryMode::Single => {
+            let mut stats = TraversalStats::default();
+            for (ray, o) in rays.iter().zip(out) {
+                *o = traverse::occluded(tree, prims, ray, how, opts, &mut stats);
+            }
+            stats
+        }
+        QueryMode::Packet => packet::occluded(tree, prims, rays, out, Width::best()),
+        QueryMode::Stream => stream::occluded(tree, prims, rays, out, Width::best()).0,
+    }
 }
