@@ -15,7 +15,7 @@ const CHUNK: usize = 4096;
 /// Rays per stream: a stream gains from more rays per node (the paper traces all rays of a
 /// frame at once), but each chunk is one task of the pool; 16384 rays keep two cores busy on a
 /// 256² frame and are within noise of larger streams on the 512² sets (`rt2 bench streams`).
-const STREAM_CHUNK: usize = 16384;
+pub const STREAM_CHUNK: usize = 16384;
 
 /// How a batch is traced. Every mode returns the same closest hits, bit for bit (the packet and
 /// stream traversals take the standard traversal's decisions for every ray).
@@ -42,7 +42,8 @@ impl QueryMode {
         }
     }
 
-    fn chunk(self) -> usize {
+    /// Rays per parallel task in this mode.
+    pub fn chunk(self) -> usize {
         match self {
             QueryMode::Stream => STREAM_CHUNK,
             _ => CHUNK,
@@ -60,9 +61,22 @@ pub fn intersect(
     opts: &TraverseOptions,
     mode: QueryMode,
 ) -> TraversalStats {
+    intersect_width(scene, rays, hits, how, opts, mode, Width::best())
+}
+
+/// [`intersect`] with packets and streams of a given lane width (for the benchmark's width rows).
+pub fn intersect_width(
+    scene: &Committed,
+    rays: &[Ray],
+    hits: &mut [Hit],
+    how: Traversal,
+    opts: &TraverseOptions,
+    mode: QueryMode,
+    width: Width,
+) -> TraversalStats {
     rays.par_chunks(mode.chunk())
         .zip(hits.par_chunks_mut(mode.chunk()))
-        .map(|(r, h)| intersect_serial(scene, r, h, how, opts, mode))
+        .map(|(r, h)| intersect_serial(scene, r, h, how, opts, mode, width))
         .reduce(TraversalStats::default, |mut a, b| {
             a.add(&b);
             a
@@ -95,6 +109,7 @@ fn intersect_serial(
     how: Traversal,
     opts: &TraverseOptions,
     mode: QueryMode,
+    width: Width,
 ) -> TraversalStats {
     let (tree, prims) = (&scene.tree, &scene.prims);
     match mode {
@@ -105,8 +120,8 @@ fn intersect_serial(
             }
             stats
         }
-        QueryMode::Packet => packet::intersect(tree, prims, rays, hits, Width::best()),
-        QueryMode::Stream => stream::intersect(tree, prims, rays, hits, Width::best()).0,
+        QueryMode::Packet => packet::intersect(tree, prims, rays, hits, width),
+        QueryMode::Stream => stream::intersect(tree, prims, rays, hits, width).0,
     }
 }
 

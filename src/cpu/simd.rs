@@ -156,7 +156,7 @@ impl<const N: usize> TriBlock<N> {
             let v = ((d.x * qx) + (d.y * qy) + (d.z * qz)) * inv;
             let t = ((e2x * qx) + (e2y * qy) + (e2z * qz)) * inv;
             // The scalar test's rejections, as masks rather than early returns.
-            let ok = !(det == 0.0 || !det.is_finite())
+            let ok = (det != 0.0 && det.is_finite())
                 & (0.0..=1.0).contains(&u)
                 & !(v < 0.0 || u + v > 1.0)
                 & (t >= ray.tmin)

@@ -27,7 +27,7 @@ const USAGE: &str = "usage:
       --samples N           samples per pixel (default: 1)
       --straight            RT² transparency (no refraction)
       --threads N           worker threads (default: all cores)
-  rt2 bench [frames|build|rays|all]    measure (rt2 bench --help)";
+  rt2 bench [frames|build|rays|streams|all]    measure (rt2 bench --help)";
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
