@@ -81,8 +81,11 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
         let live = cur.lanes.mask;
         b.stats.nodes_visited += live.count_ones() as u64;
         let next = if n.is_leaf() {
-            s.leaf
-                .gather(&b.prims.triangles, tree.leaf_prims(n.index()));
+            s.leaf.gather(
+                &b.prims.triangles,
+                tree.leaf_prims(n.index()),
+                live.count_ones() as usize,
+            );
             let mut m = live;
             while m != 0 {
                 let l = m.trailing_zeros() as usize;

@@ -169,6 +169,9 @@ impl<const N: usize> TriBlock<N> {
     }
 }
 
+/// Fewest rays at a leaf for which its triangles are gathered into blocks (`rt2 bench streams`).
+pub const GATHER_MIN_RAYS: usize = 3;
+
 /// A leaf's primitives prepared once per leaf visit for all the rays that reach it: triangles
 /// gathered into [`TriBlock`]s, other kinds kept as indices for the scalar tests. Reused from
 /// leaf to leaf, so a traversal allocates nothing per node.
@@ -181,11 +184,17 @@ pub struct LeafPrims<const N: usize> {
 }
 
 impl<const N: usize> LeafPrims<N> {
+    /// Prepares the leaf `prims` for `rays` rays. Gathering costs about one triangle test per
+    /// triangle, so for fewer than [`GATHER_MIN_RAYS`] rays every primitive stays scalar.
     #[inline(always)]
-    pub fn gather(&mut self, triangles: &[Triangle], prims: &[u32]) {
+    pub fn gather(&mut self, triangles: &[Triangle], prims: &[u32], rays: usize) {
         self.blocks.clear();
         self.others.clear();
         self.count = prims.len();
+        if rays < GATHER_MIN_RAYS {
+            self.others.extend_from_slice(prims);
+            return;
+        }
         let mut lane = N;
         for &p in prims {
             let Some(tri) = triangles.get(p as usize) else {

@@ -80,7 +80,7 @@ fn traverse<const N: usize, A: Answer>(
         if n.is_leaf() {
             scratch
                 .leaf
-                .gather(&b.prims.triangles, b.tree.leaf_prims(n.index()));
+                .gather(&b.prims.triangles, b.tree.leaf_prims(n.index()), f.count);
             for (k, p) in lists.iter().enumerate() {
                 for l in 0..N.min(f.count - k * N) {
                     if !b.done[p.id[l] as usize] {
