@@ -31,8 +31,6 @@ pub enum QueryMode {
 }
 
 impl QueryMode {
-    pub const ALL: [QueryMode; 3] = [QueryMode::Single, QueryMode::Packet, QueryMode::Stream];
-
     /// The command-line spelling.
     pub fn name(self) -> &'static str {
         match self {

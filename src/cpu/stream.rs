@@ -19,9 +19,9 @@ use super::simd::{self, Kernel, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
 
-/// Lists of at most this many rays (and at most one packet) go on as one packet. Measured with
-/// `rt2 bench streams` (bunny, primary and incoherent rays): 4 and 8 are within noise of each
-/// other and beat 0 (lists to the leaves) by 10–30%.
+/// Lists of at most this many rays go on as one packet (the paper's future work suggests 4): a
+/// list that small no longer amortises its compaction, and one packet walks the rest of the
+/// subtree with one node fetch per node. Capped at the lane width.
 pub const SWITCH: usize = 4;
 
 /// A node still to visit and its list: `count` rays in packets from `start`. A popped frame's
