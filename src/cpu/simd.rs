@@ -43,9 +43,10 @@ impl Width {
         }
     }
 
-    /// The width used by default: 8 lanes where AVX2 exists. AVX-512's 16 lanes are available
-    /// but measured slower on the development machine (`rt2 bench streams`, width rows): a
-    /// 16-ray packet loses coherence and the per-lane list compaction does not get wider.
+    /// The width used by default: 8 lanes where AVX2 exists, else 4. AVX-512's 16 lanes are
+    /// available ([`Width::W16`]) but measured no faster than 8 (`rt2 bench streams`, width
+    /// columns of BENCHMARKS.md): the SAH leaves hold ~3 triangles, so a 16-triangle block is
+    /// mostly padding, and the list compaction stays one lane at a time.
     pub fn best() -> Width {
         if Width::W8.supported() {
             Width::W8
