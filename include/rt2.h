@@ -85,6 +85,54 @@ typedef uint32_t rt2_layout;
 #endif // __cplusplus
 
 /**
+ * How a batch of rays is traced (`rt2_query_options.mode`). Every mode returns the same closest
+ * hits, bit for bit; they differ in speed (`rt2 bench streams`).
+ */
+enum rt2_query_mode
+#ifdef __cplusplus
+  : uint32_t
+#endif // __cplusplus
+ {
+  /**
+   * One ray at a time with `rt2_query_options.traversal` (default).
+   */
+  RT2_QUERY_MODE_SINGLE = 0,
+  /**
+   * Packets of 8 rays (4 without AVX2) of one octant (Wald); standard traversal order.
+   */
+  RT2_QUERY_MODE_PACKET = 1,
+  /**
+   * All rays at once: the n-ray traversal of the vectorised-traversal paper.
+   */
+  RT2_QUERY_MODE_STREAM = 2,
+};
+#ifndef __cplusplus
+typedef uint32_t rt2_query_mode;
+#endif // __cplusplus
+
+/**
+ * The order in which the CPU renderer traces rays (`rt2_render_options.schedule`). Both give the
+ * same image up to the last bit of a sum (see `rt2_render_options.schedule`).
+ */
+enum rt2_schedule
+#ifdef __cplusplus
+  : uint32_t
+#endif // __cplusplus
+ {
+  /**
+   * Pixel by pixel, one ray at a time (default).
+   */
+  RT2_SCHEDULE_DEPTH_FIRST = 0,
+  /**
+   * Wavefronts: all primary rays, then all shadow rays, then all secondary rays, as streams.
+   */
+  RT2_SCHEDULE_BREADTH_FIRST = 1,
+};
+#ifndef __cplusplus
+typedef uint32_t rt2_schedule;
+#endif // __cplusplus
+
+/**
  * Result codes of every fallible C call. Explicit numbers, never reused or renumbered.
  */
 typedef enum rt2_status {
@@ -315,6 +363,11 @@ typedef struct rt2_render_options {
    * Colour of rays that leave the scene.
    */
   float background[3];
+  /**
+   * An `rt2_schedule` value (default DEPTH_FIRST). BREADTH_FIRST adds each pixel's
+   * contributions in another order, so a channel may differ by 1/255 on a few pixels.
+   */
+  uint32_t schedule;
 } rt2_render_options;
 
 /**
@@ -333,6 +386,11 @@ typedef struct rt2_query_options {
    * Entries of the short stack, 1..=64 (default 3).
    */
   uint32_t short_stack_size;
+  /**
+   * An `rt2_query_mode` value (default SINGLE). PACKET and STREAM follow the standard
+   * traversal's order whatever `traversal` says, and return the same hits.
+   */
+  uint32_t mode;
 } rt2_query_options;
 
 /**

@@ -75,7 +75,7 @@ impl Context {
         let (how, opts) = self.query_setup(scene, q);
         match self.decision.backend {
             Backend::Cpu => {
-                Ok(self.install(|| cpu::query::intersect(scene, rays, hits, how, &opts)))
+                Ok(self.install(|| cpu::query::intersect(scene, rays, hits, how, &opts, q.mode)))
             }
             Backend::Gpu => Err(Error::unsupported("the GPU backend is not built yet")),
         }
@@ -91,7 +91,9 @@ impl Context {
     ) -> Result<TraversalStats> {
         let (how, opts) = self.query_setup(scene, q);
         match self.decision.backend {
-            Backend::Cpu => Ok(self.install(|| cpu::query::occluded(scene, rays, out, how, &opts))),
+            Backend::Cpu => {
+                Ok(self.install(|| cpu::query::occluded(scene, rays, out, how, &opts, q.mode)))
+            }
             Backend::Gpu => Err(Error::unsupported("the GPU backend is not built yet")),
         }
     }
@@ -118,6 +120,8 @@ pub struct QueryOptions {
     /// `None` lets the library choose (AUTO).
     pub traversal: Option<crate::cpu::traverse::Traversal>,
     pub short_stack_size: usize,
+    /// One ray at a time, packets or streams (same hits; see [`cpu::query::QueryMode`]).
+    pub mode: cpu::query::QueryMode,
 }
 
 impl Default for QueryOptions {
@@ -125,6 +129,7 @@ impl Default for QueryOptions {
         QueryOptions {
             traversal: None,
             short_stack_size: 3,
+            mode: cpu::query::QueryMode::Single,
         }
     }
 }

@@ -13,6 +13,17 @@ pub enum Transparency {
     Refract,
 }
 
+/// The order in which the CPU renderer traces rays.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Schedule {
+    /// Every pixel's rays to the end before the next pixel, one ray at a time.
+    #[default]
+    DepthFirst,
+    /// Wavefronts (the vectorised-traversal paper): all primary rays, then all shadow rays,
+    /// then all reflected and refracted rays, each wave traced as ray streams.
+    BreadthFirst,
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
     /// Longest chain of rays from the eye (1 = primary rays only, plus shadows).
@@ -24,6 +35,7 @@ pub struct RenderOptions {
     pub short_stack_size: usize,
     pub transparency: Transparency,
     pub background: Vec3,
+    pub schedule: Schedule,
 }
 
 impl Default for RenderOptions {
@@ -35,6 +47,7 @@ impl Default for RenderOptions {
             short_stack_size: 3,
             transparency: Transparency::Refract,
             background: Vec3::new(0.05, 0.05, 0.08),
+            schedule: Schedule::DepthFirst,
         }
     }
 }

@@ -1,9 +1,11 @@
-//! Cross-check with Embree: every traversal on the bunny's ray sets of `../shared/raysets`
+//! Cross-check with Embree: every traversal and query mode (single, packet, stream) on the bunny's
+//! ray sets of `../shared/raysets`
 //! (Embree 3's robust closest hits). The bar: at most 1 disagreement (hit vs miss, or a
 //! different triangle with |Δt| > 1e-4·diag, the rule of `../shared/peers/src/rt2cmp.cpp`) in
 //! 100,000 rays per set. Needs `$RT2_SHARED/models/bunny.ply` and `$RT2_SHARED/raysets/bunny/`.
 
 use rt2::context::{Context, QueryOptions};
+use rt2::cpu::query::QueryMode;
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
 use rt2::geometry::Hit;
@@ -18,7 +20,7 @@ fn shared() -> PathBuf {
 }
 
 #[test]
-fn every_traversal_agrees_with_embree_on_the_bunny_ray_sets() {
+fn every_traversal_and_mode_agrees_with_embree_on_the_bunny_ray_sets() {
     let model = shared().join("models/bunny.ply");
     let dir = shared().join("raysets/bunny");
     if !model.exists() || !dir.exists() {
@@ -55,17 +57,37 @@ fn every_traversal_agrees_with_embree_on_the_bunny_ray_sets() {
         let rays = rayset::read_rays(&dir.join(format!("{set}.rays"))).unwrap();
         let reference = rayset::read_hits(&dir.join(format!("{set}.embree.hits"))).unwrap();
         assert_eq!(rays.len(), reference.len());
-        for how in Traversal::ALL {
+        // Single rays with every traversal; packets and streams (standard order) once each.
+        let runs = Traversal::ALL
+            .into_iter()
+            .map(|t| (t, QueryMode::Single))
+            .chain([QueryMode::Packet, QueryMode::Stream].map(|m| (Traversal::Standard, m)));
+        let mut standard: Option<Vec<Hit>> = None;
+        for (how, mode) in runs {
             let q = QueryOptions {
                 traversal: Some(how),
+                mode,
                 ..QueryOptions::default()
             };
             let mut hits = vec![Hit::MISS; rays.len()];
             ctx.intersect(c, &rays, &mut hits, &q).unwrap();
+            // Every mode gives the standard traversal's hits, bit for bit.
+            match &standard {
+                None => standard = Some(hits.clone()),
+                Some(s) => assert!(
+                    hits.iter()
+                        .zip(s)
+                        .all(|(a, b)| a.prim == b.prim && a.t.to_bits() == b.t.to_bits()),
+                    "{set}: {} {} differs from standard",
+                    mode.name(),
+                    how.name()
+                ),
+            }
             let mine: Vec<HitRecord> = hits.iter().map(HitRecord::from).collect();
             let g = rayset::compare(&mine, &reference, diag, 1e-4);
             println!(
-                "{set} {:<22} rays {} disagreements {} (a-only {}, b-only {}, mismatches {}), ties {}",
+                "{set} {:<7} {:<22} rays {} disagreements {} (a-only {}, b-only {}, mismatches {}), ties {}",
+                mode.name(),
                 how.name(),
                 g.rays,
                 g.disagreements(),

@@ -6,7 +6,9 @@
 //! then the hard cases, each its own test.
 
 use glam::{DVec3, Mat3, Vec3};
+use rt2::cpu::simd::Width;
 use rt2::cpu::traverse::{intersect, occluded, Traversal, TraverseOptions};
+use rt2::cpu::{packet, stream};
 use rt2::geometry::{
     Aabb, Ellipsoid, Hit, Plane, PrimKind, PrimitiveSet, Ray, Sphere, TraversalStats, Triangle,
 };
@@ -317,9 +319,69 @@ fn check_rays(
                 }
             }
         }
+        check_batch_modes(&format!("{what}, {name}"), prims, tree, rays, &stats[0]);
         all_stats.push(stats);
     }
     all_stats
+}
+
+/// Packets and streams at every lane width this CPU runs: the same hits as the standard
+/// traversal, bit for bit, the same occlusion answers, and the same work (they take the standard
+/// traversal's decisions for every ray, only grouped differently).
+fn check_batch_modes(
+    what: &str,
+    prims: &PrimitiveSet,
+    tree: &KdTree,
+    rays: &[Ray],
+    standard_stats: &TraversalStats,
+) {
+    let std: Vec<Hit> = rays
+        .iter()
+        .map(|r| {
+            let opts = TraverseOptions::default();
+            let mut st = TraversalStats::default();
+            intersect(tree, prims, r, Traversal::Standard, &opts, &mut st)
+        })
+        .collect();
+    for width in Width::ALL.into_iter().filter(|w| w.supported()) {
+        for mode in ["packet", "stream"] {
+            let mut hits = vec![Hit::MISS; rays.len()];
+            let mut occ = vec![false; rays.len()];
+            let stats = match mode {
+                "packet" => {
+                    packet::occluded(tree, prims, rays, &mut occ, width);
+                    packet::intersect(tree, prims, rays, &mut hits, width)
+                }
+                _ => {
+                    stream::occluded(tree, prims, rays, &mut occ, width);
+                    stream::intersect(tree, prims, rays, &mut hits, width).0
+                }
+            };
+            for (i, (h, s)) in hits.iter().zip(&std).enumerate() {
+                assert!(
+                    h.prim == s.prim
+                        && h.t.to_bits() == s.t.to_bits()
+                        && h.u.to_bits() == s.u.to_bits()
+                        && h.v.to_bits() == s.v.to_bits(),
+                    "{what}, {mode} x{}, ray {i}: {:?} gives {h:?}, standard {s:?}",
+                    width.lanes(),
+                    rays[i]
+                );
+                assert_eq!(
+                    occ[i],
+                    s.is_hit(),
+                    "{what}, {mode} x{}, ray {i} occluded",
+                    width.lanes()
+                );
+            }
+            assert_eq!(
+                (stats.nodes_visited, stats.leaves_visited),
+                (standard_stats.nodes_visited, standard_stats.leaves_visited),
+                "{what}, {mode} x{}: work differs from the standard traversal",
+                width.lanes()
+            );
+        }
+    }
 }
 
 fn default_options(_: &KdTree, _: &Ray) -> TraverseOptions {
@@ -736,6 +798,18 @@ fn degenerate_rays_miss_without_touching_the_tree() {
                     how.name()
                 );
             }
+        }
+        for width in Width::ALL.into_iter().filter(|w| w.supported()) {
+            let mut hits = vec![Hit::MISS; rays.len()];
+            let mut occ = vec![true; rays.len()];
+            let stats = [
+                packet::intersect(&tree, &prims, &rays, &mut hits, width),
+                packet::occluded(&tree, &prims, &rays, &mut occ, width),
+                stream::intersect(&tree, &prims, &rays, &mut hits, width).0,
+                stream::occluded(&tree, &prims, &rays, &mut occ, width).0,
+            ];
+            assert!(hits.iter().all(|h| !h.is_hit()) && !occ.contains(&true));
+            assert!(stats.iter().all(|s| *s == TraversalStats::default()));
         }
     }
 }

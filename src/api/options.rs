@@ -3,11 +3,12 @@
 //! and checked, because an out-of-range C enum value must be an error, not undefined behaviour.
 
 use super::ffi::{check_struct_size, enum_error};
+use crate::cpu::query::QueryMode;
 use crate::cpu::traverse::Traversal;
 use crate::dispatch::BackendRequest;
 use crate::error::{Error, Result};
 use crate::kdtree::{BuildOptions, Builder, Layout};
-use crate::render::{RenderOptions, Transparency};
+use crate::render::{RenderOptions, Schedule, Transparency};
 use crate::scene::{Checker, Material};
 use glam::Vec3;
 
@@ -35,6 +36,19 @@ pub enum Rt2Traversal {
     RopesPlusPlus = 7,
 }
 
+/// How a batch of rays is traced (`rt2_query_options.mode`). Every mode returns the same closest
+/// hits, bit for bit; they differ in speed (`rt2 bench streams`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2QueryMode {
+    /// One ray at a time with `rt2_query_options.traversal` (default).
+    Single = 0,
+    /// Packets of 8 rays (4 without AVX2) of one octant (Wald); standard traversal order.
+    Packet = 1,
+    /// All rays at once: the n-ray traversal of the vectorised-traversal paper.
+    Stream = 2,
+}
+
 /// How transparent materials pass light (`rt2_render_options.transparency`).
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -43,6 +57,17 @@ pub enum Rt2Transparency {
     Straight = 0,
     /// Snell refraction with Fresnel reflection.
     Refract = 1,
+}
+
+/// The order in which the CPU renderer traces rays (`rt2_render_options.schedule`). Both give the
+/// same image up to the last bit of a sum (see `rt2_render_options.schedule`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2Schedule {
+    /// Pixel by pixel, one ray at a time (default).
+    DepthFirst = 0,
+    /// Wavefronts: all primary rays, then all shadow rays, then all secondary rays, as streams.
+    BreadthFirst = 1,
 }
 
 /// kd-tree builder (`rt2_build_options.builder`).
@@ -70,6 +95,15 @@ pub(crate) fn backend_from(v: u32) -> Result<BackendRequest> {
         1 => Ok(BackendRequest::Cpu),
         2 => Ok(BackendRequest::Gpu),
         _ => Err(enum_error("rt2_backend", v)),
+    }
+}
+
+pub(crate) fn query_mode_from(v: u32) -> Result<QueryMode> {
+    match v {
+        0 => Ok(QueryMode::Single),
+        1 => Ok(QueryMode::Packet),
+        2 => Ok(QueryMode::Stream),
+        _ => Err(enum_error("rt2_query_mode", v)),
     }
 }
 
@@ -298,6 +332,9 @@ pub struct rt2_render_options {
     pub transparency: u32,
     /// Colour of rays that leave the scene.
     pub background: [f32; 3],
+    /// An `rt2_schedule` value (default DEPTH_FIRST). BREADTH_FIRST adds each pixel's
+    /// contributions in another order, so a channel may differ by 1/255 on a few pixels.
+    pub schedule: u32,
 }
 
 impl rt2_render_options {
@@ -333,7 +370,13 @@ impl rt2_render_options {
                 "background is {background} (must be finite and >= 0)"
             )));
         }
+        let schedule = match self.schedule {
+            0 => Schedule::DepthFirst,
+            1 => Schedule::BreadthFirst,
+            v => return Err(enum_error("rt2_schedule", v)),
+        };
         Ok(RenderOptions {
+            schedule,
             max_depth: self.max_depth,
             samples: self.samples,
             traversal: traversal_from(self.traversal)?,
@@ -356,5 +399,6 @@ pub extern "C" fn rt2_render_options_default() -> rt2_render_options {
         short_stack_size: d.short_stack_size as u32,
         transparency: Rt2Transparency::Refract as u32,
         background: d.background.to_array(),
+        schedule: Rt2Schedule::DepthFirst as u32,
     }
 }

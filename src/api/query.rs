@@ -3,7 +3,7 @@
 
 use super::context::rt2_context;
 use super::ffi::{check_struct_size, guard, handle, slice, slice_mut, write_out};
-use super::options::traversal_from;
+use super::options::{query_mode_from, traversal_from, Rt2QueryMode};
 use super::scene::rt2_scene;
 use crate::context::QueryOptions;
 use crate::error::{Error, Rt2Status};
@@ -46,6 +46,9 @@ pub struct rt2_query_options {
     pub traversal: u32,
     /// Entries of the short stack, 1..=64 (default 3).
     pub short_stack_size: u32,
+    /// An `rt2_query_mode` value (default SINGLE). PACKET and STREAM follow the standard
+    /// traversal's order whatever `traversal` says, and return the same hits.
+    pub mode: u32,
 }
 
 /// Work done by a query (the thesis' table 1 counters), summed over the batch.
@@ -65,6 +68,7 @@ pub extern "C" fn rt2_query_options_default() -> rt2_query_options {
         struct_size: std::mem::size_of::<rt2_query_options>() as u32,
         traversal: 0,
         short_stack_size: d.short_stack_size as u32,
+        mode: Rt2QueryMode::Single as u32,
     }
 }
 
@@ -92,6 +96,7 @@ unsafe fn query_options(opt: *const rt2_query_options) -> crate::error::Result<Q
     Ok(QueryOptions {
         traversal: traversal_from(o.traversal)?,
         short_stack_size: o.short_stack_size as usize,
+        mode: query_mode_from(o.mode)?,
     })
 }
 

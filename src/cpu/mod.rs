@@ -1,5 +1,10 @@
-//! The CPU backend (layer 3a): single-ray traversals, batch queries and the Whitted renderer.
+//! The CPU backend (layer 3a): single-ray traversals, 4/8/16-ray packets, n-ray streams, SIMD
+//! intersection, batch queries and the Whitted renderer (depth-first or breadth-first).
 
+mod batch;
+pub mod packet;
 pub mod query;
+pub mod simd;
+pub mod stream;
 pub mod traverse;
 pub mod whitted;

@@ -2,12 +2,13 @@
 //! recursion, as the thesis' GPU loop), Phong shading with hard shadows, mirror reflection and
 //! transparency, image rows split into bands that the context's rayon pool renders.
 
+use super::query::{self, QueryMode};
 use super::traverse::{self, Traversal, TraverseOptions};
-use crate::camera::Camera;
+use crate::camera::{Camera, CameraRays};
 use crate::frame::Frame;
 use crate::geometry::{Hit, Ray, TraversalStats};
-use crate::render::{RenderOptions, Transparency};
-use crate::scene::Committed;
+use crate::render::{RenderOptions, Schedule, Transparency};
+use crate::scene::{Committed, Material};
 use crate::shading::{phong, reflect, refract, schlick};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -82,65 +83,112 @@ impl<'a> Tracer<'a> {
                 color += weight * self.opts.background;
                 continue;
             }
-            let s = self.scene;
-            let m = s.material_of(hit.prim);
-            let p = ray.at(hit.t);
-            let n_geo = s.prims.normal(hit.prim, p);
-            let entering = n_geo.dot(ray.dir) < 0.0;
-            let n = if entering { n_geo } else { -n_geo };
-            // The pattern is sampled just inside the surface: a checker boundary lying in the
-            // surface itself (a checkered plane at y = 0) would otherwise flicker with rounding.
-            let base = m.color_at(p - self.eps * n);
-            let local_weight = 1.0 - m.reflectivity - m.transparency;
-            if local_weight > 0.0 {
-                let mut local = m.ambient * base;
-                let above = p + self.eps * n;
-                for light in &s.lights {
-                    let to_light = light.position - above;
-                    let dist = to_light.length();
-                    let shadow = Ray::new(above, to_light / dist, 0.0, dist);
-                    if dist > 0.0 && !self.occluded(&shadow) {
-                        local += phong(m, base, p, n, -ray.dir, light);
-                    }
-                }
-                color += weight * local_weight * local;
+            let s = self.surface(&ray, &hit);
+            if s.local_weight > 0.0 {
+                let local = self.local(&s, &ray, |shadow| !self.occluded(shadow));
+                color += weight * s.local_weight * local;
             }
-            if depth >= self.opts.max_depth {
-                continue;
-            }
-            let mut push = |dir: Vec3, side: f32, w: f32| {
-                let w = weight * w;
-                if w.max_element() >= MIN_WEIGHT {
-                    pending.push((
-                        Ray::new(p + side * self.eps * n, dir, 0.0, f32::INFINITY),
-                        w,
-                        depth + 1,
-                    ));
-                }
-            };
-            let mut mirror = m.reflectivity;
-            if m.transparency > 0.0 {
-                match self.opts.transparency {
-                    Transparency::Straight => push(ray.dir, -1.0, m.transparency),
-                    Transparency::Refract => {
-                        let eta = if entering { 1.0 / m.ior } else { m.ior };
-                        match refract(ray.dir, n, eta) {
-                            Some(t) => {
-                                let f = schlick(-ray.dir.dot(n), eta);
-                                mirror += m.transparency * f;
-                                push(t, -1.0, m.transparency * (1.0 - f));
-                            }
-                            None => mirror += m.transparency,
-                        }
-                    }
-                }
-            }
-            if mirror > 0.0 {
-                push(reflect(ray.dir, n), 1.0, mirror);
-            }
+            self.secondary(&s, &ray, weight, depth, |r, w, d| pending.push((r, w, d)));
         }
         color
     }
+
+    /// The shading point of a hit: position, normal facing the ray, material, texture colour.
+    fn surface(&self, ray: &Ray, hit: &Hit) -> Surface<'a> {
+        let s = self.scene;
+        let m = s.material_of(hit.prim);
+        let p = ray.at(hit.t);
+        let n_geo = s.prims.normal(hit.prim, p);
+        let entering = n_geo.dot(ray.dir) < 0.0;
+        let n = if entering { n_geo } else { -n_geo };
+        Surface {
+            m,
+            p,
+            n,
+            entering,
+            // The pattern is sampled just inside the surface: a checker boundary lying in the
+            // surface itself (a checkered plane at y = 0) would otherwise flicker with rounding.
+            base: m.color_at(p - self.eps * n),
+            local_weight: 1.0 - m.reflectivity - m.transparency,
+        }
+    }
+
+    /// The shadow rays of a surface, light by light (`None` for a light at the point itself).
+    fn shadow_rays<'s>(&'s self, s: &'s Surface) -> impl Iterator<Item = Option<Ray>> + 's {
+        let above = s.p + self.eps * s.n;
+        self.scene.lights.iter().map(move |light| {
+            let to_light = light.position - above;
+            let dist = to_light.length();
+            (dist > 0.0).then(|| Ray::new(above, to_light / dist, 0.0, dist))
+        })
+    }
+
+    /// Ambient plus the Phong term of every light whose shadow ray `lit` says is unblocked.
+    fn local(&self, s: &Surface, ray: &Ray, mut lit: impl FnMut(&Ray) -> bool) -> Vec3 {
+        let mut local = s.m.ambient * s.base;
+        for (light, shadow) in self.scene.lights.iter().zip(self.shadow_rays(s)) {
+            if shadow.is_some_and(|r| lit(&r)) {
+                local += phong(s.m, s.base, s.p, s.n, -ray.dir, light);
+            }
+        }
+        local
+    }
+
+    /// The reflected and transmitted rays of a surface with their weights, below the depth limit.
+    fn secondary(
+        &self,
+        s: &Surface,
+        ray: &Ray,
+        weight: Vec3,
+        depth: u32,
+        mut out: impl FnMut(Ray, Vec3, u32),
+    ) {
+        if depth >= self.opts.max_depth {
+            return;
+        }
+        let (m, p, n) = (s.m, s.p, s.n);
+        let mut push = |dir: Vec3, side: f32, w: f32| {
+            let w = weight * w;
+            if w.max_element() >= MIN_WEIGHT {
+                out(
+                    Ray::new(p + side * self.eps * n, dir, 0.0, f32::INFINITY),
+                    w,
+                    depth + 1,
+                );
+            }
+        };
+        let mut mirror = m.reflectivity;
+        if m.transparency > 0.0 {
+            match self.opts.transparency {
+                Transparency::Straight => push(ray.dir, -1.0, m.transparency),
+                Transparency::Refract => {
+                    let eta = if s.entering { 1.0 / m.ior } else { m.ior };
+                    match refract(ray.dir, n, eta) {
+                        Some(t) => {
+                            let f = schlick(-ray.dir.dot(n), eta);
+                            mirror += m.transparency * f;
+                            push(t, -1.0, m.transparency * (1.0 - f));
+                        }
+                        None => mirror += m.transparency,
+                    }
+                }
+            }
+        }
+        if mirror > 0.0 {
+            push(reflect(ray.dir, n), 1.0, mirror);
+        }
+    }
+}
+
+/// A hit being shaded, shared by the depth-first and breadth-first schedules.
+struct Surface<'a> {
+    m: &'a Material,
+    p: Vec3,
+    /// Normal turned to face the incoming ray.
+    n: Vec3,
+    entering: bool,
+    base: Vec3,
+    local_weight: f32,
 }
 
 /// Deterministic per-pixel sample positions: a stratified grid jittered by a hash, so that a
@@ -177,6 +225,9 @@ pub fn render(
     traversal: Traversal,
     frame: &mut Frame,
 ) {
+    if opts.schedule == Schedule::BreadthFirst {
+        return render_breadth_first(scene, camera, opts, traversal, frame);
+    }
     let (w, h) = (frame.width(), frame.height());
     let rays = camera.rays(w, h);
     let tracer = Tracer::new(scene, opts, traversal);
@@ -193,15 +244,133 @@ pub fn render(
                     continue;
                 }
                 let (x, y) = ((idx % w as usize) as u32, (idx / w as usize) as u32);
-                let mut c = Vec3::ZERO;
-                for s in 0..opts.samples {
-                    let pixel =
-                        Vec2::new(x as f32, y as f32) + sample_offset(x, y, s, opts.samples, 0);
-                    let lens = sample_offset(x, y, s, opts.samples.max(2), 0x5bd1_e995);
-                    c += tracer.radiance(rays.ray(pixel, size, lens));
-                }
-                let c = (c / opts.samples as f32).clamp(Vec3::ZERO, Vec3::ONE) * 255.0 + 0.5;
-                px.copy_from_slice(&[c.x as u8, c.y as u8, c.z as u8, 255]);
+                let c = (0..opts.samples).fold(Vec3::ZERO, |c, s| {
+                    c + tracer.radiance(primary_ray(&rays, size, x, y, s, opts.samples))
+                });
+                px.copy_from_slice(&rgba(c, opts.samples));
             }
         });
+}
+
+/// Primary ray of sample `s` of pixel (x, y).
+fn primary_ray(rays: &CameraRays, size: Vec2, x: u32, y: u32, s: u32, samples: u32) -> Ray {
+    let pixel = Vec2::new(x as f32, y as f32) + sample_offset(x, y, s, samples, 0);
+    let lens = sample_offset(x, y, s, samples.max(2), 0x5bd1_e995);
+    rays.ray(pixel, size, lens)
+}
+
+/// The pixel of the sum `c` of `samples` radiances.
+fn rgba(c: Vec3, samples: u32) -> [u8; 4] {
+    let c = (c / samples as f32).clamp(Vec3::ZERO, Vec3::ONE) * 255.0 + 0.5;
+    [c.x as u8, c.y as u8, c.z as u8, 255]
+}
+
+/// A ray of a wavefront: its weight in the pixel, its depth and the sample (path) it adds to.
+#[derive(Clone, Copy)]
+struct WaveRay {
+    ray: Ray,
+    weight: Vec3,
+    depth: u32,
+    path: u32,
+}
+
+/// Breadth-first (wavefront) rendering, the schedule the vectorised-traversal paper needs: the
+/// closest hits of all rays of a depth as one stream query, then all their shadow rays as one
+/// occlusion query, then the next depth's rays. Each sample's radiance is the depth-first one's
+/// terms (same rays, same hits, same shading) summed in another order; float addition is not
+/// associative, so a pixel may round to the next 1/255 step.
+fn render_breadth_first(
+    scene: &Committed,
+    camera: &Camera,
+    opts: &RenderOptions,
+    traversal: Traversal,
+    frame: &mut Frame,
+) {
+    let (w, h) = (frame.width(), frame.height());
+    let rays = camera.rays(w, h);
+    let size = Vec2::new(w as f32, h as f32);
+    let tracer = Tracer::new(scene, opts, traversal);
+    let topts = tracer.traverse_options();
+    let (pixels, mask) = frame.pixels_and_mask_mut();
+    let traced: Vec<u32> = (0..w * h)
+        .filter(|&i| mask.is_none_or(|m| m[i as usize] != 0))
+        .collect();
+    let samples = opts.samples;
+    let mut wave: Vec<WaveRay> = traced
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(k, &i)| {
+            let rays = &rays;
+            (0..samples).map(move |s| WaveRay {
+                ray: primary_ray(rays, size, i % w, i / w, s, samples),
+                weight: Vec3::ONE,
+                depth: 1,
+                path: (k as u32) * samples + s,
+            })
+        })
+        .collect();
+    let mut color = vec![Vec3::ZERO; traced.len() * samples as usize];
+    let mut hits = Vec::new();
+    let mut shadows = Vec::new();
+    let mut blocked = Vec::new();
+    while !wave.is_empty() {
+        let rays: Vec<Ray> = wave.iter().map(|r| r.ray).collect();
+        hits.resize(rays.len(), Hit::MISS);
+        query::intersect(
+            scene,
+            &rays,
+            &mut hits,
+            traversal,
+            &topts,
+            QueryMode::Stream,
+        );
+        let surfaces: Vec<Option<Surface>> = wave
+            .par_iter()
+            .zip(&hits)
+            .map(|(r, hit)| hit.is_hit().then(|| tracer.surface(&r.ray, hit)))
+            .collect();
+        shadows.clear();
+        for s in surfaces.iter().flatten().filter(|s| s.local_weight > 0.0) {
+            shadows.extend(tracer.shadow_rays(s).flatten());
+        }
+        blocked.resize(shadows.len(), false);
+        query::occluded(
+            scene,
+            &shadows,
+            &mut blocked,
+            traversal,
+            &topts,
+            QueryMode::Stream,
+        );
+        let mut blocked = blocked.iter();
+        let mut next = Vec::new();
+        for (r, s) in wave.iter().zip(&surfaces) {
+            let c = &mut color[r.path as usize];
+            let Some(s) = s else {
+                *c += r.weight * opts.background;
+                continue;
+            };
+            if s.local_weight > 0.0 {
+                let local = tracer.local(s, &r.ray, |_| !blocked.next().is_some_and(|&b| b));
+                *c += r.weight * s.local_weight * local;
+            }
+            tracer.secondary(s, &r.ray, r.weight, r.depth, |ray, weight, depth| {
+                next.push(WaveRay {
+                    ray,
+                    weight,
+                    depth,
+                    path: r.path,
+                })
+            });
+        }
+        wave = next;
+    }
+    for (k, &i) in traced.iter().enumerate() {
+        let s = samples as usize;
+        let c = color[k * s..(k + 1) * s]
+            .iter()
+            .fold(Vec3::ZERO, |a, &c| a + c);
+        let i = i as usize * 4;
+        pixels[i..i + 4].copy_from_slice(&rgba(c, samples));
+    }
 }

@@ -29,7 +29,7 @@ const USAGE: &str = "usage:
       --straight            RT² transparency (no refraction)
       --threads N           worker threads (default: all cores)
       --builder B           sah (default, perfect splits) or midpoint
-  rt2 bench [frames|build|rays|all]    measure (rt2 bench --help)";
+  rt2 bench [frames|build|rays|tables|streams|all]    measure (rt2 bench --help)";
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -12,7 +12,7 @@ use glam::Vec3;
 
 /// The ray as the traversals read it, with the reciprocal direction (`±inf` for `±0` components).
 #[derive(Clone, Copy, Debug)]
-pub(super) struct TRay {
+pub(crate) struct TRay {
     pub ray: Ray,
     pub inv_dir: Vec3,
 }
@@ -44,7 +44,7 @@ impl TRay {
 /// or `None` when the ray misses it. Like `Aabb::clip_ray`, but with the slab's near and far planes
 /// chosen by the direction sign: a ray lying in a face plane (NaN distance) is inside the closed
 /// slab for either sign of zero, where `clip_ray` rejects it for `+0.0` and keeps it for `-0.0`.
-pub(super) fn clip(bounds: &Aabb, ray: &TRay) -> Option<(f32, f32)> {
+pub(crate) fn clip(bounds: &Aabb, ray: &TRay) -> Option<(f32, f32)> {
     let (mut t0, mut t1) = (ray.ray.tmin, ray.ray.tmax);
     for axis in 0..3 {
         let (near, far) = if ray.positive(axis) {

@@ -15,10 +15,11 @@ mod ropes;
 mod standard;
 
 pub use common::MAX_SHORT_STACK;
+pub(crate) use common::{clip, TRay};
 
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
-use common::{clip, AnyHit, Closest, LeafQuery, TRay};
+use common::{AnyHit, Closest, LeafQuery};
 use restart::Restart;
 
 /// A kd-tree traversal algorithm.

@@ -1,0 +1,213 @@
+//! What the packet and stream traversals share: the batch of rays in structure-of-arrays form
+//! (the paper's global ray array), the per-ray answer (closest hit or any hit), the grouping of
+//! rays by direction signs, and the one per-lane decision at an inner node.
+//!
+//! Both traversals make, for every ray, exactly the decisions of the standard single-ray
+//! traversal (`traverse::standard`): the same split distance `(split - org) * inv_dir`, the same
+//! tie rules, the same front-to-back order, the same stop rule at a leaf. Only the grouping of
+//! rays differs, so their hits are bit-identical to [`Traversal::Standard`]'s.
+//!
+//! [`Traversal::Standard`]: super::traverse::Traversal::Standard
+
+use super::simd::LeafPrims;
+use super::traverse::{clip, TRay};
+use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
+use crate::kdtree::KdTree;
+
+/// What a batch query computes per ray, written once for packets and streams.
+pub(crate) trait Answer {
+    /// Resets ray `i`'s answer and tests the planes (outside the tree). False when the ray needs
+    /// no traversal: degenerate, or already answered by a plane (any-hit).
+    fn start(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool;
+    /// Tests ray `i` against a leaf's prepared primitives; `t_exit` is where the ray leaves the
+    /// leaf. True when the ray is finished (the standard traversal's stop rule).
+    fn leaf<const N: usize>(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &LeafPrims<N>,
+        i: usize,
+        ray: &Ray,
+        t_exit: f32,
+        stats: &mut TraversalStats,
+    ) -> bool;
+}
+
+/// Closest hits, one per ray.
+pub(crate) struct Closest<'a>(pub &'a mut [Hit]);
+
+impl Answer for Closest<'_> {
+    #[inline(always)]
+    fn start(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool {
+        self.0[i] = Hit::MISS;
+        if ray.is_degenerate() {
+            return false;
+        }
+        prims.intersect_planes(ray, &mut self.0[i]);
+        true
+    }
+
+    #[inline(always)]
+    fn leaf<const N: usize>(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &LeafPrims<N>,
+        i: usize,
+        ray: &Ray,
+        t_exit: f32,
+        stats: &mut TraversalStats,
+    ) -> bool {
+        stats.prim_tests += leaf.count as u64;
+        let hit = &mut self.0[i];
+        for b in &leaf.blocks {
+            b.intersect(ray, hit);
+        }
+        for &p in &leaf.others {
+            prims.intersect(p, ray, hit);
+        }
+        // Strictly before the exit, as `traverse::common::Closest`.
+        hit.t < t_exit
+    }
+}
+
+/// Any hit in the ray's window (shadow rays), one flag per ray.
+pub(crate) struct AnyHit<'a>(pub &'a mut [bool]);
+
+impl Answer for AnyHit<'_> {
+    #[inline(always)]
+    fn start(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool {
+        self.0[i] = false;
+        if ray.is_degenerate() {
+            return false;
+        }
+        let mut planes = Hit::MISS;
+        prims.intersect_planes(ray, &mut planes);
+        self.0[i] = planes.is_hit();
+        !self.0[i]
+    }
+
+    #[inline(always)]
+    fn leaf<const N: usize>(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &LeafPrims<N>,
+        i: usize,
+        ray: &Ray,
+        _t_exit: f32,
+        stats: &mut TraversalStats,
+    ) -> bool {
+        stats.prim_tests += leaf.count as u64;
+        let found = leaf.blocks.iter().any(|b| b.occludes(ray))
+            || leaf.others.iter().any(|&p| {
+                let mut hit = Hit::MISS;
+                prims.intersect(p, ray, &mut hit)
+            });
+        self.0[i] = found;
+        found
+    }
+}
+
+/// The batch: rays, their origins and reciprocal directions by axis (structure of arrays, so a
+/// node step gathers one float per ray), the finished flags and the answer.
+pub(crate) struct Batch<'a, A> {
+    pub tree: &'a KdTree,
+    pub prims: &'a PrimitiveSet,
+    pub rays: &'a [Ray],
+    pub org: [Vec<f32>; 3],
+    pub inv: [Vec<f32>; 3],
+    /// Rays whose answer is final: dropped from every later list (the paper's "rayos
+    /// terminados").
+    pub done: Vec<bool>,
+    pub answer: A,
+    pub stats: TraversalStats,
+}
+
+/// A ray entering the tree: its index and its segment `[t0, t1]` inside the root voxel.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Root {
+    pub id: u32,
+    pub t0: f32,
+    pub t1: f32,
+}
+
+impl<'a, A: Answer> Batch<'a, A> {
+    /// Prepares the rays and returns them grouped by octant (the signs of the direction, `-0.0`
+    /// negative as in `TRay::positive`): within a group every node has the same near child for
+    /// every ray, so the group can be traversed front to back at once (paper: ≤ 8 traversals).
+    pub fn new(
+        tree: &'a KdTree,
+        prims: &'a PrimitiveSet,
+        rays: &'a [Ray],
+        mut answer: A,
+    ) -> (Self, [Vec<Root>; 8]) {
+        let n = rays.len();
+        let mut org = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+        let mut inv = org.clone();
+        let mut groups: [Vec<Root>; 8] = Default::default();
+        for (i, ray) in rays.iter().enumerate() {
+            let r = TRay::new(ray);
+            for a in 0..3 {
+                org[a][i] = ray.org[a];
+                inv[a][i] = r.inv_dir[a];
+            }
+            if !answer.start(prims, i, ray) || tree.nodes.is_empty() {
+                continue;
+            }
+            if let Some((t0, t1)) = clip(&tree.bounds, &r) {
+                groups[octant(ray)].push(Root {
+                    id: i as u32,
+                    t0,
+                    t1,
+                });
+            }
+        }
+        let batch = Batch {
+            tree,
+            prims,
+            rays,
+            org,
+            inv,
+            done: vec![false; n],
+            answer,
+            stats: TraversalStats::default(),
+        };
+        (batch, groups)
+    }
+
+    /// Tests ray `i` against a prepared leaf and marks it done when finished.
+    #[inline(always)]
+    pub fn visit_leaf<const N: usize>(&mut self, leaf: &LeafPrims<N>, i: u32, t_exit: f32) -> bool {
+        let i = i as usize;
+        self.stats.leaves_visited += 1;
+        let done = self
+            .answer
+            .leaf(self.prims, leaf, i, &self.rays[i], t_exit, &mut self.stats);
+        self.done[i] = done;
+        done
+    }
+}
+
+/// Octant index of a ray: bit `a` set when the direction is negative on axis `a`.
+#[inline]
+pub(crate) fn octant(ray: &Ray) -> usize {
+    (0..3)
+        .filter(|&a| ray.dir[a].is_sign_negative())
+        .fold(0, |o, a| o | 1 << a)
+}
+
+/// Whether the direction is positive on each axis, for the rays of octant `o`.
+pub(crate) fn positive(o: usize) -> [bool; 3] {
+    [o & 1 == 0, o & 2 == 0, o & 4 == 0]
+}
+
+/// One ray at an inner node, segment `[t0, t1]`, split distance `ts`: the cases of
+/// `traverse::common::step` written as lane masks. Returns whether the ray enters the near child
+/// and the end of its segment there, whether it enters the far child and the start there.
+/// (`ts <= t0` or NaN: far only; `ts >= t1`: near only; else both, cut at `ts`.)
+#[inline(always)]
+pub(crate) fn split_lane(ts: f32, t0: f32, t1: f32) -> (bool, f32, bool, f32) {
+    let near = ts > t0;
+    let far = !near || ts < t1;
+    let near_t1 = if ts < t1 { ts } else { t1 };
+    let far_t0 = if near { ts } else { t0 };
+    (near, near_t1, far, far_t0)
+}

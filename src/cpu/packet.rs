@@ -1,0 +1,238 @@
+//! Packet traversal (Wald et al. 2001, the "4 rayos" column of the vectorised-traversal paper,
+//! seeds/000): N rays of one octant walk the tree together, one node fetch for all, with an active
+//! mask; a lane leaves the mask where the standard traversal would not take that ray. Generic over
+//! the lane width N (4 with SSE, 8 with AVX2, 16 with AVX-512; see [`super::simd`]).
+//!
+//! The same function finishes a stream traversal when few rays reach a node (the paper's future
+//! work: stop paying for lists when the rays no longer share nodes).
+
+use super::batch::{split_lane, Answer, Batch, Root};
+use super::simd::{self, Kernel, LeafPrims, Width};
+use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
+use crate::kdtree::KdTree;
+
+/// Up to N rays with their segments `[t0, t1]` at some node; `mask` bit `l` marks lane `l` live.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Lanes<const N: usize> {
+    pub id: [u32; N],
+    pub t0: [f32; N],
+    pub t1: [f32; N],
+    pub mask: u32,
+}
+
+impl<const N: usize> Lanes<N> {
+    pub fn new() -> Self {
+        Lanes {
+            id: [0; N],
+            t0: [0.0; N],
+            t1: [0.0; N],
+            mask: 0,
+        }
+    }
+}
+
+/// A pending far subtree: the node and the live lanes' segments there.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Entry<const N: usize> {
+    node: u32,
+    lanes: Lanes<N>,
+}
+
+/// Reused buffers of one thread: the packet stack and the leaf's gathered triangles.
+pub(crate) struct Scratch<const N: usize> {
+    pub stack: Vec<Entry<N>>,
+    pub leaf: LeafPrims<N>,
+}
+
+impl<const N: usize> Scratch<N> {
+    pub fn new() -> Self {
+        Scratch {
+            stack: Vec::with_capacity(64),
+            leaf: LeafPrims::default(),
+        }
+    }
+}
+
+/// Traverses the subtree of `node` with the packet `p` (all lanes of octant `positive`), front
+/// to back, as the standard traversal does for each lane: descend to the nearest leaf, keep far
+/// children on a stack, stop a lane when its closest hit lies before the leaf's exit.
+#[inline(always)]
+pub(crate) fn traverse<const N: usize, A: Answer>(
+    b: &mut Batch<A>,
+    s: &mut Scratch<N>,
+    node: u32,
+    p: Lanes<N>,
+    positive: [bool; 3],
+) {
+    // The packet's origins and reciprocal directions, gathered once (structure of arrays).
+    let (mut org, mut inv) = ([[0.0f32; N]; 3], [[0.0f32; N]; 3]);
+    for a in 0..3 {
+        for l in 0..N {
+            org[a][l] = b.org[a][p.id[l] as usize];
+            inv[a][l] = b.inv[a][p.id[l] as usize];
+        }
+    }
+    let tree = b.tree;
+    let base = s.stack.len();
+    let mut dead = 0u32;
+    let mut cur = Entry { node, lanes: p };
+    loop {
+        let n = tree.nodes[cur.node as usize];
+        let live = cur.lanes.mask;
+        b.stats.nodes_visited += live.count_ones() as u64;
+        let next = if n.is_leaf() {
+            s.leaf.gather(
+                &b.prims.triangles,
+                tree.leaf_prims(n.index()),
+                live.count_ones() as usize,
+            );
+            let mut m = live;
+            while m != 0 {
+                let l = m.trailing_zeros() as usize;
+                m &= m - 1;
+                if b.visit_leaf(&s.leaf, cur.lanes.id[l], cur.lanes.t1[l]) {
+                    dead |= 1 << l;
+                }
+            }
+            None
+        } else {
+            let axis = n.axis();
+            let (below, above) = (n.index(), n.index() + 1);
+            let (near, far) = if positive[axis] {
+                (below, above)
+            } else {
+                (above, below)
+            };
+            let (mut nm, mut fm) = (0u32, 0u32);
+            let (mut near_t1, mut far_t0) = ([0.0f32; N], [0.0f32; N]);
+            for l in 0..N {
+                let ts = (n.split - org[axis][l]) * inv[axis][l];
+                let (en, t1, ef, t0) = split_lane(ts, cur.lanes.t0[l], cur.lanes.t1[l]);
+                nm |= (en as u32) << l;
+                fm |= (ef as u32) << l;
+                near_t1[l] = t1;
+                far_t0[l] = t0;
+            }
+            let (nm, fm) = (nm & live, fm & live);
+            let far_entry = Entry {
+                node: far,
+                lanes: Lanes {
+                    t0: far_t0,
+                    mask: fm,
+                    ..cur.lanes
+                },
+            };
+            let near_entry = Entry {
+                node: near,
+                lanes: Lanes {
+                    t1: near_t1,
+                    mask: nm,
+                    ..cur.lanes
+                },
+            };
+            match (nm != 0, fm != 0) {
+                (true, true) => {
+                    s.stack.push(far_entry);
+                    Some(near_entry)
+                }
+                (true, false) => Some(near_entry),
+                (false, true) => Some(far_entry),
+                (false, false) => None,
+            }
+        };
+        cur = match next {
+            Some(e) => e,
+            None => loop {
+                if s.stack.len() == base {
+                    return;
+                }
+                let mut e = s.stack.pop().expect("the stack is above its base");
+                e.lanes.mask &= !dead;
+                if e.lanes.mask != 0 {
+                    break e;
+                }
+            },
+        };
+    }
+}
+
+/// The packet mode of a batch: rays grouped by octant, each group cut into packets of N
+/// consecutive rays (consecutive rays of an image are coherent), each packet traversed at once.
+pub(crate) fn run<A: Answer>(
+    tree: &KdTree,
+    prims: &PrimitiveSet,
+    rays: &[Ray],
+    answer: A,
+    width: Width,
+) -> TraversalStats {
+    struct Job<'a, A> {
+        tree: &'a KdTree,
+        prims: &'a PrimitiveSet,
+        rays: &'a [Ray],
+        answer: A,
+    }
+    impl<A: Answer> Kernel for Job<'_, A> {
+        type Out = TraversalStats;
+        #[inline(always)]
+        fn run<const N: usize>(self) -> TraversalStats {
+            let (mut b, groups) = Batch::new(self.tree, self.prims, self.rays, self.answer);
+            let mut s = Scratch::<N>::new();
+            for (o, group) in groups.iter().enumerate() {
+                for chunk in group.chunks(N) {
+                    traverse(
+                        &mut b,
+                        &mut s,
+                        0,
+                        lanes_of(chunk),
+                        super::batch::positive(o),
+                    );
+                }
+            }
+            b.stats
+        }
+    }
+    simd::dispatch(
+        width,
+        Job {
+            tree,
+            prims,
+            rays,
+            answer,
+        },
+    )
+}
+
+/// Packs up to N rays into lanes.
+#[inline(always)]
+pub(crate) fn lanes_of<const N: usize>(roots: &[Root]) -> Lanes<N> {
+    let mut p = Lanes::new();
+    for (l, r) in roots.iter().take(N).enumerate() {
+        p.id[l] = r.id;
+        p.t0[l] = r.t0;
+        p.t1[l] = r.t1;
+        p.mask |= 1 << l;
+    }
+    p
+}
+
+/// Closest hits of `rays` with N-ray packets (one thread).
+pub fn intersect(
+    tree: &KdTree,
+    prims: &PrimitiveSet,
+    rays: &[Ray],
+    hits: &mut [Hit],
+    width: Width,
+) -> TraversalStats {
+    run(tree, prims, rays, super::batch::Closest(hits), width)
+}
+
+/// Any-hit queries of `rays` with N-ray packets (one thread).
+pub fn occluded(
+    tree: &KdTree,
+    prims: &PrimitiveSet,
+    rays: &[Ray],
+    found: &mut [bool],
+    width: Width,
+) -> TraversalStats {
+    run(tree, prims, rays, super::batch::AnyHit(found), width)
+}

@@ -1,0 +1,222 @@
+//! SIMD lane width and the 1 ray × N triangles Möller–Trumbore test of the vectorised-traversal
+//! paper (Noguera & Ureña, seeds/000, "intersección rayo–triángulo": the precomputed 1×4 variant).
+//!
+//! The code is portable: fixed-size `[f32; N]` lanes written as straight-line loops that LLVM
+//! turns into vector instructions. [`dispatch`] picks `N` at run time from the CPU's features and
+//! runs the whole kernel (traversal included, inlined) inside a `#[target_feature]` function, so
+//! the same source becomes SSE (4 lanes), AVX2 (8) or AVX-512 (16) code.
+
+use crate::geometry::{Hit, PrimIndex, Ray, Triangle, INVALID};
+
+/// Lane width of packets, stream lists and triangle blocks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Width {
+    /// SSE2, every x86-64 (and the portable fallback elsewhere).
+    W4,
+    /// AVX2.
+    W8,
+    /// AVX-512F.
+    W16,
+}
+
+impl Width {
+    pub const ALL: [Width; 3] = [Width::W4, Width::W8, Width::W16];
+
+    pub fn lanes(self) -> usize {
+        match self {
+            Width::W4 => 4,
+            Width::W8 => 8,
+            Width::W16 => 16,
+        }
+    }
+
+    /// Whether this CPU runs the width's instructions.
+    pub fn supported(self) -> bool {
+        match self {
+            Width::W4 => true,
+            #[cfg(target_arch = "x86_64")]
+            Width::W8 => std::arch::is_x86_feature_detected!("avx2"),
+            #[cfg(target_arch = "x86_64")]
+            Width::W16 => std::arch::is_x86_feature_detected!("avx512f"),
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => false,
+        }
+    }
+
+    /// The width used by default: 8 lanes where AVX2 exists, else 4. AVX-512's 16 lanes are
+    /// available ([`Width::W16`]) but measured no faster than 8 (`rt2 bench streams`, width
+    /// columns of BENCHMARKS.md): the SAH leaves hold ~3 triangles, so a 16-triangle block is
+    /// mostly padding, and the list compaction stays one lane at a time.
+    pub fn best() -> Width {
+        if Width::W8.supported() {
+            Width::W8
+        } else {
+            Width::W4
+        }
+    }
+}
+
+/// A computation generic over the lane width, run by [`dispatch`].
+pub trait Kernel {
+    type Out;
+    fn run<const N: usize>(self) -> Self::Out;
+}
+
+/// Runs `k` with `width` lanes, compiled for the instruction set of that width. Everything the
+/// kernel calls in its hot loop is `#[inline(always)]`, so it is compiled with the wrapper's
+/// target features. A width the CPU lacks falls back to the portable 4 lanes.
+pub fn dispatch<K: Kernel>(width: Width, k: K) -> K::Out {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if width == Width::W16 && width.supported() {
+            // SAFETY: the CPU has AVX-512F (checked just above).
+            return unsafe { run_avx512(k) };
+        }
+        if width == Width::W8 && width.supported() {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { run_avx2(k) };
+        }
+    }
+    let _ = width;
+    k.run::<4>()
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn run_avx2<K: Kernel>(k: K) -> K::Out {
+    k.run::<8>()
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2")]
+unsafe fn run_avx512<K: Kernel>(k: K) -> K::Out {
+    k.run::<16>()
+}
+
+/// N triangles in structure-of-arrays form (`v0`, `e1`, `e2` per axis). Unused lanes hold a
+/// zero triangle, whose determinant is 0: never hit.
+#[derive(Clone, Copy, Debug)]
+pub struct TriBlock<const N: usize> {
+    v0: [[f32; N]; 3],
+    e1: [[f32; N]; 3],
+    e2: [[f32; N]; 3],
+    prim: [PrimIndex; N],
+}
+
+impl<const N: usize> TriBlock<N> {
+    const EMPTY: Self = TriBlock {
+        v0: [[0.0; N]; 3],
+        e1: [[0.0; N]; 3],
+        e2: [[0.0; N]; 3],
+        prim: [INVALID; N],
+    };
+
+    /// Closest-hit test of one ray against the block, offered to `hit` lane by lane. Every lane
+    /// does the scalar [`Triangle::intersect`]'s operations in the same order (no fused
+    /// multiply-add), so `t`, `u`, `v` are bit-identical to the single-ray path.
+    #[inline(always)]
+    pub fn intersect(&self, ray: &Ray, hit: &mut Hit) {
+        let tmax = hit.bound(ray);
+        let (t, u, v) = self.lanes(ray, tmax);
+        for l in 0..N {
+            if t[l] < f32::INFINITY {
+                hit.offer(t[l], u[l], v[l], self.prim[l]);
+            }
+        }
+    }
+
+    /// Any-hit test: whether some lane is hit in `[tmin, tmax)`.
+    #[inline(always)]
+    pub fn occludes(&self, ray: &Ray) -> bool {
+        let (t, _, _) = self.lanes(ray, ray.tmax);
+        t.iter().any(|&t| t < f32::INFINITY)
+    }
+
+    /// Möller–Trumbore on every lane; `t = inf` marks a miss.
+    #[inline(always)]
+    fn lanes(&self, ray: &Ray, tmax: f32) -> ([f32; N], [f32; N], [f32; N]) {
+        let (o, d) = (ray.org, ray.dir);
+        let (mut t_out, mut u_out, mut v_out) = ([0.0; N], [0.0; N], [0.0; N]);
+        for l in 0..N {
+            let [e1x, e1y, e1z] = [self.e1[0][l], self.e1[1][l], self.e1[2][l]];
+            let [e2x, e2y, e2z] = [self.e2[0][l], self.e2[1][l], self.e2[2][l]];
+            // p = dir × e2 (glam's Vec3::cross order), det = e1 · p.
+            let px = d.y * e2z - e2y * d.z;
+            let py = d.z * e2x - e2z * d.x;
+            let pz = d.x * e2y - e2x * d.y;
+            let det = (e1x * px) + (e1y * py) + (e1z * pz);
+            let inv = 1.0 / det;
+            let sx = o.x - self.v0[0][l];
+            let sy = o.y - self.v0[1][l];
+            let sz = o.z - self.v0[2][l];
+            let u = ((sx * px) + (sy * py) + (sz * pz)) * inv;
+            // q = s × e1
+            let qx = sy * e1z - e1y * sz;
+            let qy = sz * e1x - e1z * sx;
+            let qz = sx * e1y - e1x * sy;
+            let v = ((d.x * qx) + (d.y * qy) + (d.z * qz)) * inv;
+            let t = ((e2x * qx) + (e2y * qy) + (e2z * qz)) * inv;
+            // The scalar test's rejections, as masks rather than early returns.
+            let ok = (det != 0.0 && det.is_finite())
+                & (0.0..=1.0).contains(&u)
+                & !(v < 0.0 || u + v > 1.0)
+                & (t >= ray.tmin)
+                & (t < tmax);
+            t_out[l] = if ok { t } else { f32::INFINITY };
+            u_out[l] = u;
+            v_out[l] = v;
+        }
+        (t_out, u_out, v_out)
+    }
+}
+
+/// Fewest rays at a leaf for which its triangles are gathered into blocks. Gathering costs about
+/// as much as testing each triangle once, and SAH leaves hold ~3 triangles, so for one or two
+/// rays the scalar test is cheaper (on the bunny's sets, stream ×8 went from 1.13× to 1.34× the
+/// single-ray speed on primary rays with this rule; incoherent rays were within noise).
+pub const GATHER_MIN_RAYS: usize = 3;
+
+/// A leaf's primitives prepared once per leaf visit for all the rays that reach it: triangles
+/// gathered into [`TriBlock`]s, other kinds kept as indices for the scalar tests. Reused from
+/// leaf to leaf, so a traversal allocates nothing per node.
+#[derive(Default)]
+pub struct LeafPrims<const N: usize> {
+    pub blocks: Vec<TriBlock<N>>,
+    pub others: Vec<u32>,
+    /// Primitive tests one ray costs here (for the statistics).
+    pub count: usize,
+}
+
+impl<const N: usize> LeafPrims<N> {
+    /// Prepares the leaf `prims` for `rays` rays. Gathering costs about one triangle test per
+    /// triangle, so for fewer than [`GATHER_MIN_RAYS`] rays every primitive stays scalar.
+    #[inline(always)]
+    pub fn gather(&mut self, triangles: &[Triangle], prims: &[u32], rays: usize) {
+        self.blocks.clear();
+        self.others.clear();
+        self.count = prims.len();
+        if rays < GATHER_MIN_RAYS {
+            self.others.extend_from_slice(prims);
+            return;
+        }
+        let mut lane = N;
+        for &p in prims {
+            let Some(tri) = triangles.get(p as usize) else {
+                self.others.push(p);
+                continue;
+            };
+            if lane == N {
+                self.blocks.push(TriBlock::EMPTY);
+                lane = 0;
+            }
+            let b = self.blocks.last_mut().expect("a block was just pushed");
+            for a in 0..3 {
+                b.v0[a][lane] = tri.v0[a];
+                b.e1[a][lane] = tri.e1[a];
+                b.e2[a][lane] = tri.e2[a];
+            }
+            b.prim[lane] = p;
+            lane += 1;
+        }
+    }
+}
