@@ -331,6 +331,10 @@ typedef struct rt2_render_options {
    * Colour of rays that leave the scene.
    */
   float background[3];
+  /**
+   * An `rt2_gpu_path` value (default AUTO).
+   */
+  uint32_t gpu_path;
 } rt2_render_options;
 
 /**

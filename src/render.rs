@@ -13,6 +13,18 @@ pub enum Transparency {
     Refract,
 }
 
+/// Which GPU render path runs a frame (thesis §3.3); ignored on the CPU.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GpuPathRequest {
+    /// The dispatch layer picks by the share of reflective and transparent primitives.
+    #[default]
+    Auto,
+    /// One kernel traces every ray of a pixel.
+    Megakernel,
+    /// One kernel per bounce; rays still alive are compacted by a prefix sum.
+    Wavefront,
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
     /// Longest chain of rays from the eye (1 = primary rays only, plus shadows).
@@ -24,6 +36,7 @@ pub struct RenderOptions {
     pub short_stack_size: usize,
     pub transparency: Transparency,
     pub background: Vec3,
+    pub gpu_path: GpuPathRequest,
 }
 
 impl Default for RenderOptions {
@@ -35,6 +48,7 @@ impl Default for RenderOptions {
             short_stack_size: 3,
             transparency: Transparency::Refract,
             background: Vec3::new(0.05, 0.05, 0.08),
+            gpu_path: GpuPathRequest::Auto,
         }
     }
 }

@@ -7,7 +7,7 @@ use crate::cpu::traverse::Traversal;
 use crate::dispatch::BackendRequest;
 use crate::error::{Error, Result};
 use crate::kdtree::{BuildOptions, Builder, Layout};
-use crate::render::{RenderOptions, Transparency};
+use crate::render::{GpuPathRequest, RenderOptions, Transparency};
 use crate::scene::{Checker, Material};
 use glam::Vec3;
 
@@ -43,6 +43,18 @@ pub enum Rt2Transparency {
     Straight = 0,
     /// Snell refraction with Fresnel reflection.
     Refract = 1,
+}
+
+/// GPU render path (`rt2_render_options.gpu_path`); RT² thesis §3.3. Ignored on the CPU.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2GpuPath {
+    /// The library picks by the share of reflective and transparent primitives.
+    Auto = 0,
+    /// One kernel traces every ray of a pixel.
+    Megakernel = 1,
+    /// One kernel per bounce; live rays compacted by a parallel prefix sum.
+    Wavefront = 2,
 }
 
 /// kd-tree builder (`rt2_build_options.builder`).
@@ -298,6 +310,8 @@ pub struct rt2_render_options {
     pub transparency: u32,
     /// Colour of rays that leave the scene.
     pub background: [f32; 3],
+    /// An `rt2_gpu_path` value (default AUTO).
+    pub gpu_path: u32,
 }
 
 impl rt2_render_options {
@@ -333,7 +347,14 @@ impl rt2_render_options {
                 "background is {background} (must be finite and >= 0)"
             )));
         }
+        let gpu_path = match self.gpu_path {
+            0 => GpuPathRequest::Auto,
+            1 => GpuPathRequest::Megakernel,
+            2 => GpuPathRequest::Wavefront,
+            v => return Err(enum_error("rt2_gpu_path", v)),
+        };
         Ok(RenderOptions {
+            gpu_path,
             max_depth: self.max_depth,
             samples: self.samples,
             traversal: traversal_from(self.traversal)?,
@@ -356,5 +377,6 @@ pub extern "C" fn rt2_render_options_default() -> rt2_render_options {
         short_stack_size: d.short_stack_size as u32,
         transparency: Rt2Transparency::Refract as u32,
         background: d.background.to_array(),
+        gpu_path: Rt2GpuPath::Auto as u32,
     }
 }

@@ -43,7 +43,11 @@ pub struct Committed {
     pub bounds: Aabb,
     /// Time to place primitives in world space and build the tree.
     pub commit_ms: f32,
+    /// Unique per commit in this process: the GPU backend re-checks its copy when it changes.
+    pub id: u64,
 }
+
+static NEXT_COMMIT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
 impl Committed {
     pub fn material_of(&self, prim: u32) -> &Material {
@@ -317,6 +321,7 @@ impl Scene {
             materials: self.materials.clone(),
             lights: self.lights.clone(),
             commit_ms: start.elapsed().as_secs_f32() * 1e3,
+            id: NEXT_COMMIT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         });
         self.dirty = false;
         Ok(())
