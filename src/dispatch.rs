@@ -73,7 +73,7 @@ pub fn decide_backend(
     };
     match request {
         BackendRequest::Cpu => cpu(format!("CPU requested by {source}"), false),
-        BackendRequest::Gpu => match gpu::open(gpu_opts) {
+        BackendRequest::Gpu => match gpu::open(gpu_opts, true) {
             // Explicitly requested, a software adapter is accepted (that is how CI tests).
             Ok(g) => Ok((
                 Decision {
@@ -88,15 +88,7 @@ pub fn decide_backend(
                 format!("GPU requested by {source}, but {why}"),
             )),
         },
-        BackendRequest::Auto => match gpu::open(gpu_opts) {
-            Ok(g) if g.software && !gpu_opts.auto_accepts_software => cpu(
-                format!(
-                    "AUTO from {source}: the only adapter, {}, is a software rasteriser, \
-                     slower than RT2's CPU path, so tracing runs on the CPU",
-                    g.description
-                ),
-                true,
-            ),
+        BackendRequest::Auto => match gpu::open(gpu_opts, gpu_opts.auto_accepts_software) {
             Ok(g) => Ok((
                 Decision {
                     backend: Backend::Gpu,

@@ -95,12 +95,15 @@ fn rank(t: wgpu::DeviceType) -> u8 {
     }
 }
 
-/// Finds adapters and opens devices. `Err` carries the reason no GPU is usable.
-pub fn open(opts: &GpuOptions) -> std::result::Result<Gpu, String> {
+/// Finds adapters and opens devices. `Err` carries the reason no GPU is usable; with
+/// `accept_software` false, a software adapter is such a reason (it is slower than RT2's CPU
+/// path) and no device is created for it.
+pub fn open(opts: &GpuOptions, accept_software: bool) -> std::result::Result<Gpu, String> {
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
     desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
+    let backends = desc.backends;
     let instance = wgpu::Instance::new(desc);
-    let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
     if adapters.is_empty() {
         return Err("no GPU adapter was found (wgpu found no Vulkan driver)".into());
     }
@@ -118,6 +121,13 @@ pub fn open(opts: &GpuOptions) -> std::result::Result<Gpu, String> {
     adapters.sort_by_key(|a| rank(a.get_info().device_type));
     // Several GPUs of the best kind share frames; a software adapter never joins hardware.
     let best = adapters[0].get_info().device_type;
+    if best == wgpu::DeviceType::Cpu && !accept_software {
+        let i = adapters[0].get_info();
+        return Err(format!(
+            "the only adapter, {} ({:?}, {:?}), is a software one, slower than RT2's CPU path",
+            i.name, i.device_type, i.backend
+        ));
+    }
     adapters.retain(|a| a.get_info().device_type == best);
     let chosen: Vec<&wgpu::Adapter> = if opts.logical_devices > 0 {
         vec![&adapters[0]; opts.logical_devices]
@@ -280,18 +290,16 @@ pub(crate) const WAVE_ENTRIES: [&str; 5] = [
 impl Device {
     /// Largest storage binding, in bytes: what one buffer of the scene or a job may hold.
     pub fn max_binding(&self) -> u64 {
-        let l =
-            self.limits.max_storage_buffer_binding_size.min(self.limits.max_buffer_size);
+        let l = self
+            .limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size);
         self.max_binding_override.map_or(l, |o| o.min(l))
     }
 
     /// The pipelines of a traversal's program, compiled on first use. Render: megakernel
     /// first, then [`WAVE_ENTRIES`].
-    pub(crate) fn pipelines(
-        &self,
-        t: Traversal,
-        p: Program,
-    ) -> Result<Pipelines> {
+    pub(crate) fn pipelines(&self, t: Traversal, p: Program) -> Result<Pipelines> {
         let mut cache = self.pipelines.lock().map_err(|_| poisoned())?;
         if let Some(v) = cache.get(&(t, p)) {
             return Ok(v.clone());

@@ -129,4 +129,35 @@ mod tests {
             .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&src)));
         }
     }
+
+    /// A kernel that does not compile is an error status from `create_pipelines`, not a
+    /// panic through wgpu's default error handler.
+    #[test]
+    fn a_bad_kernel_is_an_error_not_a_panic() {
+        let gpu = match super::super::open(&Default::default(), true) {
+            Ok(g) => g,
+            Err(why) => {
+                assert!(
+                    std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
+                    "{why}"
+                );
+                eprintln!("SKIPPED (no GPU adapter): {why}");
+                return;
+            }
+        };
+        let dev = &gpu.devices[0];
+        let bad = source(Traversal::Standard, Program::Query).replace("fn intersect_main", "fn ;");
+        let e = create_pipelines(
+            &dev.device,
+            "bad",
+            &bad,
+            &dev.layouts.query,
+            &["intersect_main"],
+        )
+        .unwrap_err();
+        assert_eq!(e.status, Rt2Status::Internal);
+        assert!(e.message.contains("failed to compile"), "{}", e.message);
+        // The device still works afterwards.
+        assert!(dev.pipelines(Traversal::Standard, Program::Query).is_ok());
+    }
 }
