@@ -13,7 +13,7 @@ fn restart_traverse(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<funct
     var len = 0u;
     var root = 0u;
     var t_max = scene.t0;
-    for (var round = 0u; round < params.n_leaves; round++) {
+    for (var visit = 0u; visit < params.n_leaves; visit++) {
         var node = root;
         var t0 = t_max;
         var t1 = scene.t1;

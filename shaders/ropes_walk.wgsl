@@ -45,7 +45,7 @@ fn rope_walk(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, St
     var node = start;
     var t_entry = t_start;
     var miss_test = miss_test_on;
-    for (var round = 0u; round < params.n_leaves; round++) {
+    for (var visit = 0u; visit < params.n_leaves; visit++) {
         var t1 = inf();
         loop {
             let n = nodes[node];

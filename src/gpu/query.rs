@@ -32,11 +32,11 @@ pub(crate) fn run(
     let mut stats = TraversalStats::default();
     for (k, piece) in rays.chunks(per).enumerate() {
         let gpu_rays: Vec<GpuRay> = piece.iter().map(gpu_ray).collect();
-        let params = GpuParams {
+        let params = cache.job(GpuParams {
             count: piece.len() as u32,
             short_stack: short_stack as u32,
-            ..cache.params
-        };
+            ..GpuParams::default()
+        });
         let n = piece.len() as u64;
         let ray_buf = dev.upload(
             "rays",

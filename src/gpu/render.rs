@@ -127,21 +127,9 @@ impl Job<'_> {
             .bind_group
             .clone()
             .ok_or_else(|| GpuError::Other(panicked()))?;
-        let mut base = self.base;
-        let scene_params = cache.params;
+        let base = cache.job(self.base);
+        // The bind group keeps the scene's buffers alive: other jobs may use the device now.
         drop(cache);
-        base = GpuParams {
-            bounds_min: scene_params.bounds_min,
-            bounds_max: scene_params.bounds_max,
-            n_tri: scene_params.n_tri,
-            n_sph: scene_params.n_sph,
-            n_ell: scene_params.n_ell,
-            n_box: scene_params.n_box,
-            n_planes: scene_params.n_planes,
-            n_leaves: scene_params.n_leaves,
-            n_lights: scene_params.n_lights,
-            ..base
-        };
         let w = base.width as u64;
         // Largest per-pixel binding: the frame (4 bytes) or the wave's child slots.
         let per_pixel = match path {

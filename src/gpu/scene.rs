@@ -39,8 +39,8 @@ pub(crate) struct SceneCache {
     key: Option<(u64, bool)>,
     arrays: Vec<Option<Uploaded>>,
     pub bind_group: Option<wgpu::BindGroup>,
-    /// The scene part of every kernel's parameters.
-    pub params: GpuParams,
+    /// The scene part of every kernel's parameters (see [`SceneCache::job`]).
+    params: GpuParams,
     /// Arrays re-sent by the last sync (tests check that unchanged ones are not).
     pub last_uploads: Vec<&'static str>,
 }
@@ -89,6 +89,23 @@ fn arrays(c: &Committed) -> Vec<Vec<u8>> {
 }
 
 impl SceneCache {
+    /// A job's parameters with the scene's part (bounds and counts) filled in.
+    pub fn job(&self, job: GpuParams) -> GpuParams {
+        let s = &self.params;
+        GpuParams {
+            bounds_min: s.bounds_min,
+            bounds_max: s.bounds_max,
+            n_tri: s.n_tri,
+            n_sph: s.n_sph,
+            n_ell: s.n_ell,
+            n_box: s.n_box,
+            n_planes: s.n_planes,
+            n_leaves: s.n_leaves,
+            n_lights: s.n_lights,
+            ..job
+        }
+    }
+
     /// Makes the device's copy match `c`. `Limits` when an array exceeds a storage binding.
     pub fn sync(&mut self, dev: &Device, c: &Committed) -> GpuResult<()> {
         let key = (c.id, c.tree.ropes.is_some());
