@@ -67,6 +67,31 @@ typedef uint32_t rt2_builder;
 #endif // __cplusplus
 
 /**
+ * GPU render path (`rt2_render_options.gpu_path`); RT² thesis §3.3. Ignored on the CPU.
+ */
+enum rt2_gpu_path
+#ifdef __cplusplus
+  : uint32_t
+#endif // __cplusplus
+ {
+  /**
+   * The library picks by the share of reflective and transparent primitives.
+   */
+  RT2_GPU_PATH_AUTO = 0,
+  /**
+   * One kernel traces every ray of a pixel.
+   */
+  RT2_GPU_PATH_MEGAKERNEL = 1,
+  /**
+   * One kernel per bounce; live rays compacted by a parallel prefix sum.
+   */
+  RT2_GPU_PATH_WAVEFRONT = 2,
+};
+#ifndef __cplusplus
+typedef uint32_t rt2_gpu_path;
+#endif // __cplusplus
+
+/**
  * Node order in memory (`rt2_build_options.layout`).
  */
 enum rt2_layout
@@ -368,6 +393,10 @@ typedef struct rt2_render_options {
    * contributions in another order, so a channel may differ by 1/255 on a few pixels.
    */
   uint32_t schedule;
+  /**
+   * An `rt2_gpu_path` value (default AUTO).
+   */
+  uint32_t gpu_path;
 } rt2_render_options;
 
 /**

@@ -114,6 +114,18 @@ impl Camera {
 }
 
 impl CameraRays {
+    /// The generator as the GPU's parameters take it: eye + aperture, forward + focus
+    /// distance, right + half width, up + half height.
+    pub fn packed(&self) -> [[f32; 4]; 4] {
+        let v = |a: Vec3, w: f32| [a.x, a.y, a.z, w];
+        [
+            v(self.eye, self.aperture),
+            v(self.forward, self.focus),
+            v(self.right, self.half_w),
+            v(self.up, self.half_h),
+        ]
+    }
+
     /// Primary ray through image point `pixel` (in pixels, y down, (0,0) = top-left corner).
     /// `lens` is a point in the unit square used for depth of field.
     pub fn ray(&self, pixel: Vec2, size: Vec2, lens: Vec2) -> Ray {

@@ -1,26 +1,43 @@
-//! The context: the thread pool and the backend decision every operation goes through.
+//! The context: the thread pool, the backend decision every operation goes through and, when
+//! tracing runs on the GPU, the devices.
 
 use crate::camera::Camera;
 use crate::cpu;
 use crate::cpu::traverse::TraverseOptions;
-use crate::dispatch::{self, Backend, BackendRequest, Decision};
+use crate::dispatch::{self, BackendRequest, Decision};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::geometry::{Hit, Ray, TraversalStats};
+use crate::gpu::{self, Gpu, GpuOptions, GpuResult};
 use crate::render::RenderOptions;
 use crate::scene::Committed;
+use std::sync::Mutex;
 
 pub struct Context {
     pool: rayon::ThreadPool,
     decision: Decision,
+    /// The devices, when tracing runs on the GPU.
+    gpu: Option<Gpu>,
+    /// Why the last job of an AUTO context ran on the CPU after all (device limits).
+    fallback: Mutex<Option<String>>,
 }
 
 impl Context {
     /// `threads == 0` uses every core. The pool is the context's own: the host program's
-    /// global rayon pool is never touched.
+    /// global rayon pool is never touched. GPU adapters follow `RT2_ADAPTER` and
+    /// `RT2_GPU_DEVICES` (see [`GpuOptions::from_env`]).
     pub fn new(request: BackendRequest, threads: u32) -> Result<Self> {
+        Self::with_gpu_options(request, threads, &GpuOptions::from_env())
+    }
+
+    /// [`Context::new`] with explicit GPU options (tests force two logical devices this way).
+    pub fn with_gpu_options(
+        request: BackendRequest,
+        threads: u32,
+        gpu_opts: &GpuOptions,
+    ) -> Result<Self> {
         let env = std::env::var("RT2_BACKEND").ok();
-        let decision = dispatch::decide_backend(request, env.as_deref())?;
+        let (decision, gpu) = dispatch::decide_backend(request, env.as_deref(), gpu_opts)?;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads as usize)
             .thread_name(|i| format!("rt2-worker-{i}"))
@@ -31,11 +48,26 @@ impl Context {
                     format!("cannot start threads: {e}"),
                 )
             })?;
-        Ok(Context { pool, decision })
+        Ok(Context {
+            pool,
+            decision,
+            gpu,
+            fallback: Mutex::new(None),
+        })
     }
 
     pub fn decision(&self) -> &Decision {
         &self.decision
+    }
+
+    /// The GPU devices, when tracing runs there.
+    pub fn gpu(&self) -> Option<&Gpu> {
+        self.gpu.as_ref()
+    }
+
+    /// Why the last job of an AUTO GPU context ran on the CPU instead (`None`: it did not).
+    pub fn last_fallback(&self) -> Option<String> {
+        self.fallback.lock().ok().and_then(|f| f.clone())
     }
 
     pub fn threads(&self) -> usize {
@@ -47,6 +79,26 @@ impl Context {
         self.pool.install(f)
     }
 
+    /// Runs `job` on the GPU when tracing runs there. `Ok(None)`: the CPU must do the job,
+    /// because the backend is the CPU, or because AUTO chose the GPU and the job exceeds its
+    /// limits (the reason is kept for [`Context::last_fallback`]).
+    fn gpu_job<T>(&self, job: impl FnOnce(&Gpu) -> GpuResult<T>) -> Result<Option<T>> {
+        let Some(g) = &self.gpu else {
+            return Ok(None);
+        };
+        let (out, why) = match job(g) {
+            Ok(v) => (Ok(Some(v)), None),
+            Err(gpu::GpuError::Limits(why)) if self.decision.auto => {
+                (Ok(None), Some(format!("{why}, so this job ran on the CPU")))
+            }
+            Err(e) => (Err(e.into_error()), None),
+        };
+        if let Ok(mut f) = self.fallback.lock() {
+            *f = why;
+        }
+        out
+    }
+
     pub fn render(
         &self,
         scene: &Committed,
@@ -54,14 +106,16 @@ impl Context {
         opts: &RenderOptions,
         frame: &mut Frame,
     ) -> Result<()> {
-        let (traversal, _why) = dispatch::choose_traversal(scene, opts.traversal);
-        match self.decision.backend {
-            Backend::Cpu => {
-                self.install(|| cpu::whitted::render(scene, camera, opts, traversal, frame));
-                Ok(())
-            }
-            Backend::Gpu => Err(Error::unsupported("the GPU backend is not built yet")),
+        let done = self.gpu_job(|g| {
+            let (traversal, _) = dispatch::choose_gpu_traversal(scene, opts.traversal);
+            let (path, _) = dispatch::choose_gpu_path(scene, opts);
+            gpu::render(g, scene, camera, opts, traversal, path, frame)
+        })?;
+        if done.is_none() {
+            let (traversal, _why) = dispatch::choose_traversal(scene, opts.traversal);
+            self.install(|| cpu::whitted::render(scene, camera, opts, traversal, frame));
         }
+        Ok(())
     }
 
     /// Closest hits of a batch of rays; the traversal is the caller's or AUTO's choice.
@@ -72,13 +126,15 @@ impl Context {
         hits: &mut [Hit],
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
-        let (how, opts) = self.query_setup(scene, q);
-        match self.decision.backend {
-            Backend::Cpu => {
-                Ok(self.install(|| cpu::query::intersect(scene, rays, hits, how, &opts, q.mode)))
-            }
-            Backend::Gpu => Err(Error::unsupported("the GPU backend is not built yet")),
+        let on_gpu = self.gpu_job(|g| {
+            let (how, _) = dispatch::choose_gpu_traversal(scene, q.traversal);
+            gpu::intersect(g, scene, rays, hits, how, q.short_stack_size)
+        })?;
+        if let Some(stats) = on_gpu {
+            return Ok(stats);
         }
+        let (how, opts) = self.query_setup(scene, q);
+        Ok(self.install(|| cpu::query::intersect(scene, rays, hits, how, &opts, q.mode)))
     }
 
     /// Any-hit queries for a batch of rays.
@@ -89,15 +145,16 @@ impl Context {
         out: &mut [bool],
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
-        let (how, opts) = self.query_setup(scene, q);
-        match self.decision.backend {
-            Backend::Cpu => {
-                Ok(self.install(|| cpu::query::occluded(scene, rays, out, how, &opts, q.mode)))
-            }
-            Backend::Gpu => Err(Error::unsupported("the GPU backend is not built yet")),
+        let on_gpu = self.gpu_job(|g| {
+            let (how, _) = dispatch::choose_gpu_traversal(scene, q.traversal);
+            gpu::occluded(g, scene, rays, out, how, q.short_stack_size)
+        })?;
+        if let Some(stats) = on_gpu {
+            return Ok(stats);
         }
+        let (how, opts) = self.query_setup(scene, q);
+        Ok(self.install(|| cpu::query::occluded(scene, rays, out, how, &opts, q.mode)))
     }
-
     fn query_setup(
         &self,
         scene: &Committed,

@@ -4,6 +4,8 @@
 
 use crate::cpu::traverse::Traversal;
 use crate::error::{Error, Result, Rt2Status};
+use crate::gpu::{self, Gpu, GpuOptions, GpuPath};
+use crate::render::{GpuPathRequest, RenderOptions};
 use crate::scene::Committed;
 
 /// Backend requested by a caller.
@@ -26,10 +28,9 @@ pub enum Backend {
 pub struct Decision {
     pub backend: Backend,
     pub reason: String,
+    /// Chosen by AUTO: a job the GPU cannot hold (device limits) then runs on the CPU.
+    pub auto: bool,
 }
-
-/// Why no GPU is available in this build; the GPU backend replaces this with adapter probing.
-const NO_GPU: &str = "this build of RT2 has no GPU backend yet";
 
 impl BackendRequest {
     pub fn parse(s: &str) -> Option<Self> {
@@ -43,7 +44,12 @@ impl BackendRequest {
 }
 
 /// Resolves the backend for a new context. `env` is the value of `RT2_BACKEND`, if set.
-pub fn decide_backend(requested: BackendRequest, env: Option<&str>) -> Result<Decision> {
+/// Returns the GPU devices when tracing goes there.
+pub fn decide_backend(
+    requested: BackendRequest,
+    env: Option<&str>,
+    gpu_opts: &GpuOptions,
+) -> Result<(Decision, Option<Gpu>)> {
     let (request, source) = match env {
         Some(v) => match BackendRequest::parse(v) {
             Some(r) => (r, format!("RT2_BACKEND={v}")),
@@ -55,19 +61,96 @@ pub fn decide_backend(requested: BackendRequest, env: Option<&str>) -> Result<De
         },
         None => (requested, "the context descriptor".to_string()),
     };
+    let cpu = |reason: String, auto: bool| {
+        Ok((
+            Decision {
+                backend: Backend::Cpu,
+                reason,
+                auto,
+            },
+            None,
+        ))
+    };
     match request {
-        BackendRequest::Cpu => Ok(Decision {
-            backend: Backend::Cpu,
-            reason: format!("CPU requested by {source}"),
-        }),
-        BackendRequest::Gpu => Err(Error::new(
-            Rt2Status::BackendUnavailable,
-            format!("GPU requested by {source}, but {NO_GPU}"),
-        )),
-        BackendRequest::Auto => Ok(Decision {
-            backend: Backend::Cpu,
-            reason: format!("AUTO from {source}: {NO_GPU}, so tracing runs on the CPU"),
-        }),
+        BackendRequest::Cpu => cpu(format!("CPU requested by {source}"), false),
+        BackendRequest::Gpu => match gpu::open(gpu_opts, true) {
+            // Explicitly requested, a software adapter is accepted (that is how CI tests).
+            Ok(g) => Ok((
+                Decision {
+                    backend: Backend::Gpu,
+                    reason: format!("GPU requested by {source}: {}", g.description),
+                    auto: false,
+                },
+                Some(g),
+            )),
+            Err(why) => Err(Error::new(
+                Rt2Status::BackendUnavailable,
+                format!("GPU requested by {source}, but {why}"),
+            )),
+        },
+        BackendRequest::Auto => match gpu::open(gpu_opts, gpu_opts.auto_accepts_software) {
+            Ok(g) => Ok((
+                Decision {
+                    backend: Backend::Gpu,
+                    reason: format!("AUTO from {source}: tracing on {}", g.description),
+                    auto: true,
+                },
+                Some(g),
+            )),
+            Err(why) => cpu(
+                format!("AUTO from {source}: {why}, so tracing runs on the CPU"),
+                true,
+            ),
+        },
+    }
+}
+
+/// The traversal AUTO picks on the GPU, and why.
+pub fn choose_gpu_traversal(
+    scene: &Committed,
+    requested: Option<Traversal>,
+) -> (Traversal, &'static str) {
+    match requested {
+        Some(t) => (t, "requested by the caller"),
+        // Thesis table 2: ropes++ is the fastest GPU traversal in every scene.
+        None if scene.tree.ropes.is_some() => (
+            Traversal::RopesPlusPlus,
+            "ropes++ is the fastest GPU traversal (thesis table 2) and the tree has ropes",
+        ),
+        // Without ropes (3x the tree memory, built only on request), the standard stack
+        // visits the fewest nodes (thesis table 1); a 64-entry private stack fits a thread.
+        None => (
+            Traversal::Standard,
+            "the tree has no ropes: standard visits the fewest nodes of the stack methods",
+        ),
+    }
+}
+
+/// The render path AUTO picks on the GPU (thesis §3.3), and why.
+pub fn choose_gpu_path(scene: &Committed, opts: &RenderOptions) -> (GpuPath, &'static str) {
+    match opts.gpu_path {
+        GpuPathRequest::Megakernel => (GpuPath::Megakernel, "requested by the caller"),
+        GpuPathRequest::Wavefront => (GpuPath::Wavefront, "requested by the caller"),
+        GpuPathRequest::Auto => {
+            // Thesis: the megakernel for primary rays with few reflections; one kernel per
+            // bounce, with compaction, pays off when most objects spawn secondary rays.
+            let secondary = scene
+                .origins
+                .iter()
+                .filter(|o| {
+                    let m = &scene.materials[scene.object_material[o.object as usize] as usize];
+                    m.reflectivity > 0.0 || m.transparency > 0.0
+                })
+                .count();
+            if opts.max_depth > 1 && 2 * secondary >= scene.origins.len().max(1) {
+                (
+                    GpuPath::Wavefront,
+                    "most primitives reflect or transmit: wavefront",
+                )
+            } else {
+                (GpuPath::Megakernel, "few secondary rays: megakernel")
+            }
+        }
     }
 }
 

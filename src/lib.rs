@@ -1,7 +1,8 @@
 //! RT2: a real-time kd-tree ray tracer with a C API.
 //!
 //! Layers (DESIGN.md §2): [`api`] is the C boundary (layer 1); [`dispatch`] decides where each
-//! operation runs (layer 2); [`cpu`] is the CPU backend (layer 3a). Shared by all: the
+//! operation runs (layer 2); [`cpu`] is the CPU backend (layer 3a), [`gpu`] the GPU backend
+//! (layer 3b). Shared by all: the
 //! [`geometry`] vocabulary, the [`scene`] model, the [`kdtree`], [`camera`], [`frame`] and
 //! [`shading`]. [`context::Context`] ties a thread pool to a dispatch decision.
 
@@ -13,6 +14,7 @@ pub mod dispatch;
 pub mod error;
 pub mod frame;
 pub mod geometry;
+pub mod gpu;
 pub mod kdtree;
 pub mod rayset;
 pub mod render;

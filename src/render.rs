@@ -24,6 +24,18 @@ pub enum Schedule {
     BreadthFirst,
 }
 
+/// Which GPU render path runs a frame (thesis §3.3); ignored on the CPU.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GpuPathRequest {
+    /// The dispatch layer picks by the share of reflective and transparent primitives.
+    #[default]
+    Auto,
+    /// One kernel traces every ray of a pixel.
+    Megakernel,
+    /// One kernel per bounce; rays still alive are compacted by a prefix sum.
+    Wavefront,
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
     /// Longest chain of rays from the eye (1 = primary rays only, plus shadows).
@@ -36,6 +48,7 @@ pub struct RenderOptions {
     pub transparency: Transparency,
     pub background: Vec3,
     pub schedule: Schedule,
+    pub gpu_path: GpuPathRequest,
 }
 
 impl Default for RenderOptions {
@@ -48,6 +61,7 @@ impl Default for RenderOptions {
             transparency: Transparency::Refract,
             background: Vec3::new(0.05, 0.05, 0.08),
             schedule: Schedule::DepthFirst,
+            gpu_path: GpuPathRequest::Auto,
         }
     }
 }

@@ -8,7 +8,7 @@ use crate::cpu::traverse::Traversal;
 use crate::dispatch::BackendRequest;
 use crate::error::{Error, Result};
 use crate::kdtree::{BuildOptions, Builder, Layout};
-use crate::render::{RenderOptions, Schedule, Transparency};
+use crate::render::{GpuPathRequest, RenderOptions, Schedule, Transparency};
 use crate::scene::{Checker, Material};
 use glam::Vec3;
 
@@ -68,6 +68,18 @@ pub enum Rt2Schedule {
     DepthFirst = 0,
     /// Wavefronts: all primary rays, then all shadow rays, then all secondary rays, as streams.
     BreadthFirst = 1,
+}
+
+/// GPU render path (`rt2_render_options.gpu_path`); RT² thesis §3.3. Ignored on the CPU.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2GpuPath {
+    /// The library picks by the share of reflective and transparent primitives.
+    Auto = 0,
+    /// One kernel traces every ray of a pixel.
+    Megakernel = 1,
+    /// One kernel per bounce; live rays compacted by a parallel prefix sum.
+    Wavefront = 2,
 }
 
 /// kd-tree builder (`rt2_build_options.builder`).
@@ -335,6 +347,8 @@ pub struct rt2_render_options {
     /// An `rt2_schedule` value (default DEPTH_FIRST). BREADTH_FIRST adds each pixel's
     /// contributions in another order, so a channel may differ by 1/255 on a few pixels.
     pub schedule: u32,
+    /// An `rt2_gpu_path` value (default AUTO).
+    pub gpu_path: u32,
 }
 
 impl rt2_render_options {
@@ -375,7 +389,14 @@ impl rt2_render_options {
             1 => Schedule::BreadthFirst,
             v => return Err(enum_error("rt2_schedule", v)),
         };
+        let gpu_path = match self.gpu_path {
+            0 => GpuPathRequest::Auto,
+            1 => GpuPathRequest::Megakernel,
+            2 => GpuPathRequest::Wavefront,
+            v => return Err(enum_error("rt2_gpu_path", v)),
+        };
         Ok(RenderOptions {
+            gpu_path,
             schedule,
             max_depth: self.max_depth,
             samples: self.samples,
@@ -400,5 +421,6 @@ pub extern "C" fn rt2_render_options_default() -> rt2_render_options {
         transparency: Rt2Transparency::Refract as u32,
         background: d.background.to_array(),
         schedule: Rt2Schedule::DepthFirst as u32,
+        gpu_path: Rt2GpuPath::Auto as u32,
     }
 }

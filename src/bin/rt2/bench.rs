@@ -13,20 +13,21 @@ use rt2::frame::Frame;
 use rt2::geometry::{Hit, Ray};
 use rt2::kdtree::{BuildOptions, Builder, Layout};
 use rt2::rayset::{self, HitRecord};
-use rt2::render::RenderOptions;
+use rt2::render::{GpuPathRequest, RenderOptions};
 use rt2::scene::{loaders, Scene, Shape};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-const USAGE: &str = "usage: rt2 bench [frames|build|rays|tables|streams|all] [--runs N] [--write FILE]
+const USAGE: &str = "usage: rt2 bench [frames|build|rays|tables|streams|gpu|all] [--runs N] [--write FILE]
   frames   ms per 1376x768 frame on the CPU: spheres3 and the bunny, with build time and memory
   build    kd-tree build time (SAH+perfect splits, midpoint) at 1 and 2 threads, Embree beside
   rays     Mrays/s per traversal on ../shared/raysets, agreement with Embree's hits, Embree beside
   tables   the RT² thesis' tables 1 and 2 on the CPU: nodes visited per ray, tree memory and
            ms per 1376x768 frame for every traversal, beside the thesis' figures
   streams  n-ray streams vs packets vs single rays: the vectorised-traversal paper's tables, Embree beside
+  gpu      thesis table 2 on the GPU backend: ms per frame per traversal, both render paths, vs CPU
   --runs N       timed runs per figure (default 5; the median is reported)
   --write FILE   also replace this benchmark's section in FILE (e.g. BENCHMARKS.md)
 Model files come from $RT2_SHARED (default ../shared); Embree from $RT2_EMBREE_BENCH or
@@ -70,12 +71,14 @@ pub fn run(args: &[String]) -> Result<()> {
         "rays" => vec![("rays", rays)],
         "tables" => vec![("tables", tables)],
         "streams" => vec![("streams", streams::streams)],
+        "gpu" => vec![("gpu", gpu)],
         "all" => vec![
             ("frames", frames),
             ("build", build),
             ("rays", rays),
             ("tables", tables),
             ("streams", streams::streams),
+            ("gpu", gpu),
         ],
         _ => {
             return Err(Error::invalid_argument(format!(
@@ -608,4 +611,115 @@ fn tables(a: &Args) -> Result<String> {
         writeln!(t2, "{row} {} |", thesis_ms(&label)).ok();
     }
     Ok(format!("{t1}\n{t2}"))
+}
+
+/// Thesis table 2 on the GPU backend: ms per frame for every traversal (AUTO render path),
+/// then megakernel against wavefront and the GPU against the CPU (both at their AUTO
+/// traversal). A software adapter (lavapipe) is labelled as such and renders a quarter of
+/// the thesis' frame side (1/16 of the pixels): it shows the kernels work, not GPU speed.
+fn gpu(a: &Args) -> Result<String> {
+    let ctx = match Context::new(BackendRequest::Gpu, 0) {
+        Ok(c) => c,
+        Err(e) => {
+            return Ok(format!(
+                "### GPU backend\n\nNo GPU adapter: {}\n",
+                e.message
+            ))
+        }
+    };
+    let g = ctx
+        .gpu()
+        .ok_or_else(|| Error::invalid_operation("no GPU devices"))?;
+    let (w, h) = if g.software { (344, 192) } else { (1376, 768) };
+    let cpu = Context::new(BackendRequest::Cpu, 0)?;
+    let kind = if g.software {
+        "SOFTWARE adapter: CPU-emulated GPU, not representative of GPU speed"
+    } else {
+        "hardware adapter"
+    };
+    let mut out = format!(
+        "### GPU backend: thesis table 2 (ms per {w}x{h} frame, 1 sample, AUTO render path)\n\n\
+         Adapter: {} ({kind}).\n\n| scene |",
+        g.description
+    );
+    for t in Traversal::ALL {
+        write!(out, " {} |", t.name()).ok();
+    }
+    out.push_str("\n|---|");
+    out.push_str(&"---|".repeat(Traversal::ALL.len()));
+    out.push('\n');
+    let mut paths = String::from(
+        "\n| scene | megakernel ms | wavefront ms | GPU (AUTO) ms | CPU (AUTO) ms | GPU vs CPU |\n|---|---|---|---|---|---|\n",
+    );
+    let mut names: Vec<String> = Vec::new();
+    for m in ["bunny.ply", "dragon.ply", "snowden.ply"] {
+        let p = shared().join("models").join(m);
+        if p.exists() {
+            names.push(p.display().to_string());
+        } else {
+            eprintln!("bench gpu: {} is missing; skipped", p.display());
+        }
+    }
+    names.extend(["spheres1", "spheres2", "spheres3"].map(String::from));
+    for name in names {
+        let mut l = load_scene(&name)?;
+        l.scene.commit()?;
+        l.scene.ensure_ropes()?;
+        let c = l.scene.committed()?;
+        let label = Path::new(&name)
+            .file_stem()
+            .map_or(name.clone(), |s| s.to_string_lossy().into());
+        let mut frame = Frame::new(w, h)?;
+        let base = RenderOptions {
+            max_depth: l.max_depth,
+            ..RenderOptions::default()
+        };
+        let mut time = |ctx: &Context, opts: RenderOptions| -> Result<f64> {
+            ctx.render(c, &l.camera, &opts, &mut frame)?;
+            Ok(time_ms(a.runs, || {
+                let _ = ctx.render(c, &l.camera, &opts, &mut frame);
+            }))
+        };
+        write!(out, "| {label} (depth {}) |", l.max_depth).ok();
+        for t in Traversal::ALL {
+            let ms = time(
+                &ctx,
+                RenderOptions {
+                    traversal: Some(t),
+                    ..base
+                },
+            )?;
+            write!(out, " {ms:.1} |").ok();
+        }
+        out.push('\n');
+        let mega = time(
+            &ctx,
+            RenderOptions {
+                gpu_path: GpuPathRequest::Megakernel,
+                ..base
+            },
+        )?;
+        let wave = time(
+            &ctx,
+            RenderOptions {
+                gpu_path: GpuPathRequest::Wavefront,
+                ..base
+            },
+        )?;
+        let auto = time(&ctx, base)?;
+        let on_cpu = time(&cpu, base)?;
+        writeln!(
+            paths,
+            "| {label} | {mega:.1} | {wave:.1} | {auto:.1} | {on_cpu:.1} | {:.2}x |",
+            on_cpu / auto
+        )
+        .ok();
+    }
+    out.push_str(&paths);
+    out.push_str(
+        "\nAUTO on the GPU: ropes++ when the tree has ropes (here it has), render path by the \
+         share of reflective primitives. CPU: the context's pool, every core. Medians of \
+         `--runs` frames after one warm-up frame (which also compiles the kernels).\n",
+    );
+    Ok(out)
 }

@@ -1,0 +1,68 @@
+// Rope traversals (src/cpu/traverse/ropes.rs): each leaf knows its box and, per face, the
+// node across it; after a leaf the ray follows the rope of its exit face and descends from
+// there to the leaf it enters: no stack, no restart. ropes.wgsl and ropes_pp.wgsl pick the
+// exit test and the scene test.
+
+struct Exit { t: f32, face: u32 }
+
+// Popov's exit: both planes of every slab, the farther one is where the ray leaves it.
+fn exit_six_faces(b: Aabb, r: TRay) -> Exit {
+    var best = Exit(inf(), 0u);
+    for (var a = 0u; a < 3u; a++) {
+        let ta = dist(r, a, b.min[a]);
+        let tb = dist(r, a, b.max[a]);
+        var e: Exit;
+        if (ta > tb) { e = Exit(ta, 2u * a); } else if (tb >= ta) { e = Exit(tb, 2u * a + 1u); } else { continue; }
+        if (e.t < best.t) { best = e; }
+    }
+    return best;
+}
+
+// ropes++: the exit face of each slab follows from the direction sign: three planes.
+fn exit_three_faces(b: Aabb, r: TRay) -> Exit {
+    var best = Exit(inf(), 0u);
+    for (var a = 0u; a < 3u; a++) {
+        let pos = positive(r, a);
+        let t = dist(r, a, select(b.min[a], b.max[a], pos));
+        if (t < best.t) { best = Exit(t, 2u * a + select(0u, 1u, pos)); }
+    }
+    return best;
+}
+
+// ropes++'s entry-only scene test: the three planes facing the ray, no exit.
+fn entry_three_faces(r: TRay) -> f32 {
+    var t = r.ray.tmin;
+    for (var a = 0u; a < 3u; a++) {
+        let tn = dist(r, a, select(params.bounds_max[a], params.bounds_min[a], positive(r, a)));
+        if (tn > t) { t = tn; }
+    }
+    return t;
+}
+
+// The loop of algorithms 7 and 8: locate the leaf, test its primitives, follow the rope.
+fn rope_walk(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, Stats>,
+             start: u32, t_start: f32, t_end: f32, three_faces: bool, miss_test_on: bool) {
+    var node = start;
+    var t_entry = t_start;
+    var miss_test = miss_test_on;
+    for (var visit = 0u; visit < params.n_leaves; visit++) {
+        var t1 = inf();
+        loop {
+            let n = nodes[node];
+            (*st).nodes += 1u;
+            if (is_leaf(n)) { break; }
+            let c = kd_step(n, r, t_entry, t1);
+            if (c.both) { t1 = c.t_split; }
+            node = c.child;
+        }
+        let leaf = node_index(nodes[node]);
+        var ex: Exit;
+        if (three_faces) { ex = exit_three_faces(leaf_boxes[leaf], r); } else { ex = exit_six_faces(leaf_boxes[leaf], r); }
+        if (miss_test && ex.t < t_entry) { return; }
+        miss_test = false;
+        if (visit_leaf(leaf, ex.t, r.ray, h, any_hit, st) || ex.t >= t_end) { return; }
+        node = ropes[leaf].links[ex.face];
+        if (node == INVALID) { return; }
+        t_entry = max(t_entry, ex.t);
+    }
+}

@@ -1,0 +1,206 @@
+// Whitted shading, the WGSL twin of src/shading.rs and Tracer::radiance in
+// src/cpu/whitted.rs: Phong with point lights and hard shadows, mirror reflection,
+// transparency straight or refracted (Snell + Schlick). Both render paths call `shade` for one
+// ray and get its local colour and up to two child rays.
+
+// Rays whose weight drops below this add less than a 1/255 step (whitted.rs MIN_WEIGHT).
+const MIN_WEIGHT: f32 = 1.0 / 512.0;
+
+// glam's normalize_or_zero: times the reciprocal length, zero when that is not finite.
+fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
+    let r = 1.0 / sqrt(dot(v, v));
+    if ((bitcast<u32>(r) & 0x7fffffffu) < 0x7f800000u && r > 0.0) { return v * r; }
+    return vec3<f32>(0.0);
+}
+
+// Rust's powf for the Phong exponent: pow(0, 0) = 1 and pow(0, y) = 0 without log2(0).
+fn powf(x: f32, y: f32) -> f32 {
+    if (y == 0.0) { return 1.0; }
+    if (x <= 0.0) { return 0.0; }
+    return pow(x, y);
+}
+
+fn reflect_dir(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> { return d - 2.0 * dot(d, n) * n; }
+
+// `refract`: w < 0 signals total internal reflection.
+fn refract_dir(d: vec3<f32>, n: vec3<f32>, eta: f32) -> vec4<f32> {
+    let cos_i = -dot(d, n);
+    let sin2_t = eta * eta * max(1.0 - cos_i * cos_i, 0.0);
+    if (sin2_t > 1.0) { return vec4<f32>(0.0, 0.0, 0.0, -1.0); }
+    let cos_t = sqrt(1.0 - sin2_t);
+    return vec4<f32>(normalize_or_zero(eta * d + (eta * cos_i - cos_t) * n), 1.0);
+}
+
+fn schlick(cos_i: f32, eta: f32) -> f32 {
+    let a = (1.0 - eta) / (1.0 + eta);
+    let r0 = a * a;
+    let x = 1.0 - clamp(cos_i, 0.0, 1.0);
+    let x2 = x * x;
+    return r0 + (1.0 - r0) * (x2 * x2 * x);
+}
+
+fn phong(m: Material, base: vec3<f32>, p: vec3<f32>, n: vec3<f32>, view: vec3<f32>, light: Light) -> vec3<f32> {
+    let l = normalize_or_zero(v3(light.position) - p);
+    let ndotl = dot(n, l);
+    if (ndotl <= 0.0) { return vec3<f32>(0.0); }
+    let r = reflect_dir(-l, n);
+    let spec = powf(max(dot(r, view), 0.0), m.shininess);
+    return (m.diffuse * ndotl * base + vec3<f32>(m.specular * spec)) * v3(light.color) * light.intensity;
+}
+
+// Outward normal of a box face nearest to p (`box_normal`).
+fn box_normal(b: Aabb, p: vec3<f32>) -> vec3<f32> {
+    let c = 0.5 * (v3(b.min) + v3(b.max));
+    let h = 0.5 * max(v3(b.max) - v3(b.min), vec3<f32>(0.0));
+    let d = (p - c) / max(h, vec3<f32>(1.17549435e-38));
+    let a = abs(d);
+    var axis = 2u;
+    if (a.x >= a.y && a.x >= a.z) { axis = 0u; } else if (a.y >= a.z) { axis = 1u; }
+    var n = vec3<f32>(0.0);
+    n[axis] = select(1.0, -1.0, negative(d[axis]));
+    return n;
+}
+
+// `PrimitiveSet::normal`: geometric normal at p, not oriented towards the ray.
+fn prim_normal(i: u32, p: vec3<f32>) -> vec3<f32> {
+    let nb = n_bounded();
+    if (i >= nb) { return normalize_or_zero(v3(planes[i - nb].normal)); }
+    var k = i;
+    if (k < params.n_tri) { let t = triangles[k]; return normalize_or_zero(cross(v3(t.e1), v3(t.e2))); }
+    k -= params.n_tri;
+    if (k < params.n_sph) { return normalize_or_zero(p - v3(spheres[k].center)); }
+    k -= params.n_sph;
+    if (k < params.n_ell) {
+        let e = ellipsoids[k];
+        let m = ell_inv(e);
+        return normalize_or_zero(transpose(m) * (m * (p - v3(e.center))));
+    }
+    return box_normal(boxes[k - params.n_ell], p);
+}
+
+// `Material::color_at`: the checkerboard by the parity of floor(p / scale) summed.
+fn color_at(m: Material, p: vec3<f32>) -> vec3<f32> {
+    if (m.checker == 0u) { return v3(m.color); }
+    let q = floor(p / m.scale);
+    var s = (q.x + q.y + q.z) % 2.0;
+    if (s < 0.0) { s += 2.0; }
+    return select(v3(m.color2), v3(m.color), s < 1.0);
+}
+
+struct Child { ok: bool, org: vec3<f32>, dir: vec3<f32>, w: vec3<f32> }
+// One ray's work: its contribution and its children (transmitted, mirror), in the order the
+// CPU pushes them onto its stack of pending rays.
+struct Shaded { color: vec3<f32>, transmitted: Child, mirror: Child }
+
+fn child(p: vec3<f32>, n: vec3<f32>, side: f32, dir: vec3<f32>, w: vec3<f32>) -> Child {
+    let eps = params.background.w;
+    return Child(max(w.x, max(w.y, w.z)) >= MIN_WEIGHT, p + side * eps * n, dir, w);
+}
+
+fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
+    let none = Child(false, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    var out = Shaded(vec3<f32>(0.0), none, none);
+    var st = Stats(0u, 0u, 0u);
+    let hit = closest_hit(r, &st);
+    if (hit.prim == INVALID) {
+        out.color = weight * params.background.xyz;
+        return out;
+    }
+    let m = materials[prim_material[hit.prim]];
+    let eps = params.background.w;
+    let p = ray_at(r, hit.t);
+    let n_geo = prim_normal(hit.prim, p);
+    let entering = dot(n_geo, r.dir) < 0.0;
+    let n = select(-n_geo, n_geo, entering);
+    // Sampled just inside the surface, as on the CPU (no flicker on a checker boundary).
+    let base = color_at(m, p - eps * n);
+    let local_weight = 1.0 - m.reflectivity - m.transparency;
+    if (local_weight > 0.0) {
+        var local = m.ambient * base;
+        let above = p + eps * n;
+        for (var k = 0u; k < params.n_lights; k++) {
+            let light = lights[k];
+            let to_light = v3(light.position) - above;
+            let d = length(to_light);
+            let shadow = Ray(above, to_light / d, 0.0, d);
+            if (d > 0.0 && !occluded(shadow, &st)) {
+                local += phong(m, base, p, n, -r.dir, light);
+            }
+        }
+        out.color = weight * local_weight * local;
+    }
+    if (depth >= params.max_depth) { return out; }
+    var mirror = m.reflectivity;
+    if (m.transparency > 0.0) {
+        if (params.refract == 0u) {
+            out.transmitted = child(p, n, -1.0, r.dir, weight * m.transparency);
+        } else {
+            let eta = select(m.ior, 1.0 / m.ior, entering);
+            let t = refract_dir(r.dir, n, eta);
+            if (t.w > 0.0) {
+                let f = schlick(-dot(r.dir, n), eta);
+                mirror += m.transparency * f;
+                out.transmitted = child(p, n, -1.0, t.xyz, weight * (m.transparency * (1.0 - f)));
+            } else {
+                mirror += m.transparency;
+            }
+        }
+    }
+    if (mirror > 0.0) {
+        out.mirror = child(p, n, 1.0, reflect_dir(r.dir, n), weight * mirror);
+    }
+    return out;
+}
+
+// `sample_offset` of whitted.rs: a stratified grid jittered by a hash.
+fn hash(x: u32, y: u32, s: u32, k: u32, salt: u32) -> f32 {
+    var v = (x * 0x9E3779B1u) ^ (y * 0x85EBCA77u) ^ (s * 0xC2B2AE3Du) ^ k ^ salt;
+    v ^= v >> 16u;
+    v *= 0x7FEB352Du;
+    v ^= v >> 15u;
+    v *= 0x846CA68Bu;
+    v ^= v >> 16u;
+    return f32(v >> 8u) / f32(1u << 24u);
+}
+
+fn sample_offset(x: u32, y: u32, s: u32, n: u32, salt: u32) -> vec2<f32> {
+    if (n == 1u) { return vec2<f32>(0.5, 0.5); }
+    let side = u32(ceil(sqrt(f32(n))));
+    return vec2<f32>((f32(s % side) + hash(x, y, s, 1u, salt)) / f32(side),
+                     (f32(s / side) + hash(x, y, s, 2u, salt)) / f32(side));
+}
+
+// `CameraRays::ray`: pinhole or thin lens.
+fn camera_ray(pixel: vec2<f32>, lens: vec2<f32>) -> Ray {
+    let size = vec2<f32>(f32(params.width), f32(params.height));
+    let ndc = vec2<f32>(2.0 * pixel.x / size.x - 1.0, 1.0 - 2.0 * pixel.y / size.y);
+    let fwd = params.forward.xyz;
+    let right = params.right.xyz;
+    let up = params.up.xyz;
+    let dir = normalize_or_zero(fwd + (ndc.x * params.right.w) * right + (ndc.y * params.up.w) * up);
+    let eye = params.eye.xyz;
+    let aperture = params.eye.w;
+    if (aperture == 0.0) { return Ray(eye, dir, 0.0, inf()); }
+    let focus_point = eye + dir * (params.forward.w / dot(dir, fwd));
+    let rad = 0.5 * aperture * sqrt(lens.x);
+    let phi = 6.28318530717958647692 * lens.y;
+    let org = eye + rad * (cos(phi) * right + sin(phi) * up);
+    return Ray(org, normalize_or_zero(focus_point - org), 0.0, inf());
+}
+
+// Primary ray of sample s of the chunk's pixel i.
+fn primary(i: u32, s: u32) -> Ray {
+    let g = params.row0 * params.width + i;
+    let x = g % params.width;
+    let y = g / params.width;
+    let pixel = vec2<f32>(f32(x), f32(y)) + sample_offset(x, y, s, params.samples, 0u);
+    let lens = sample_offset(x, y, s, max(params.samples, 2u), 0x5bd1e995u);
+    return camera_ray(pixel, lens);
+}
+
+// RGBA8 in memory order r, g, b, 255 (little-endian u32).
+fn pack(sum: vec3<f32>) -> u32 {
+    let c = clamp(sum / f32(params.samples), vec3<f32>(0.0), vec3<f32>(1.0)) * 255.0 + 0.5;
+    let b = vec3<u32>(c);
+    return b.x | (b.y << 8u) | (b.z << 16u) | (255u << 24u);
+}

@@ -1,0 +1,4 @@
+// short-stack (algorithm 5): a small circular stack; restart when it runs dry. The loop is restart.wgsl's.
+fn traverse(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, Stats>) {
+    restart_traverse(r, h, any_hit, st, params.short_stack, false);
+}

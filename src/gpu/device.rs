@@ -1,0 +1,536 @@
+//! Adapters and devices: instance over the backends wgpu supports here (`WGPU_BACKEND`
+//! honoured), adapter choice (discrete first; `RT2_ADAPTER` picks by name), limits read from
+//! the adapter and respected, and the small helpers every job uses (buffers, dispatch sizes,
+//! read-back). wgpu reports errors outside error scopes through a handler that panics by
+//! default; each device records them instead, and every job checks the record.
+
+use super::kernels::{self, Program};
+use super::scene::SceneCache;
+use super::{GpuError, GpuResult};
+use crate::cpu::traverse::Traversal;
+use crate::error::{Error, Result, Rt2Status};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+use wgpu::util::DeviceExt;
+
+/// How the GPU backend picks and uses adapters.
+#[derive(Clone, Debug, Default)]
+pub struct GpuOptions {
+    /// Only adapters whose name contains this (case-insensitive); `RT2_ADAPTER` sets it.
+    pub adapter: Option<String>,
+    /// Logical devices to open on the chosen adapter (0: one per adapter). More than one
+    /// splits frames across them as several GPUs would (how the split is tested on one GPU).
+    pub logical_devices: usize,
+    /// Let AUTO use a software adapter (tests only: lavapipe is slower than the CPU path).
+    pub auto_accepts_software: bool,
+    /// Lower the storage binding limit (tests of the AUTO fallback on small limits).
+    pub max_binding_override: Option<u64>,
+}
+
+impl GpuOptions {
+    /// The defaults with `RT2_ADAPTER` and `RT2_GPU_DEVICES` applied.
+    pub fn from_env() -> Self {
+        GpuOptions {
+            adapter: std::env::var("RT2_ADAPTER").ok().filter(|s| !s.is_empty()),
+            logical_devices: std::env::var("RT2_GPU_DEVICES")
+                .ok()
+                .and_then(|s| s.parse().ok())
+                .unwrap_or(0),
+            ..GpuOptions::default()
+        }
+    }
+}
+
+/// The pipelines of one module, in the order of its entry-point list.
+pub(crate) type Pipelines = Arc<Vec<wgpu::ComputePipeline>>;
+
+/// Storage buffers one kernel binds: 13 scene arrays + 7 wavefront buffers.
+const STORAGE_BUFFERS_NEEDED: u32 = 20;
+
+/// Bind group layouts shared by all kernels of a device.
+pub(crate) struct Layouts {
+    pub scene: wgpu::BindGroupLayout,
+    pub query: wgpu::PipelineLayout,
+    pub query_io: wgpu::BindGroupLayout,
+    pub mega: wgpu::PipelineLayout,
+    pub mega_io: wgpu::BindGroupLayout,
+    pub wave: wgpu::PipelineLayout,
+    pub wave_io: wgpu::BindGroupLayout,
+    pub scan: wgpu::PipelineLayout,
+    pub scan_io: wgpu::BindGroupLayout,
+}
+
+/// One logical device with its queue, limits, compiled kernels and uploaded scene.
+pub struct Device {
+    pub name: String,
+    pub(crate) device: wgpu::Device,
+    pub(crate) queue: wgpu::Queue,
+    pub(crate) limits: wgpu::Limits,
+    pub(crate) layouts: Layouts,
+    pipelines: Mutex<HashMap<(Traversal, Program), Pipelines>>,
+    scan: Mutex<Option<Pipelines>>,
+    /// Errors wgpu reported outside error scopes since the last check.
+    errors: Arc<Mutex<Vec<String>>>,
+    /// The committed scene as uploaded; one job at a time uses a device.
+    pub(crate) scene: Mutex<SceneCache>,
+    max_binding_override: Option<u64>,
+}
+
+/// The devices of a context.
+pub struct Gpu {
+    pub devices: Vec<Device>,
+    /// "name (type, backend)" of the adapter(s), for the context's reason.
+    pub description: String,
+    /// Whether the adapter is a CPU implementation (lavapipe, SwiftShader, WARP).
+    pub software: bool,
+}
+
+fn rank(t: wgpu::DeviceType) -> u8 {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+/// Finds adapters and opens devices. `Err` carries the reason no GPU is usable; with
+/// `accept_software` false, a software adapter is such a reason (it is slower than RT2's CPU
+/// path) and no device is created for it.
+pub fn open(opts: &GpuOptions, accept_software: bool) -> std::result::Result<Gpu, String> {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
+    let backends = desc.backends;
+    let instance = wgpu::Instance::new(desc);
+    let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
+    if adapters.is_empty() {
+        return Err("no GPU adapter was found (wgpu found no Vulkan driver)".into());
+    }
+    if let Some(want) = &opts.adapter {
+        let want = want.to_lowercase();
+        let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+        adapters.retain(|a| a.get_info().name.to_lowercase().contains(&want));
+        if adapters.is_empty() {
+            return Err(format!(
+                "RT2_ADAPTER='{want}' matches none of the adapters ({})",
+                names.join(", ")
+            ));
+        }
+    }
+    adapters.sort_by_key(|a| rank(a.get_info().device_type));
+    // Several GPUs of the best kind share frames; a software adapter never joins hardware.
+    let best = adapters[0].get_info().device_type;
+    if best == wgpu::DeviceType::Cpu && !accept_software {
+        let i = adapters[0].get_info();
+        return Err(format!(
+            "the only adapter, {} ({:?}, {:?}), is a software one, slower than RT2's CPU path",
+            i.name, i.device_type, i.backend
+        ));
+    }
+    adapters.retain(|a| a.get_info().device_type == best);
+    let chosen: Vec<&wgpu::Adapter> = if opts.logical_devices > 0 {
+        vec![&adapters[0]; opts.logical_devices]
+    } else {
+        adapters.iter().collect()
+    };
+    let mut devices = Vec::new();
+    for a in chosen {
+        devices.push(open_device(a, opts)?);
+    }
+    let info = adapters[0].get_info();
+    Ok(Gpu {
+        description: format!(
+            "{} x{} ({:?}, {:?})",
+            info.name,
+            devices.len(),
+            info.device_type,
+            info.backend
+        ),
+        software: best == wgpu::DeviceType::Cpu,
+        devices,
+    })
+}
+
+fn open_device(adapter: &wgpu::Adapter, opts: &GpuOptions) -> std::result::Result<Device, String> {
+    let info = adapter.get_info();
+    let limits = adapter.limits();
+    if limits.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS_NEEDED
+        || limits.max_bind_groups < 2
+    {
+        return Err(format!(
+            "adapter {} allows {} storage buffers per shader stage; RT2's kernels need {}",
+            info.name, limits.max_storage_buffers_per_shader_stage, STORAGE_BUFFERS_NEEDED
+        ));
+    }
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("rt2"),
+        required_features: wgpu::Features::empty(),
+        // Everything the adapter offers: large scenes need its full storage binding size.
+        required_limits: limits.clone(),
+        ..Default::default()
+    }))
+    .map_err(|e| format!("adapter {} refused a device: {e}", info.name))?;
+    let errors = Arc::new(Mutex::new(Vec::new()));
+    let sink = errors.clone();
+    device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+        if let Ok(mut v) = sink.lock() {
+            v.push(e.to_string());
+        }
+    }));
+    let layouts = make_layouts(&device);
+    Ok(Device {
+        name: info.name,
+        device,
+        queue,
+        limits,
+        layouts,
+        pipelines: Mutex::new(HashMap::new()),
+        scan: Mutex::new(None),
+        errors,
+        scene: Mutex::new(SceneCache::default()),
+        max_binding_override: opts.max_binding_override,
+    })
+}
+
+fn storage(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn uniform(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// The bind group layouts; every binding is documented where the WGSL declares it
+/// (common.wgsl for the scene, query.wgsl, render.wgsl and scan.wgsl for the rest).
+fn make_layouts(d: &wgpu::Device) -> Layouts {
+    let bgl = |label: &str, entries: &[wgpu::BindGroupLayoutEntry]| {
+        d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries,
+        })
+    };
+    let pl = |label: &str, groups: &[&wgpu::BindGroupLayout]| {
+        let groups: Vec<Option<&wgpu::BindGroupLayout>> = groups.iter().map(|g| Some(*g)).collect();
+        d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &groups,
+            immediate_size: 0,
+        })
+    };
+    // Group 0: the 13 scene arrays, read-only.
+    let scene_entries: Vec<_> = (0..13).map(|b| storage(b, true)).collect();
+    let scene = bgl("scene", &scene_entries);
+    // Group 1 of the queries: params, rays (read), hits and stats (written).
+    let query_io = bgl(
+        "query io",
+        &[
+            uniform(0),
+            storage(1, true),
+            storage(2, false),
+            storage(3, false),
+        ],
+    );
+    // Group 1 of the megakernel: params, frame (written), mask (read).
+    let mega_io = bgl(
+        "megakernel io",
+        &[uniform(0), storage(1, false), storage(2, true)],
+    );
+    // Group 1 of the wavefront kernels: params, frame, mask, queue, slots, scan, contrib, accum.
+    let mut wave_entries = vec![uniform(0), storage(1, false), storage(2, true)];
+    wave_entries.extend((3..8).map(|b| storage(b, false)));
+    let wave_io = bgl("wavefront io", &wave_entries);
+    // The prefix sum: params, the level, its block sums.
+    let scan_io = bgl(
+        "scan io",
+        &[uniform(0), storage(1, false), storage(2, false)],
+    );
+    Layouts {
+        query: pl("query", &[&scene, &query_io]),
+        mega: pl("megakernel", &[&scene, &mega_io]),
+        wave: pl("wavefront", &[&scene, &wave_io]),
+        scan: pl("scan", &[&scan_io]),
+        scene,
+        query_io,
+        mega_io,
+        wave_io,
+        scan_io,
+    }
+}
+
+/// Entry points of each program, in the order `pipelines` returns them.
+pub(crate) const QUERY_ENTRIES: [&str; 2] = ["intersect_main", "occluded_main"];
+pub(crate) const MEGA_ENTRY: &str = "megakernel";
+pub(crate) const WAVE_ENTRIES: [&str; 5] = [
+    "wave_generate",
+    "wave_trace",
+    "wave_accumulate",
+    "wave_compact",
+    "wave_finalize",
+];
+
+impl Device {
+    /// Largest storage binding, in bytes: what one buffer of the scene or a job may hold.
+    pub fn max_binding(&self) -> u64 {
+        let l = self
+            .limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size);
+        self.max_binding_override.map_or(l, |o| o.min(l))
+    }
+
+    /// The pipelines of a traversal's program, compiled on first use. Render: megakernel
+    /// first, then [`WAVE_ENTRIES`].
+    pub(crate) fn pipelines(&self, t: Traversal, p: Program) -> Result<Pipelines> {
+        let mut cache = self.pipelines.lock().map_err(|_| poisoned())?;
+        if let Some(v) = cache.get(&(t, p)) {
+            return Ok(v.clone());
+        }
+        let src = kernels::source(t, p);
+        let label = format!("{} {p:?}", t.name());
+        let v = match p {
+            Program::Query => kernels::create_pipelines(
+                &self.device,
+                &label,
+                &src,
+                &self.layouts.query,
+                &QUERY_ENTRIES,
+            )?,
+            Program::Render => {
+                let mut v = kernels::create_pipelines(
+                    &self.device,
+                    &label,
+                    &src,
+                    &self.layouts.mega,
+                    &[MEGA_ENTRY],
+                )?;
+                v.extend(kernels::create_pipelines(
+                    &self.device,
+                    &label,
+                    &src,
+                    &self.layouts.wave,
+                    &WAVE_ENTRIES,
+                )?);
+                v
+            }
+        };
+        let v = Arc::new(v);
+        cache.insert((t, p), v.clone());
+        Ok(v)
+    }
+
+    /// Scene arrays re-sent by the last job (names as in common.wgsl): how the upload cache
+    /// is observed.
+    pub fn last_uploads(&self) -> Vec<&'static str> {
+        self.scene
+            .lock()
+            .map(|s| s.last_uploads.clone())
+            .unwrap_or_default()
+    }
+
+    /// `scan_local`, `scan_add`.
+    pub(crate) fn scan_pipelines(&self) -> Result<Pipelines> {
+        let mut cache = self.scan.lock().map_err(|_| poisoned())?;
+        if let Some(v) = &*cache {
+            return Ok(v.clone());
+        }
+        let v = Arc::new(kernels::create_pipelines(
+            &self.device,
+            "scan",
+            kernels::SCAN,
+            &self.layouts.scan,
+            &["scan_local", "scan_add"],
+        )?);
+        *cache = Some(v.clone());
+        Ok(v)
+    }
+
+    /// A storage buffer holding `bytes` (at least 64 bytes: wgpu rejects empty bindings and
+    /// one element of any struct fits).
+    pub(crate) fn upload(
+        &self,
+        label: &str,
+        bytes: &[u8],
+        extra: wgpu::BufferUsages,
+    ) -> wgpu::Buffer {
+        let mut padded;
+        let contents = if bytes.len() < 64 {
+            padded = bytes.to_vec();
+            padded.resize(64, 0);
+            &padded[..]
+        } else {
+            bytes
+        };
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE | extra,
+            })
+    }
+
+    pub(crate) fn uniform<T: bytemuck::Pod>(&self, v: &T) -> wgpu::Buffer {
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("params"),
+                contents: bytemuck::bytes_of(v),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+    }
+
+    /// An uninitialised storage buffer of `bytes` (rounded up to 64), checked against the
+    /// binding limit.
+    pub(crate) fn scratch(
+        &self,
+        label: &str,
+        bytes: u64,
+        extra: wgpu::BufferUsages,
+    ) -> GpuResult<wgpu::Buffer> {
+        let size = bytes.max(64).next_multiple_of(4);
+        if size > self.max_binding() {
+            return Err(GpuError::Limits(format!(
+                "{label} needs {size} bytes, more than the {} bytes a storage binding of {} may hold",
+                self.max_binding(),
+                self.name
+            )));
+        }
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size,
+            usage: wgpu::BufferUsages::STORAGE | extra,
+            mapped_at_creation: false,
+        }))
+    }
+
+    pub(crate) fn bind(
+        &self,
+        layout: &wgpu::BindGroupLayout,
+        buffers: &[&wgpu::Buffer],
+    ) -> wgpu::BindGroup {
+        let entries: Vec<_> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout,
+            entries: &entries,
+        })
+    }
+
+    /// Records a dispatch of `threads` threads (64 per workgroup), as a 2-D grid when the
+    /// per-dimension limit requires it (kernels read their index with `flat_id`).
+    pub(crate) fn dispatch(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        pipeline: &wgpu::ComputePipeline,
+        groups: &[&wgpu::BindGroup],
+        threads: u64,
+    ) {
+        if threads == 0 {
+            return;
+        }
+        let wg = threads.div_ceil(64);
+        let max = self.limits.max_compute_workgroups_per_dimension.max(1) as u64;
+        let x = wg.min(max);
+        let y = wg.div_ceil(x);
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+        pass.set_pipeline(pipeline);
+        for (i, g) in groups.iter().enumerate() {
+            pass.set_bind_group(i as u32, Some(*g), &[]);
+        }
+        pass.dispatch_workgroups(x as u32, y as u32, 1);
+    }
+
+    /// Most threads one dispatch may run (the 2-D grid's bound).
+    pub(crate) fn max_threads(&self) -> u64 {
+        let max = self.limits.max_compute_workgroups_per_dimension as u64;
+        max * max * 64
+    }
+
+    /// Submits `enc` after copying `src` into a mappable buffer, waits, returns the bytes.
+    pub(crate) fn read_back(
+        &self,
+        mut enc: wgpu::CommandEncoder,
+        src: &wgpu::Buffer,
+        offset: u64,
+        bytes: u64,
+    ) -> Result<Vec<u8>> {
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("read back"),
+            size: bytes.max(4),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        if bytes > 0 {
+            enc.copy_buffer_to_buffer(src, offset, &staging, 0, bytes);
+        }
+        self.queue.submit([enc.finish()]);
+        let slice = staging.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| gpu_error(format!("waiting for {}: {e}", self.name)))?;
+        self.check()?;
+        match rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(gpu_error(format!("mapping a result buffer: {e}"))),
+            Err(_) => return Err(gpu_error("the result buffer was never mapped".into())),
+        }
+        let view = slice
+            .get_mapped_range()
+            .map_err(|e| gpu_error(format!("reading a result buffer: {e}")))?;
+        let out = view[..bytes as usize].to_vec();
+        drop(view);
+        staging.unmap();
+        Ok(out)
+    }
+
+    /// Turns errors wgpu reported outside error scopes (out of memory, a lost device, a
+    /// validation error of a job) into an error status.
+    pub(crate) fn check(&self) -> Result<()> {
+        let mut errs = self.errors.lock().map_err(|_| poisoned())?;
+        if errs.is_empty() {
+            return Ok(());
+        }
+        let msg = errs.join("; ");
+        errs.clear();
+        Err(gpu_error(format!("{}: {msg}", self.name)))
+    }
+}
+
+fn gpu_error(m: String) -> Error {
+    Error::new(Rt2Status::Internal, format!("GPU error: {m}"))
+}
+
+fn poisoned() -> Error {
+    Error::new(
+        Rt2Status::Internal,
+        "a GPU lock was poisoned by an earlier panic",
+    )
+}

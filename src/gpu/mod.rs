@@ -1,0 +1,107 @@
+//! Layer 3b: the GPU backend on wgpu compute shaders (WGSL in `shaders/`). It owns the
+//! devices of a context, their pipelines and their copy of the committed scene; the kd-tree
+//! is always built on the CPU and uploaded (RT² render cycle, thesis fig. 13).
+//!
+//! - [`open`] picks adapters and creates devices; the dispatch layer decides whether to use
+//!   them (a software adapter is slower than the CPU path).
+//! - [`query`]: batch ray queries, one thread per ray.
+//! - [`render`]: Whitted frames, megakernel or wavefront, rows split across devices.
+
+mod device;
+pub mod kernels;
+pub mod layout;
+mod query;
+mod render;
+mod scene;
+
+pub use device::{open, Device, Gpu, GpuOptions};
+pub use render::GpuPath;
+
+use crate::camera::Camera;
+use crate::cpu::traverse::Traversal;
+use crate::frame::Frame;
+use crate::geometry::{Hit, Ray, TraversalStats};
+use crate::render::RenderOptions;
+use crate::scene::Committed;
+
+/// Renders a frame on every device of `gpu`, each a band of rows.
+pub fn render(
+    gpu: &Gpu,
+    scene: &Committed,
+    camera: &Camera,
+    opts: &RenderOptions,
+    traversal: Traversal,
+    path: GpuPath,
+    frame: &mut Frame,
+) -> GpuResult<()> {
+    render::render(gpu, scene, camera, opts, traversal, path, frame)
+}
+
+/// Closest hits of a batch of rays, on the first device.
+pub fn intersect(
+    gpu: &Gpu,
+    scene: &Committed,
+    rays: &[Ray],
+    hits: &mut [Hit],
+    traversal: Traversal,
+    short_stack: usize,
+) -> GpuResult<TraversalStats> {
+    query::run(
+        &gpu.devices[0],
+        scene,
+        rays,
+        traversal,
+        short_stack,
+        Some(hits),
+        None,
+    )
+}
+
+/// Any-hit flags of a batch of rays, on the first device.
+pub fn occluded(
+    gpu: &Gpu,
+    scene: &Committed,
+    rays: &[Ray],
+    out: &mut [bool],
+    traversal: Traversal,
+    short_stack: usize,
+) -> GpuResult<TraversalStats> {
+    query::run(
+        &gpu.devices[0],
+        scene,
+        rays,
+        traversal,
+        short_stack,
+        None,
+        Some(out),
+    )
+}
+
+/// Errors of the GPU backend that the dispatch layer may answer by running on the CPU.
+#[derive(Clone, Debug)]
+pub enum GpuError {
+    /// The scene or job does not fit the device's limits; AUTO falls back to the CPU.
+    Limits(String),
+    /// Anything else (device lost, out of memory, kernel error): an error status.
+    Other(crate::error::Error),
+}
+
+impl From<crate::error::Error> for GpuError {
+    fn from(e: crate::error::Error) -> Self {
+        GpuError::Other(e)
+    }
+}
+
+impl GpuError {
+    /// The error a caller sees when no fallback applies.
+    pub fn into_error(self) -> crate::error::Error {
+        match self {
+            GpuError::Limits(m) => {
+                crate::error::Error::new(crate::error::Rt2Status::BackendUnavailable, m)
+            }
+            GpuError::Other(e) => e,
+        }
+    }
+}
+
+pub type GpuResult<T> = std::result::Result<T, GpuError>;
