@@ -22,6 +22,8 @@ class RenderOptions(ctypes.Structure):
         ("short_stack_size", ctypes.c_uint32),
         ("transparency", ctypes.c_uint32),
         ("background", ctypes.c_float * 3),
+        ("schedule", ctypes.c_uint32),
+        ("gpu_path", ctypes.c_uint32),
     ]
 
 
