@@ -109,7 +109,14 @@ impl Triangle {
                 len = n;
             }
         }
-        // Rounding in the interpolation can step a hair outside the voxel: clamp back.
-        Aabb::from_points(&poly[..len]).intersection(*voxel)
+        // The interpolated corners are off the true edge by rounding, in either direction, and
+        // two triangles sharing the edge round differently: the box is padded by a few ULPs so
+        // that it is conservative (a triangle must be listed in every leaf its true part
+        // touches, or a ray through the shared edge can miss it there; `tests/precision.rs`); the
+        // pad follows the largest coordinate, as the error of the ray's position does,
+        // then clamped back to the voxel.
+        let b = Aabb::from_points(&poly[..len]);
+        let pad = 4.0 * f32::EPSILON * b.min.abs().max(b.max.abs()).max_element();
+        Aabb::new(b.min - pad, b.max + pad).intersection(*voxel)
     }
 }

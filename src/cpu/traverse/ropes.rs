@@ -19,7 +19,9 @@ fn exit_six_faces(b: &Aabb, ray: &TRay) -> (f32, usize) {
     let mut best = (f32::INFINITY, 0);
     for axis in 0..3 {
         let (ta, tb) = (ray.dist(axis, b.min[axis]), ray.dist(axis, b.max[axis]));
-        let (t, face) = if ta > tb {
+        // A flat slab (`ta == tb`) is left through the face the direction points to: the other
+        // rope leads back to the leaf the ray came from.
+        let (t, face) = if ta > tb || (ta == tb && !ray.positive(axis)) {
             (ta, 2 * axis)
         } else if tb >= ta {
             (tb, 2 * axis + 1)
