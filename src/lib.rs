@@ -3,7 +3,7 @@
 //! Layers (DESIGN.md §2): [`api`] is the C boundary (layer 1); [`dispatch`] decides where each
 //! operation runs (layer 2); [`cpu`] is the CPU backend (layer 3a). Shared by all: the
 //! [`geometry`] vocabulary, the [`scene`] model, the [`kdtree`], [`camera`], [`frame`] and
-//! [`shading`]. [`context::Context`] ties a thread pool to a dispatch decision.
+//! [`shading`], and the [`precision`] modes. [`context::Context`] ties a thread pool to a dispatch decision.
 
 pub mod api;
 pub mod camera;
@@ -14,6 +14,7 @@ pub mod error;
 pub mod frame;
 pub mod geometry;
 pub mod kdtree;
+pub mod precision;
 pub mod rayset;
 pub mod render;
 pub mod scene;

@@ -133,12 +133,13 @@ pub(super) fn ropes(
 }
 
 /// Ropes++ (the thesis' algorithm 8): exits from the three planes the direction selects, an
-/// entry-only scene test, and secondary rays start at `start`, the leaf node holding their origin
+/// entry-only scene test (on `scene_box`, the tree's box or its padded version), and secondary rays start at `start`, the leaf node holding their origin
 /// (checked against its box: a wrong hint falls back to the descent from the root, never to a
 /// wrong answer).
 pub(super) fn ropes_plus_plus(
     tree: &KdTree,
     ropes: &Ropes,
+    scene_box: &Aabb,
     ray: &TRay,
     start: Option<u32>,
     query: &mut impl LeafQuery,
@@ -153,7 +154,7 @@ pub(super) fn ropes_plus_plus(
     };
     let (node, t_entry, miss_test) = match start {
         Some(s) if holds_origin(s) => (s, ray.ray.tmin, false),
-        _ => (0, entry_three_faces(&tree.bounds, ray), true),
+        _ => (0, entry_three_faces(scene_box, ray), true),
     };
     if t_entry > ray.ray.tmax {
         return;
