@@ -106,6 +106,7 @@ impl Context {
             how,
             TraverseOptions {
                 short_stack_size: q.short_stack_size,
+                intersector: q.intersector,
                 ..TraverseOptions::default()
             },
         )
@@ -118,6 +119,8 @@ pub struct QueryOptions {
     /// `None` lets the library choose (AUTO).
     pub traversal: Option<crate::cpu::traverse::Traversal>,
     pub short_stack_size: usize,
+    /// The ray–triangle test (`crate::precision`).
+    pub intersector: crate::precision::Intersector,
 }
 
 impl Default for QueryOptions {
@@ -125,6 +128,7 @@ impl Default for QueryOptions {
         QueryOptions {
             traversal: None,
             short_stack_size: 3,
+            intersector: crate::precision::Intersector::MollerTrumbore,
         }
     }
 }

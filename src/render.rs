@@ -1,6 +1,7 @@
 //! Render options shared by every backend.
 
 use crate::cpu::traverse::Traversal;
+use crate::precision::{Intersector, OffsetMode};
 use glam::Vec3;
 
 /// How transparent materials pass light.
@@ -24,6 +25,10 @@ pub struct RenderOptions {
     pub short_stack_size: usize,
     pub transparency: Transparency,
     pub background: Vec3,
+    /// The ray–triangle test (`crate::precision`).
+    pub intersector: Intersector,
+    /// Where secondary rays start (`crate::precision`).
+    pub offset_mode: OffsetMode,
 }
 
 impl Default for RenderOptions {
@@ -35,6 +40,8 @@ impl Default for RenderOptions {
             short_stack_size: 3,
             transparency: Transparency::Refract,
             background: Vec3::new(0.05, 0.05, 0.08),
+            intersector: Intersector::MollerTrumbore,
+            offset_mode: OffsetMode::Epsilon,
         }
     }
 }

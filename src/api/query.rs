@@ -3,7 +3,7 @@
 
 use super::context::rt2_context;
 use super::ffi::{check_struct_size, guard, handle, slice, slice_mut, write_out};
-use super::options::traversal_from;
+use super::options::{intersector_from, intersector_to, traversal_from};
 use super::scene::rt2_scene;
 use crate::context::QueryOptions;
 use crate::error::{Error, Rt2Status};
@@ -46,6 +46,8 @@ pub struct rt2_query_options {
     pub traversal: u32,
     /// Entries of the short stack, 1..=64 (default 3).
     pub short_stack_size: u32,
+    /// An `rt2_intersector` value (default MOLLER_TRUMBORE).
+    pub intersector: u32,
 }
 
 /// Work done by a query (the thesis' table 1 counters), summed over the batch.
@@ -65,6 +67,7 @@ pub extern "C" fn rt2_query_options_default() -> rt2_query_options {
         struct_size: std::mem::size_of::<rt2_query_options>() as u32,
         traversal: 0,
         short_stack_size: d.short_stack_size as u32,
+        intersector: intersector_to(d.intersector),
     }
 }
 
@@ -92,6 +95,7 @@ unsafe fn query_options(opt: *const rt2_query_options) -> crate::error::Result<Q
     Ok(QueryOptions {
         traversal: traversal_from(o.traversal)?,
         short_stack_size: o.short_stack_size as usize,
+        intersector: intersector_from(o.intersector)?,
     })
 }
 
@@ -122,6 +126,9 @@ unsafe fn run_query<T>(
         let out = slice_mut(out, count, "hits")?;
         if q.traversal.is_some_and(|t| t.needs_ropes()) {
             s.write().ensure_ropes()?;
+        }
+        if q.intersector == crate::precision::Intersector::Watertight {
+            s.write().ensure_exact_vertices()?;
         }
         let guard = s.read();
         let committed = guard.committed()?;

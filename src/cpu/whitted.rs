@@ -5,7 +5,8 @@
 use super::traverse::{self, Traversal, TraverseOptions};
 use crate::camera::Camera;
 use crate::frame::Frame;
-use crate::geometry::{Hit, Ray, TraversalStats};
+use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
+use crate::precision::{offset_ray_origin, OffsetMode};
 use crate::render::{RenderOptions, Transparency};
 use crate::scene::Committed;
 use crate::shading::{phong, reflect, refract, schlick};
@@ -23,8 +24,11 @@ pub struct Tracer<'a> {
     pub scene: &'a Committed,
     pub opts: &'a RenderOptions,
     pub traversal: Traversal,
-    /// Offset of secondary-ray origins along the normal, scaled to the scene.
+    /// Offset of secondary-ray origins along the normal, scaled to the scene
+    /// (`OffsetMode::Epsilon`; also where the checker pattern is sampled).
     pub eps: f32,
+    /// The scene diagonal, for the robust offset near the origin.
+    pub scale: f32,
 }
 
 impl<'a> Tracer<'a> {
@@ -34,17 +38,21 @@ impl<'a> Tracer<'a> {
             opts,
             traversal,
             eps: 1e-5 * scene.scale(),
+            scale: scene.scale(),
         }
     }
 
-    fn traverse_options(&self) -> TraverseOptions {
+    fn traverse_options(&self, exclude: PrimIndex) -> TraverseOptions {
         TraverseOptions {
             short_stack_size: self.opts.short_stack_size,
+            intersector: self.opts.intersector,
+            exclude,
             ..TraverseOptions::default()
         }
     }
 
-    pub fn intersect(&self, ray: &Ray) -> Hit {
+    /// Closest hit of `ray`, ignoring primitive `exclude` (`INVALID` for none).
+    pub fn intersect(&self, ray: &Ray, exclude: PrimIndex) -> Hit {
         let mut stats = TraversalStats::default();
         let s = self.scene;
         traverse::intersect(
@@ -52,12 +60,12 @@ impl<'a> Tracer<'a> {
             &s.prims,
             ray,
             self.traversal,
-            &self.traverse_options(),
+            &self.traverse_options(exclude),
             &mut stats,
         )
     }
 
-    pub fn occluded(&self, ray: &Ray) -> bool {
+    pub fn occluded(&self, ray: &Ray, exclude: PrimIndex) -> bool {
         let mut stats = TraversalStats::default();
         let s = self.scene;
         traverse::occluded(
@@ -65,27 +73,55 @@ impl<'a> Tracer<'a> {
             &s.prims,
             ray,
             self.traversal,
-            &self.traverse_options(),
+            &self.traverse_options(exclude),
             &mut stats,
         )
     }
 
+    /// The hit point of `hit` as the offset mode wants it, and the geometric normal there. The
+    /// fixed epsilon keeps the historical `org + t·dir` (its default renders are unchanged); the
+    /// other modes start from the point recomputed on the surface.
+    pub fn surface(&self, ray: &Ray, hit: &Hit) -> (Vec3, Vec3) {
+        let prims = &self.scene.prims;
+        let p = match self.opts.offset_mode {
+            OffsetMode::Epsilon => ray.at(hit.t),
+            _ => prims.hit_point(hit, ray),
+        };
+        (p, prims.normal(hit.prim, p))
+    }
+
+    /// Where a secondary ray leaving `hit` at `p` into the side of the unit normal `side`
+    /// starts, and which primitive it ignores (the offset modes of `crate::precision`).
+    /// `n_geo` is the primitive's outward normal.
+    pub fn leave(&self, hit: &Hit, p: Vec3, side: Vec3, n_geo: Vec3) -> (Vec3, PrimIndex) {
+        match self.opts.offset_mode {
+            OffsetMode::Epsilon => (p + self.eps * side, INVALID),
+            OffsetMode::Robust => (offset_ray_origin(p, side, self.scale), INVALID),
+            // Leaving a flat primitive, or a convex one to its outside, never meets it again.
+            OffsetMode::ExcludePrim
+                if self.scene.prims.is_flat(hit.prim) || side.dot(n_geo) > 0.0 =>
+            {
+                (p, hit.prim)
+            }
+            OffsetMode::ExcludePrim => (offset_ray_origin(p, side, self.scale), INVALID),
+        }
+    }
+
     /// Radiance along a primary ray: pops pending rays until none is left.
     pub fn radiance(&self, primary: Ray) -> Vec3 {
-        let mut pending: Vec<(Ray, Vec3, u32)> =
+        let mut pending: Vec<(Ray, PrimIndex, Vec3, u32)> =
             Vec::with_capacity(2 * self.opts.max_depth as usize + 2);
-        pending.push((primary, Vec3::ONE, 1));
+        pending.push((primary, INVALID, Vec3::ONE, 1));
         let mut color = Vec3::ZERO;
-        while let Some((ray, weight, depth)) = pending.pop() {
-            let hit = self.intersect(&ray);
+        while let Some((ray, exclude, weight, depth)) = pending.pop() {
+            let hit = self.intersect(&ray, exclude);
             if !hit.is_hit() {
                 color += weight * self.opts.background;
                 continue;
             }
             let s = self.scene;
             let m = s.material_of(hit.prim);
-            let p = ray.at(hit.t);
-            let n_geo = s.prims.normal(hit.prim, p);
+            let (p, n_geo) = self.surface(&ray, &hit);
             let entering = n_geo.dot(ray.dir) < 0.0;
             let n = if entering { n_geo } else { -n_geo };
             // The pattern is sampled just inside the surface: a checker boundary lying in the
@@ -94,12 +130,12 @@ impl<'a> Tracer<'a> {
             let local_weight = 1.0 - m.reflectivity - m.transparency;
             if local_weight > 0.0 {
                 let mut local = m.ambient * base;
-                let above = p + self.eps * n;
+                let (above, skip) = self.leave(&hit, p, n, n_geo);
                 for light in &s.lights {
                     let to_light = light.position - above;
                     let dist = to_light.length();
                     let shadow = Ray::new(above, to_light / dist, 0.0, dist);
-                    if dist > 0.0 && !self.occluded(&shadow) {
+                    if dist > 0.0 && !self.occluded(&shadow, skip) {
                         local += phong(m, base, p, n, -ray.dir, light);
                     }
                 }
@@ -111,11 +147,8 @@ impl<'a> Tracer<'a> {
             let mut push = |dir: Vec3, side: f32, w: f32| {
                 let w = weight * w;
                 if w.max_element() >= MIN_WEIGHT {
-                    pending.push((
-                        Ray::new(p + side * self.eps * n, dir, 0.0, f32::INFINITY),
-                        w,
-                        depth + 1,
-                    ));
+                    let (org, skip) = self.leave(&hit, p, side * n, n_geo);
+                    pending.push((Ray::new(org, dir, 0.0, f32::INFINITY), skip, w, depth + 1));
                 }
             };
             let mut mirror = m.reflectivity;
