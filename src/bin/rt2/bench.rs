@@ -2,6 +2,8 @@
 //! runs; Embree (the peer of `../shared/peers`) is measured in the same invocation when its
 //! harness is built, so ratios compare like with like on a noisy shared machine.
 
+mod chart;
+
 use crate::load_scene;
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::traverse::Traversal;
@@ -18,12 +20,18 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-const USAGE: &str = "usage: rt2 bench [frames|build|rays|tables|all] [--runs N] [--write FILE]
+const USAGE: &str =
+    "usage: rt2 bench [frames|build|rays|tables|chart|memory|all] [--runs N] [--write FILE]
   frames   ms per 1376x768 frame on the CPU: spheres3 and the bunny, with build time and memory
   build    kd-tree build time (SAH+perfect splits, midpoint) at 1 and 2 threads, Embree beside
   rays     Mrays/s per traversal on ../shared/raysets, agreement with Embree's hits, Embree beside
   tables   the RT² thesis' tables 1 and 2 on the CPU: nodes visited per ray, tree memory and
            ms per 1376x768 frame for every traversal, beside the thesis' figures
+  chart    speed against accuracy: every traversal x intersector x offset mode against an f64
+           reference on the bunny sets and a stress scene; docs/chart.svg and .png with
+           --features chart
+  memory   bytes per primitive of each part of each built-in scene and the bunny, beside a
+           tessellation of their analytic primitives
   --runs N       timed runs per figure (default 5; the median is reported)
   --write FILE   also replace this benchmark's section in FILE (e.g. BENCHMARKS.md)
 Model files come from $RT2_SHARED (default ../shared); Embree from $RT2_EMBREE_BENCH or
@@ -66,11 +74,15 @@ pub fn run(args: &[String]) -> Result<()> {
         "build" => vec![("build", build)],
         "rays" => vec![("rays", rays)],
         "tables" => vec![("tables", tables)],
+        "chart" => vec![("chart", chart::chart)],
+        "memory" => vec![("memory", chart::memory)],
         "all" => vec![
             ("frames", frames),
             ("build", build),
             ("rays", rays),
             ("tables", tables),
+            ("chart", chart::chart),
+            ("memory", chart::memory),
         ],
         _ => {
             return Err(Error::invalid_argument(format!(

@@ -10,6 +10,7 @@ use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
 use rt2::error::{Error, Result};
 use rt2::frame::Frame;
+use rt2::precision::{Intersector, OffsetMode};
 use rt2::render::{RenderOptions, Transparency};
 use rt2::scene::{builtin, loaders, Material, PointLight, Scene, Shape};
 use std::path::Path;
@@ -26,6 +27,8 @@ const USAGE: &str = "usage:
       --depth N             maximum ray depth (default: the scene's)
       --samples N           samples per pixel (default: 1)
       --straight            RT² transparency (no refraction)
+      --intersector I       moller-trumbore or watertight (default: moller-trumbore)
+      --offset M            secondary-ray origins: epsilon, robust, exclude-prim (default: epsilon)
       --threads N           worker threads (default: all cores)
   rt2 bench [frames|build|rays|all]    measure (rt2 bench --help)";
 
@@ -145,6 +148,16 @@ fn render(args: &[String]) -> Result<()> {
             "--samples" => opts.samples = parse(a, it.next())?,
             "--threads" => threads = parse(a, it.next())?,
             "--straight" => opts.transparency = Transparency::Straight,
+            "--intersector" => {
+                let i: String = parse(a, it.next())?;
+                opts.intersector = Intersector::from_name(&i)
+                    .ok_or_else(|| Error::invalid_argument(format!("unknown intersector '{i}'")))?;
+            }
+            "--offset" => {
+                let m: String = parse(a, it.next())?;
+                opts.offset_mode = OffsetMode::from_name(&m)
+                    .ok_or_else(|| Error::invalid_argument(format!("unknown offset mode '{m}'")))?;
+            }
             s if !s.starts_with('-') => name = s.to_string(),
             s => {
                 return Err(Error::invalid_argument(format!(
@@ -161,6 +174,9 @@ fn render(args: &[String]) -> Result<()> {
     ctx.install(|| loaded.scene.commit())?;
     if opts.traversal.is_some_and(|t| t.needs_ropes()) {
         loaded.scene.ensure_ropes()?;
+    }
+    if opts.intersector == Intersector::Watertight {
+        loaded.scene.ensure_exact_vertices()?;
     }
     let committed = loaded.scene.committed()?;
     let mut frame = Frame::new(width, height)?;
