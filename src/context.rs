@@ -13,6 +13,39 @@ use crate::scene::Committed;
 pub struct Context {
     pool: rayon::ThreadPool,
     decision: Decision,
+    /// Declared after `pool`, so dropped after it: waits for the workers to exit.
+    _workers: Workers,
+}
+
+/// The pool's worker threads, spawned by the context itself so that it can join them. rayon's
+/// `ThreadPool::drop` only tells its workers to stop; joining them makes `rt2_context_destroy`
+/// leave no thread behind (under valgrind, the stacks and TLS of workers still exiting when a
+/// C program's `main` returned were reported as possibly lost).
+#[derive(Default)]
+struct Workers {
+    threads: std::sync::Arc<std::sync::Mutex<Vec<std::thread::JoinHandle<()>>>>,
+}
+
+impl Drop for Workers {
+    fn drop(&mut self) {
+        // A worker cannot join itself (nor its siblings, which may be joining it).
+        if IN_WORKER.get() {
+            return;
+        }
+        let threads = match self.threads.lock() {
+            Ok(mut t) => std::mem::take(&mut *t),
+            Err(_) => return,
+        };
+        for t in threads {
+            let _ = t.join();
+        }
+    }
+}
+
+thread_local! {
+    /// Set on the pools' worker threads (no destructor and no allocation, unlike
+    /// `thread::current()`, whose handle a C program's main thread never frees).
+    static IN_WORKER: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
 impl Context {
@@ -21,9 +54,28 @@ impl Context {
     pub fn new(request: BackendRequest, threads: u32) -> Result<Self> {
         let env = std::env::var("RT2_BACKEND").ok();
         let decision = dispatch::decide_backend(request, env.as_deref())?;
+        let workers = Workers::default();
+        let handles = workers.threads.clone();
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads as usize)
             .thread_name(|i| format!("rt2-worker-{i}"))
+            .spawn_handler(move |worker| {
+                let mut b = std::thread::Builder::new();
+                if let Some(name) = worker.name() {
+                    b = b.name(name.to_owned());
+                }
+                if let Some(size) = worker.stack_size() {
+                    b = b.stack_size(size);
+                }
+                let handle = b.spawn(move || {
+                    IN_WORKER.set(true);
+                    worker.run()
+                })?;
+                if let Ok(mut t) = handles.lock() {
+                    t.push(handle);
+                }
+                Ok(())
+            })
             .build()
             .map_err(|e| {
                 Error::new(
@@ -31,7 +83,11 @@ impl Context {
                     format!("cannot start threads: {e}"),
                 )
             })?;
-        Ok(Context { pool, decision })
+        Ok(Context {
+            pool,
+            decision,
+            _workers: workers,
+        })
     }
 
     pub fn decision(&self) -> &Decision {
