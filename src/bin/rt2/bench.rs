@@ -93,8 +93,9 @@ pub fn run(args: &[String]) -> Result<()> {
     for (name, f) in sections {
         let body = f(&a)?;
         let text = format!(
-            "Machine: {}. Command: `cargo run --release --bin rt2 -- bench {name} --runs {}`.\n\n{body}",
+            "Machine: {}. Command: `cargo run --release {}--bin rt2 -- bench {name} --runs {}`.\n\n{body}",
             machine(),
+            if name == "chart" { "--features chart " } else { "" },
             a.runs
         );
         println!("\n{text}");
