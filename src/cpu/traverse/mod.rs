@@ -98,9 +98,11 @@ impl Default for TraverseOptions {
 /// The scene box the traversal clips rays to. The watertight test must not lose a hit on a
 /// triangle lying in a face of the box to the rounding of the clip (a grazing ray whose entry
 /// rounds past its exit), so for it the box is padded by a few ULPs of its largest coordinate:
-/// the conservative traversal bounds of Woop et al. §4. Inside the tree no padding is needed:
-/// consecutive leaves share the same rounded split distance, so the leaves cover the clipped
-/// segment without gaps.
+/// the conservative traversal bounds of Woop et al. §4. Inside the tree the rounded split
+/// distances are shared by consecutive leaves, so the leaves cover the clipped segment without
+/// gaps; a ray through a leaf corner may still be placed in a neighbouring leaf, which is why
+/// the builders list a primitive in every leaf it touches, with padded clipped boxes
+/// (`kdtree::split::classify`, `Triangle::clipped_bounds`).
 fn scene_box(tree: &KdTree, intersector: Intersector) -> Aabb {
     match intersector {
         Intersector::MollerTrumbore => tree.bounds,
