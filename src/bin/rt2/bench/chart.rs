@@ -483,6 +483,57 @@ fn secondary(a: &Args, ctx: &Context) -> Result<(Vec<Point>, String)> {
     Ok((points, table))
 }
 
+/// PSNR of renders of the built-in `default` scene (meshes, quadrics, a box, a plane; mirror
+/// and refraction, depth 6; 688x384) with each intersector x offset mode, against the render
+/// with the watertight test and the robust offset, standard traversal.
+fn psnr_table(ctx: &Context) -> Result<String> {
+    let mut b = builtin::by_name("default")?;
+    b.scene.commit()?;
+    b.scene.ensure_exact_vertices()?;
+    let c = b.scene.committed()?;
+    let render = |intersector, offset_mode| -> Result<Vec<u8>> {
+        let opts = RenderOptions {
+            max_depth: b.max_depth,
+            traversal: Some(Traversal::Standard),
+            intersector,
+            offset_mode,
+            ..RenderOptions::default()
+        };
+        let mut frame = rt2::frame::Frame::new(688, 384)?;
+        ctx.render(c, &b.camera, &opts, &mut frame)?;
+        Ok(frame.pixels().to_vec())
+    };
+    let reference = render(Intersector::Watertight, OffsetMode::Robust)?;
+    let mut out = String::from(
+        "\n#### Renders against a reference render\n\n\
+         The built-in `default` scene (688x384, depth 6), standard traversal; PSNR of the RGB \
+         channels against the render with the watertight test and the robust offset \
+         (inf: identical).\n\n| intersector | offset | PSNR dB | pixels differing |\n|---|---|---|---|\n",
+    );
+    for intersector in Intersector::ALL {
+        for mode in OffsetMode::ALL {
+            let img = render(intersector, mode)?;
+            let (mut se, mut n, mut differ) = (0.0f64, 0usize, 0usize);
+            for (p, q) in img.chunks_exact(4).zip(reference.chunks_exact(4)) {
+                differ += (p[..3] != q[..3]) as usize;
+                for k in 0..3 {
+                    se += (p[k] as f64 - q[k] as f64).powi(2);
+                    n += 1;
+                }
+            }
+            let psnr = 10.0 * (255.0f64 * 255.0 / (se / n as f64)).log10();
+            writeln!(
+                out,
+                "| {} | {} | {psnr:.1} | {differ} |",
+                intersector.name(),
+                mode.name()
+            )
+            .ok();
+        }
+    }
+    Ok(out)
+}
+
 /// The points no other point beats in both speed and error (lower error, higher Mrays/s),
 /// by increasing error.
 pub(super) fn pareto(points: &[Point]) -> Vec<Point> {
@@ -543,6 +594,7 @@ pub(super) fn chart(a: &Args) -> Result<String> {
     let t0 = Instant::now();
     let (qp, qt) = queries(a, &ctx)?;
     let (sp, st) = secondary(a, &ctx)?;
+    let psnr = psnr_table(&ctx)?;
     eprintln!(
         "bench chart: measured in {:.0} s",
         t0.elapsed().as_secs_f64()
@@ -566,7 +618,7 @@ pub(super) fn chart(a: &Args) -> Result<String> {
          that hits its own object is a self-intersection (acne), per million such shadow rays. \
          They include silhouette edges where the primary ray's closest hit is the back face \
          sharing the edge (the tie goes to the lower index): the shading side then points into \
-         the object and every offset mode starts inside it.\n\n{st}{}",
+         the object and every offset mode starts inside it.\n\n{st}{}{psnr}",
         front_table("ray queries", &qp),
         front_table("secondary rays", &sp)
     ))
