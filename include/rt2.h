@@ -92,6 +92,28 @@ typedef uint32_t rt2_gpu_path;
 #endif // __cplusplus
 
 /**
+ * Ray–triangle test (`rt2_query_options.intersector`, `rt2_render_options.intersector`).
+ */
+enum rt2_intersector
+#ifdef __cplusplus
+  : uint32_t
+#endif // __cplusplus
+ {
+  /**
+   * Möller–Trumbore: fastest; a ray through a shared edge or vertex may slip through.
+   */
+  RT2_INTERSECTOR_MOLLER_TRUMBORE = 0,
+  /**
+   * Woop, Benthin & Wald 2013: no ray slips through shared edges or vertices of a closed
+   * mesh; a per-ray set-up and a few more operations per test.
+   */
+  RT2_INTERSECTOR_WATERTIGHT = 1,
+};
+#ifndef __cplusplus
+typedef uint32_t rt2_intersector;
+#endif // __cplusplus
+
+/**
  * Node order in memory (`rt2_build_options.layout`).
  */
 enum rt2_layout
@@ -107,6 +129,33 @@ enum rt2_layout
 };
 #ifndef __cplusplus
 typedef uint32_t rt2_layout;
+#endif // __cplusplus
+
+/**
+ * Where secondary rays start (`rt2_render_options.offset_mode`).
+ */
+enum rt2_offset_mode
+#ifdef __cplusplus
+  : uint32_t
+#endif // __cplusplus
+ {
+  /**
+   * A fixed offset of 1e-5 x the scene diagonal along the normal.
+   */
+  RT2_OFFSET_MODE_EPSILON = 0,
+  /**
+   * Wächter & Binder 2019: hit point recomputed on the surface, moved a few ULPs along
+   * the geometric normal (scale-aware).
+   */
+  RT2_OFFSET_MODE_ROBUST = 1,
+  /**
+   * Start on the recomputed hit point and ignore the primitive just hit (robust offset for
+   * rays entering a curved primitive).
+   */
+  RT2_OFFSET_MODE_EXCLUDE_PRIM = 2,
+};
+#ifndef __cplusplus
+typedef uint32_t rt2_offset_mode;
 #endif // __cplusplus
 
 /**
@@ -237,6 +286,13 @@ enum rt2_traversal
 #ifndef __cplusplus
 typedef uint32_t rt2_traversal;
 #endif // __cplusplus
+
+/**
+ * What the intersection core needs per ray besides the ray itself, prepared once per ray:
+ * the triangle test with its per-ray set-up, and the primitive to ignore (the one a
+ * secondary ray leaves, for `OffsetMode::ExcludePrim`; `INVALID` for none).
+ */
+typedef struct RayTest RayTest;
 
 /**
  * Creation parameters of a context.
@@ -397,6 +453,14 @@ typedef struct rt2_render_options {
    * An `rt2_gpu_path` value (default AUTO).
    */
   uint32_t gpu_path;
+  /**
+   * An `rt2_intersector` value (default MOLLER_TRUMBORE).
+   */
+  uint32_t intersector;
+  /**
+   * An `rt2_offset_mode` value (default EPSILON).
+   */
+  uint32_t offset_mode;
 } rt2_render_options;
 
 /**
@@ -420,6 +484,10 @@ typedef struct rt2_query_options {
    * traversal's order whatever `traversal` says, and return the same hits.
    */
   uint32_t mode;
+  /**
+   * An `rt2_intersector` value (default MOLLER_TRUMBORE).
+   */
+  uint32_t intersector;
 } rt2_query_options;
 
 /**

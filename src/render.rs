@@ -1,6 +1,7 @@
 //! Render options shared by every backend.
 
 use crate::cpu::traverse::Traversal;
+use crate::precision::{Intersector, OffsetMode};
 use glam::Vec3;
 
 /// How transparent materials pass light.
@@ -49,6 +50,10 @@ pub struct RenderOptions {
     pub background: Vec3,
     pub schedule: Schedule,
     pub gpu_path: GpuPathRequest,
+    /// The ray–triangle test (`crate::precision`).
+    pub intersector: Intersector,
+    /// Where secondary rays start (`crate::precision`).
+    pub offset_mode: OffsetMode,
 }
 
 impl Default for RenderOptions {
@@ -62,6 +67,8 @@ impl Default for RenderOptions {
             background: Vec3::new(0.05, 0.05, 0.08),
             schedule: Schedule::DepthFirst,
             gpu_path: GpuPathRequest::Auto,
+            intersector: Intersector::MollerTrumbore,
+            offset_mode: OffsetMode::Epsilon,
         }
     }
 }

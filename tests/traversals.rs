@@ -2,17 +2,20 @@
 //! bit for bit against `Traversal::Standard` (same primitive, same `t`, `u`, `v`), against a brute
 //! force over the same f32 intersection core (the answer a traversal must reproduce up to the
 //! rounding of leaf boundaries), and against a brute force written independently here in f64.
-//! `occluded` must agree with `intersect(..).is_hit()` on every ray. Random scenes come first,
-//! then the hard cases, each its own test.
+//! `occluded` must agree with `intersect(..).is_hit()` on every ray. Every check runs with both
+//! ray–triangle tests (`Intersector`). Random scenes come first, then the hard cases, each its
+//! own test.
 
 use glam::{DVec3, Mat3, Vec3};
 use rt2::cpu::simd::Width;
 use rt2::cpu::traverse::{intersect, occluded, Traversal, TraverseOptions};
 use rt2::cpu::{packet, stream};
 use rt2::geometry::{
-    Aabb, Ellipsoid, Hit, Plane, PrimKind, PrimitiveSet, Ray, Sphere, TraversalStats, Triangle,
+    Aabb, Ellipsoid, Hit, Plane, PrimKind, PrimitiveSet, Ray, RayTest, Sphere, TraversalStats,
+    Triangle, INVALID,
 };
 use rt2::kdtree::{build, BuildOptions, Builder, KdTree, Layout};
+use rt2::precision::Intersector;
 
 /// SplitMix64: deterministic, no dependency.
 struct Rng(u64);
@@ -212,14 +215,15 @@ fn reference(prims: &PrimitiveSet, ray: &Ray) -> Reference {
 }
 
 /// The f32 brute force over the same intersection core as the traversals.
-fn brute32(prims: &PrimitiveSet, ray: &Ray) -> Hit {
+fn brute32(prims: &PrimitiveSet, ray: &Ray, intersector: Intersector) -> Hit {
     let mut hit = Hit::MISS;
     if ray.is_degenerate() {
         return hit;
     }
-    prims.intersect_planes(ray, &mut hit);
+    let test = RayTest::new(ray, intersector, INVALID);
+    prims.intersect_planes(ray, &test, &mut hit);
     for i in 0..prims.len() as u32 {
-        prims.intersect(i, ray, &mut hit);
+        prims.intersect(i, ray, &test, &mut hit);
     }
     hit
 }
@@ -238,8 +242,9 @@ enum Check {
     SameCore,
 }
 
-/// Runs every traversal on every ray of every tree and checks them; returns the summed
-/// statistics per tree and traversal (in `Traversal::ALL` order).
+/// Runs every traversal with every intersector on every ray of every tree and checks them;
+/// returns the summed statistics per tree and traversal (in `Traversal::ALL` order) of the
+/// Möller–Trumbore runs.
 fn check_rays(
     what: &str,
     prims: &PrimitiveSet,
@@ -253,67 +258,82 @@ fn check_rays(
         Check::Full => rays.iter().map(|r| reference(prims, r)).collect(),
         Check::SameCore => vec![],
     };
-    let brute: Vec<Hit> = rays.iter().map(|r| brute32(prims, r)).collect();
     let mut all_stats = Vec::new();
     for (name, tree) in trees {
         let mut stats = [TraversalStats::default(); 7];
         for (i, ray) in rays.iter().enumerate() {
-            let opts = options(tree, ray);
-            let ctx = || format!("{what}, {name}, ray {i}: {ray:?}");
-            let std = intersect(
-                tree,
-                prims,
-                ray,
-                Traversal::Standard,
-                &opts,
-                &mut TraversalStats::default(),
-            );
-            for (k, how) in Traversal::ALL.into_iter().enumerate() {
-                let hit = intersect(tree, prims, ray, how, &opts, &mut stats[k]);
-                assert!(
-                    hit.prim == std.prim
-                        && hit.t.to_bits() == std.t.to_bits()
-                        && hit.u.to_bits() == std.u.to_bits()
-                        && hit.v.to_bits() == std.v.to_bits(),
-                    "{}: {} gives {hit:?}, standard {std:?}",
-                    ctx(),
-                    how.name()
+            for intersector in Intersector::ALL {
+                let opts = TraverseOptions {
+                    intersector,
+                    ..options(tree, ray)
+                };
+                let mut scratch = [TraversalStats::default(); 7];
+                let stats = match intersector {
+                    Intersector::MollerTrumbore => &mut stats,
+                    Intersector::Watertight => &mut scratch,
+                };
+                let ctx = || format!("{what}, {name}, {}, ray {i}: {ray:?}", intersector.name());
+                let std = intersect(
+                    tree,
+                    prims,
+                    ray,
+                    Traversal::Standard,
+                    &opts,
+                    &mut TraversalStats::default(),
                 );
-                let occ = occluded(tree, prims, ray, how, &opts, &mut TraversalStats::default());
-                assert_eq!(occ, hit.is_hit(), "{}: {} occluded", ctx(), how.name());
-            }
-            let b = brute[i];
-            assert!(
-                std.prim == b.prim
-                    || (std.is_hit() && b.is_hit() && close(std.t as f64, b.t as f64, 1e-6)),
-                "{}: tree {std:?}, f32 brute force {b:?}",
-                ctx()
-            );
-            if check == Check::Full {
-                let r = &refs[i];
-                match r.best {
-                    None => assert!(!std.is_hit(), "{}: {std:?}, f64 reference misses", ctx()),
-                    Some((t1, p1)) => {
-                        assert!(
-                            std.is_hit(),
-                            "{}: miss, f64 reference hits {p1} at {t1}",
-                            ctx()
-                        );
-                        // The f32 quadric tests (sphere, ellipsoid) lose ~1e-5 to cancellation, more
-                        // near tangency; their agreement with the traversal is the f32 check above.
-                        let quadric = (p1 as usize) < prims.len()
-                            && matches!(
-                                prims.locate(p1 as usize).0,
-                                PrimKind::Sphere | PrimKind::Ellipsoid
+                for (k, how) in Traversal::ALL.into_iter().enumerate() {
+                    let hit = intersect(tree, prims, ray, how, &opts, &mut stats[k]);
+                    assert!(
+                        hit.prim == std.prim
+                            && hit.t.to_bits() == std.t.to_bits()
+                            && hit.u.to_bits() == std.u.to_bits()
+                            && hit.v.to_bits() == std.v.to_bits(),
+                        "{}: {} gives {hit:?}, standard {std:?}",
+                        ctx(),
+                        how.name()
+                    );
+                    let occ =
+                        occluded(tree, prims, ray, how, &opts, &mut TraversalStats::default());
+                    assert_eq!(occ, hit.is_hit(), "{}: {} occluded", ctx(), how.name());
+                }
+                let b = brute32(prims, ray, intersector);
+                assert!(
+                    std.prim == b.prim
+                        || (std.is_hit() && b.is_hit() && close(std.t as f64, b.t as f64, 1e-6)),
+                    "{}: tree {std:?}, f32 brute force {b:?}",
+                    ctx()
+                );
+                if check == Check::Full {
+                    let r = &refs[i];
+                    match r.best {
+                        None => assert!(!std.is_hit(), "{}: {std:?}, f64 reference misses", ctx()),
+                        Some((t1, p1)) => {
+                            assert!(
+                                std.is_hit(),
+                                "{}: miss, f64 reference hits {p1} at {t1}",
+                                ctx()
                             );
-                        let tol = if quadric { 1e-3 } else { 1e-5 };
-                        assert!(
-                            close(std.t as f64, t1, tol),
-                            "{}: {std:?}, f64 t {t1}",
-                            ctx()
-                        );
-                        if r.second.is_none_or(|t2| !close(t1, t2, 1e-4)) {
-                            assert_eq!(std.prim, p1, "{}: f64 reference hits {p1} at {t1}", ctx());
+                            // The f32 quadric tests (sphere, ellipsoid) lose ~1e-5 to cancellation, more
+                            // near tangency; their agreement with the traversal is the f32 check above.
+                            let quadric = (p1 as usize) < prims.len()
+                                && matches!(
+                                    prims.locate(p1 as usize).0,
+                                    PrimKind::Sphere | PrimKind::Ellipsoid
+                                );
+                            let tol = if quadric { 1e-3 } else { 1e-5 };
+                            assert!(
+                                close(std.t as f64, t1, tol),
+                                "{}: {std:?}, f64 t {t1}",
+                                ctx()
+                            );
+                            if r.second.is_none_or(|t2| !close(t1, t2, 1e-4)) {
+                                assert_eq!(
+                                    std.prim,
+                                    p1,
+                                    "{}: f64 reference hits {p1} at {t1}",
+                                    ctx()
+                                );
+                            }
                         }
                     }
                 }
@@ -591,7 +611,7 @@ fn secondary_rays_start_inside_leaves() {
         let trees = trees(&prims);
         let mut rays = Vec::new();
         for primary in random_rays(&mut rng, 1500) {
-            let hit = brute32(&prims, &primary);
+            let hit = brute32(&prims, &primary, Intersector::MollerTrumbore);
             if hit.is_hit() && hit.t.is_finite() {
                 let tmin = if rays.len() % 2 == 0 { 0.0 } else { 1e-3 };
                 rays.push(Ray::new(primary.at(hit.t), rng.dir(), tmin, f32::INFINITY));
@@ -850,7 +870,9 @@ fn scene_of_planes_only() {
         Check::Full,
         default_options,
     );
-    assert!(rays.iter().any(|r| brute32(&prims, r).is_hit()));
+    assert!(rays
+        .iter()
+        .any(|r| brute32(&prims, r, Intersector::MollerTrumbore).is_hit()));
     for s in stats.iter().flatten() {
         assert_eq!(s.prim_tests, 0);
     }

@@ -8,6 +8,7 @@ use crate::cpu::traverse::Traversal;
 use crate::dispatch::BackendRequest;
 use crate::error::{Error, Result};
 use crate::kdtree::{BuildOptions, Builder, Layout};
+use crate::precision::{Intersector, OffsetMode};
 use crate::render::{GpuPathRequest, RenderOptions, Schedule, Transparency};
 use crate::scene::{Checker, Material};
 use glam::Vec3;
@@ -99,6 +100,63 @@ pub enum Rt2Layout {
     DepthFirst = 0,
     /// Cache-oblivious van Emde Boas order.
     VanEmdeBoas = 1,
+}
+
+/// Ray–triangle test (`rt2_query_options.intersector`, `rt2_render_options.intersector`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2Intersector {
+    /// Möller–Trumbore: fastest; a ray through a shared edge or vertex may slip through.
+    MollerTrumbore = 0,
+    /// Woop, Benthin & Wald 2013: no ray slips through shared edges or vertices of a closed
+    /// mesh; a per-ray set-up and a few more operations per test.
+    Watertight = 1,
+}
+
+/// Where secondary rays start (`rt2_render_options.offset_mode`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rt2OffsetMode {
+    /// A fixed offset of 1e-5 x the scene diagonal along the normal.
+    Epsilon = 0,
+    /// Wächter & Binder 2019: hit point recomputed on the surface, moved a few ULPs along
+    /// the geometric normal (scale-aware).
+    Robust = 1,
+    /// Start on the recomputed hit point and ignore the primitive just hit (robust offset for
+    /// rays entering a curved primitive).
+    ExcludePrim = 2,
+}
+
+pub(crate) fn intersector_from(v: u32) -> Result<Intersector> {
+    match v {
+        0 => Ok(Intersector::MollerTrumbore),
+        1 => Ok(Intersector::Watertight),
+        _ => Err(enum_error("rt2_intersector", v)),
+    }
+}
+
+pub(crate) fn intersector_to(i: Intersector) -> u32 {
+    match i {
+        Intersector::MollerTrumbore => Rt2Intersector::MollerTrumbore as u32,
+        Intersector::Watertight => Rt2Intersector::Watertight as u32,
+    }
+}
+
+fn offset_mode_from(v: u32) -> Result<OffsetMode> {
+    match v {
+        0 => Ok(OffsetMode::Epsilon),
+        1 => Ok(OffsetMode::Robust),
+        2 => Ok(OffsetMode::ExcludePrim),
+        _ => Err(enum_error("rt2_offset_mode", v)),
+    }
+}
+
+fn offset_mode_to(m: OffsetMode) -> u32 {
+    match m {
+        OffsetMode::Epsilon => Rt2OffsetMode::Epsilon as u32,
+        OffsetMode::Robust => Rt2OffsetMode::Robust as u32,
+        OffsetMode::ExcludePrim => Rt2OffsetMode::ExcludePrim as u32,
+    }
 }
 
 pub(crate) fn backend_from(v: u32) -> Result<BackendRequest> {
@@ -349,6 +407,10 @@ pub struct rt2_render_options {
     pub schedule: u32,
     /// An `rt2_gpu_path` value (default AUTO).
     pub gpu_path: u32,
+    /// An `rt2_intersector` value (default MOLLER_TRUMBORE).
+    pub intersector: u32,
+    /// An `rt2_offset_mode` value (default EPSILON).
+    pub offset_mode: u32,
 }
 
 impl rt2_render_options {
@@ -404,6 +466,8 @@ impl rt2_render_options {
             short_stack_size: self.short_stack_size as usize,
             transparency,
             background,
+            intersector: intersector_from(self.intersector)?,
+            offset_mode: offset_mode_from(self.offset_mode)?,
         })
     }
 }
@@ -422,5 +486,34 @@ pub extern "C" fn rt2_render_options_default() -> rt2_render_options {
         background: d.background.to_array(),
         schedule: Rt2Schedule::DepthFirst as u32,
         gpu_path: Rt2GpuPath::Auto as u32,
+        intersector: intersector_to(d.intersector),
+        offset_mode: offset_mode_to(d.offset_mode),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn precision_fields_convert_and_reject_unknown_values() {
+        let mut o = rt2_render_options_default();
+        let d = o.to_options().unwrap();
+        assert_eq!(
+            (d.intersector, d.offset_mode),
+            (Intersector::MollerTrumbore, OffsetMode::Epsilon)
+        );
+        o.intersector = Rt2Intersector::Watertight as u32;
+        o.offset_mode = Rt2OffsetMode::ExcludePrim as u32;
+        let r = o.to_options().unwrap();
+        assert_eq!(
+            (r.intersector, r.offset_mode),
+            (Intersector::Watertight, OffsetMode::ExcludePrim)
+        );
+        o.offset_mode = 3;
+        assert!(o.to_options().is_err());
+        o.offset_mode = 1;
+        o.intersector = 2;
+        assert!(o.to_options().is_err());
     }
 }

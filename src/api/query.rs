@@ -3,7 +3,9 @@
 
 use super::context::rt2_context;
 use super::ffi::{check_struct_size, guard, handle, slice, slice_mut, write_out};
-use super::options::{query_mode_from, traversal_from, Rt2QueryMode};
+use super::options::{
+    intersector_from, intersector_to, query_mode_from, traversal_from, Rt2QueryMode,
+};
 use super::scene::rt2_scene;
 use crate::context::QueryOptions;
 use crate::error::{Error, Rt2Status};
@@ -49,6 +51,8 @@ pub struct rt2_query_options {
     /// An `rt2_query_mode` value (default SINGLE). PACKET and STREAM follow the standard
     /// traversal's order whatever `traversal` says, and return the same hits.
     pub mode: u32,
+    /// An `rt2_intersector` value (default MOLLER_TRUMBORE).
+    pub intersector: u32,
 }
 
 /// Work done by a query (the thesis' table 1 counters), summed over the batch.
@@ -69,6 +73,7 @@ pub extern "C" fn rt2_query_options_default() -> rt2_query_options {
         traversal: 0,
         short_stack_size: d.short_stack_size as u32,
         mode: Rt2QueryMode::Single as u32,
+        intersector: intersector_to(d.intersector),
     }
 }
 
@@ -97,6 +102,7 @@ unsafe fn query_options(opt: *const rt2_query_options) -> crate::error::Result<Q
         traversal: traversal_from(o.traversal)?,
         short_stack_size: o.short_stack_size as usize,
         mode: query_mode_from(o.mode)?,
+        intersector: intersector_from(o.intersector)?,
     })
 }
 
@@ -127,6 +133,9 @@ unsafe fn run_query<T>(
         let out = slice_mut(out, count, out_name)?;
         if q.traversal.is_some_and(|t| t.needs_ropes()) {
             s.write().ensure_ropes()?;
+        }
+        if q.intersector == crate::precision::Intersector::Watertight {
+            s.write().ensure_exact_vertices()?;
         }
         let guard = s.read();
         let committed = guard.committed()?;

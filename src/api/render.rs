@@ -37,6 +37,9 @@ pub unsafe extern "C" fn rt2_render(
         if opts.traversal.is_some_and(|t| t.needs_ropes()) {
             s.write().ensure_ropes()?;
         }
+        if opts.intersector == crate::precision::Intersector::Watertight {
+            s.write().ensure_exact_vertices()?;
+        }
         let guard = s.read();
         let committed = guard.committed()?;
         c.inner.render(committed, &cam.camera, &opts, &mut f.frame)

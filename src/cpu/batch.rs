@@ -11,7 +11,7 @@
 
 use super::simd::LeafPrims;
 use super::traverse::{clip, TRay};
-use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
+use crate::geometry::{Hit, PrimitiveSet, Ray, RayTest, TraversalStats};
 use crate::kdtree::KdTree;
 
 /// What a batch query computes per ray, written once for packets and streams.
@@ -42,7 +42,7 @@ impl Answer for Closest<'_> {
         if ray.is_degenerate() {
             return false;
         }
-        prims.intersect_planes(ray, &mut self.0[i]);
+        prims.intersect_planes(ray, &RayTest::PLAIN, &mut self.0[i]);
         true
     }
 
@@ -62,7 +62,7 @@ impl Answer for Closest<'_> {
             b.intersect(ray, hit);
         }
         for &p in &leaf.others {
-            prims.intersect(p, ray, hit);
+            prims.intersect(p, ray, &RayTest::PLAIN, hit);
         }
         // Strictly before the exit, as `traverse::common::Closest`.
         hit.t < t_exit
@@ -80,7 +80,7 @@ impl Answer for AnyHit<'_> {
             return false;
         }
         let mut planes = Hit::MISS;
-        prims.intersect_planes(ray, &mut planes);
+        prims.intersect_planes(ray, &RayTest::PLAIN, &mut planes);
         self.0[i] = planes.is_hit();
         !self.0[i]
     }
@@ -99,7 +99,7 @@ impl Answer for AnyHit<'_> {
         let found = leaf.blocks.iter().any(|b| b.occludes(ray))
             || leaf.others.iter().any(|&p| {
                 let mut hit = Hit::MISS;
-                prims.intersect(p, ray, &mut hit)
+                prims.intersect(p, ray, &RayTest::PLAIN, &mut hit)
             });
         self.0[i] = found;
         found

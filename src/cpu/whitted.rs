@@ -6,7 +6,8 @@ use super::query::{self, QueryMode};
 use super::traverse::{self, Traversal, TraverseOptions};
 use crate::camera::{Camera, CameraRays};
 use crate::frame::Frame;
-use crate::geometry::{Hit, Ray, TraversalStats};
+use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
+use crate::precision::{offset_ray_origin, OffsetMode};
 use crate::render::{RenderOptions, Schedule, Transparency};
 use crate::scene::{Committed, Material};
 use crate::shading::{phong, reflect, refract, schlick};
@@ -24,8 +25,11 @@ pub struct Tracer<'a> {
     pub scene: &'a Committed,
     pub opts: &'a RenderOptions,
     pub traversal: Traversal,
-    /// Offset of secondary-ray origins along the normal, scaled to the scene.
+    /// Offset of secondary-ray origins along the normal, scaled to the scene
+    /// (`OffsetMode::Epsilon`; also where the checker pattern is sampled).
     pub eps: f32,
+    /// The scene diagonal, for the robust offset near the origin.
+    pub scale: f32,
 }
 
 impl<'a> Tracer<'a> {
@@ -35,17 +39,21 @@ impl<'a> Tracer<'a> {
             opts,
             traversal,
             eps: 1e-5 * scene.scale(),
+            scale: scene.scale(),
         }
     }
 
-    fn traverse_options(&self) -> TraverseOptions {
+    fn traverse_options(&self, exclude: PrimIndex) -> TraverseOptions {
         TraverseOptions {
             short_stack_size: self.opts.short_stack_size,
+            intersector: self.opts.intersector,
+            exclude,
             ..TraverseOptions::default()
         }
     }
 
-    pub fn intersect(&self, ray: &Ray) -> Hit {
+    /// Closest hit of `ray`, ignoring primitive `exclude` (`INVALID` for none).
+    pub fn intersect(&self, ray: &Ray, exclude: PrimIndex) -> Hit {
         let mut stats = TraversalStats::default();
         let s = self.scene;
         traverse::intersect(
@@ -53,12 +61,12 @@ impl<'a> Tracer<'a> {
             &s.prims,
             ray,
             self.traversal,
-            &self.traverse_options(),
+            &self.traverse_options(exclude),
             &mut stats,
         )
     }
 
-    pub fn occluded(&self, ray: &Ray) -> bool {
+    pub fn occluded(&self, ray: &Ray, exclude: PrimIndex) -> bool {
         let mut stats = TraversalStats::default();
         let s = self.scene;
         traverse::occluded(
@@ -66,45 +74,54 @@ impl<'a> Tracer<'a> {
             &s.prims,
             ray,
             self.traversal,
-            &self.traverse_options(),
+            &self.traverse_options(exclude),
             &mut stats,
         )
     }
 
     /// Radiance along a primary ray: pops pending rays until none is left.
     pub fn radiance(&self, primary: Ray) -> Vec3 {
-        let mut pending: Vec<(Ray, Vec3, u32)> =
+        let mut pending: Vec<(Ray, PrimIndex, Vec3, u32)> =
             Vec::with_capacity(2 * self.opts.max_depth as usize + 2);
-        pending.push((primary, Vec3::ONE, 1));
+        pending.push((primary, INVALID, Vec3::ONE, 1));
         let mut color = Vec3::ZERO;
-        while let Some((ray, weight, depth)) = pending.pop() {
-            let hit = self.intersect(&ray);
+        while let Some((ray, exclude, weight, depth)) = pending.pop() {
+            let hit = self.intersect(&ray, exclude);
             if !hit.is_hit() {
                 color += weight * self.opts.background;
                 continue;
             }
             let s = self.surface(&ray, &hit);
             if s.local_weight > 0.0 {
-                let local = self.local(&s, &ray, |shadow| !self.occluded(shadow));
+                let local = self.local(&s, &ray, |shadow, skip| !self.occluded(shadow, skip));
                 color += weight * s.local_weight * local;
             }
-            self.secondary(&s, &ray, weight, depth, |r, w, d| pending.push((r, w, d)));
+            self.secondary(&s, &ray, weight, depth, |r, skip, w, d| {
+                pending.push((r, skip, w, d))
+            });
         }
         color
     }
 
     /// The shading point of a hit: position, normal facing the ray, material, texture colour.
-    fn surface(&self, ray: &Ray, hit: &Hit) -> Surface<'a> {
+    /// The fixed epsilon keeps the historical `org + t·dir` (its default renders are unchanged);
+    /// the other offset modes start from the point recomputed on the surface.
+    pub fn surface(&self, ray: &Ray, hit: &Hit) -> Surface<'a> {
         let s = self.scene;
         let m = s.material_of(hit.prim);
-        let p = ray.at(hit.t);
+        let p = match self.opts.offset_mode {
+            OffsetMode::Epsilon => ray.at(hit.t),
+            _ => s.prims.hit_point(hit, ray),
+        };
         let n_geo = s.prims.normal(hit.prim, p);
         let entering = n_geo.dot(ray.dir) < 0.0;
         let n = if entering { n_geo } else { -n_geo };
         Surface {
             m,
+            prim: hit.prim,
             p,
             n,
+            n_geo,
             entering,
             // The pattern is sampled just inside the surface: a checker boundary lying in the
             // surface itself (a checkered plane at y = 0) would otherwise flicker with rounding.
@@ -113,21 +130,41 @@ impl<'a> Tracer<'a> {
         }
     }
 
-    /// The shadow rays of a surface, light by light (`None` for a light at the point itself).
-    fn shadow_rays<'s>(&'s self, s: &'s Surface) -> impl Iterator<Item = Option<Ray>> + 's {
-        let above = s.p + self.eps * s.n;
+    /// Where a secondary ray leaving surface `s` into the side of the unit normal `side`
+    /// starts, and which primitive it ignores (the offset modes of `crate::precision`).
+    pub fn leave(&self, s: &Surface, side: Vec3) -> (Vec3, PrimIndex) {
+        match self.opts.offset_mode {
+            OffsetMode::Epsilon => (s.p + self.eps * side, INVALID),
+            OffsetMode::Robust => (offset_ray_origin(s.p, side, self.scale), INVALID),
+            // Leaving a flat primitive, or a convex one to its outside, never meets it again.
+            OffsetMode::ExcludePrim
+                if self.scene.prims.is_flat(s.prim) || side.dot(s.n_geo) > 0.0 =>
+            {
+                (s.p, s.prim)
+            }
+            OffsetMode::ExcludePrim => (offset_ray_origin(s.p, side, self.scale), INVALID),
+        }
+    }
+
+    /// The shadow rays of a surface, light by light, with the primitive each ignores (`None`
+    /// for a light at the point itself).
+    fn shadow_rays<'s>(
+        &'s self,
+        s: &'s Surface,
+    ) -> impl Iterator<Item = Option<(Ray, PrimIndex)>> + 's {
+        let (above, skip) = self.leave(s, s.n);
         self.scene.lights.iter().map(move |light| {
             let to_light = light.position - above;
             let dist = to_light.length();
-            (dist > 0.0).then(|| Ray::new(above, to_light / dist, 0.0, dist))
+            (dist > 0.0).then(|| (Ray::new(above, to_light / dist, 0.0, dist), skip))
         })
     }
 
     /// Ambient plus the Phong term of every light whose shadow ray `lit` says is unblocked.
-    fn local(&self, s: &Surface, ray: &Ray, mut lit: impl FnMut(&Ray) -> bool) -> Vec3 {
+    fn local(&self, s: &Surface, ray: &Ray, mut lit: impl FnMut(&Ray, PrimIndex) -> bool) -> Vec3 {
         let mut local = s.m.ambient * s.base;
         for (light, shadow) in self.scene.lights.iter().zip(self.shadow_rays(s)) {
-            if shadow.is_some_and(|r| lit(&r)) {
+            if shadow.is_some_and(|(r, skip)| lit(&r, skip)) {
                 local += phong(s.m, s.base, s.p, s.n, -ray.dir, light);
             }
         }
@@ -141,20 +178,17 @@ impl<'a> Tracer<'a> {
         ray: &Ray,
         weight: Vec3,
         depth: u32,
-        mut out: impl FnMut(Ray, Vec3, u32),
+        mut out: impl FnMut(Ray, PrimIndex, Vec3, u32),
     ) {
         if depth >= self.opts.max_depth {
             return;
         }
-        let (m, p, n) = (s.m, s.p, s.n);
+        let (m, n) = (s.m, s.n);
         let mut push = |dir: Vec3, side: f32, w: f32| {
             let w = weight * w;
             if w.max_element() >= MIN_WEIGHT {
-                out(
-                    Ray::new(p + side * self.eps * n, dir, 0.0, f32::INFINITY),
-                    w,
-                    depth + 1,
-                );
+                let (org, skip) = self.leave(s, side * n);
+                out(Ray::new(org, dir, 0.0, f32::INFINITY), skip, w, depth + 1);
             }
         };
         let mut mirror = m.reflectivity;
@@ -181,14 +215,17 @@ impl<'a> Tracer<'a> {
 }
 
 /// A hit being shaded, shared by the depth-first and breadth-first schedules.
-struct Surface<'a> {
-    m: &'a Material,
-    p: Vec3,
+pub struct Surface<'a> {
+    pub m: &'a Material,
+    pub prim: PrimIndex,
+    pub p: Vec3,
     /// Normal turned to face the incoming ray.
-    n: Vec3,
-    entering: bool,
-    base: Vec3,
-    local_weight: f32,
+    pub n: Vec3,
+    /// The primitive's outward normal.
+    pub n_geo: Vec3,
+    pub entering: bool,
+    pub base: Vec3,
+    pub local_weight: f32,
 }
 
 /// Deterministic per-pixel sample positions: a stratified grid jittered by a hash, so that a
@@ -278,7 +315,9 @@ struct WaveRay {
 /// closest hits of all rays of a depth as one stream query, then all their shadow rays as one
 /// occlusion query, then the next depth's rays. Each sample's radiance is the depth-first one's
 /// terms (same rays, same hits, same shading) summed in another order; float addition is not
-/// associative, so a pixel may round to the next 1/255 step.
+/// associative, so a pixel may round to the next 1/255 step. The stream queries carry no
+/// per-ray excluded primitive, so `OffsetMode::ExcludePrim` is refused before rendering
+/// ([`check_schedule`]).
 fn render_breadth_first(
     scene: &Committed,
     camera: &Camera,
@@ -290,7 +329,7 @@ fn render_breadth_first(
     let rays = camera.rays(w, h);
     let size = Vec2::new(w as f32, h as f32);
     let tracer = Tracer::new(scene, opts, traversal);
-    let topts = tracer.traverse_options();
+    let topts = tracer.traverse_options(INVALID);
     let (pixels, mask) = frame.pixels_and_mask_mut();
     let traced: Vec<u32> = (0..w * h)
         .filter(|&i| mask.is_none_or(|m| m[i as usize] != 0))
@@ -331,7 +370,7 @@ fn render_breadth_first(
             .collect();
         shadows.clear();
         for s in surfaces.iter().flatten().filter(|s| s.local_weight > 0.0) {
-            shadows.extend(tracer.shadow_rays(s).flatten());
+            shadows.extend(tracer.shadow_rays(s).flatten().map(|(r, _)| r));
         }
         blocked.resize(shadows.len(), false);
         query::occluded(
@@ -351,10 +390,10 @@ fn render_breadth_first(
                 continue;
             };
             if s.local_weight > 0.0 {
-                let local = tracer.local(s, &r.ray, |_| !blocked.next().is_some_and(|&b| b));
+                let local = tracer.local(s, &r.ray, |_, _| !blocked.next().is_some_and(|&b| b));
                 *c += r.weight * s.local_weight * local;
             }
-            tracer.secondary(s, &r.ray, r.weight, r.depth, |ray, weight, depth| {
+            tracer.secondary(s, &r.ray, r.weight, r.depth, |ray, _, weight, depth| {
                 next.push(WaveRay {
                     ray,
                     weight,
@@ -373,4 +412,20 @@ fn render_breadth_first(
         let i = i as usize * 4;
         pixels[i..i + 4].copy_from_slice(&rgba(c, samples));
     }
+}
+
+/// Options the breadth-first schedule cannot honour: its stream queries test triangles with
+/// Möller–Trumbore and carry no per-ray excluded primitive.
+pub fn check_schedule(opts: &RenderOptions) -> crate::error::Result<()> {
+    use crate::precision::Intersector;
+    if opts.schedule == Schedule::BreadthFirst
+        && (opts.offset_mode == OffsetMode::ExcludePrim
+            || opts.intersector != Intersector::MollerTrumbore)
+    {
+        return Err(crate::error::Error::unsupported(
+            "the breadth-first schedule traces ray streams with Möller–Trumbore and no excluded \
+             primitive: use the depth-first schedule for the watertight test or exclude-prim offsets",
+        ));
+    }
+    Ok(())
 }

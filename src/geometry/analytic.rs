@@ -4,13 +4,24 @@
 use super::{Aabb, Ray};
 use glam::{Mat3, Vec3};
 
-/// Smallest root of `a t² + 2 b t + c = 0` inside `[tmin, tmax)`, computed without the
-/// cancellation of the textbook formula (Numerical Recipes' `q` form).
-fn nearest_root(a: f32, b: f32, c: f32, tmin: f32, tmax: f32) -> Option<f32> {
-    let disc = b * b - a * c;
-    if disc < 0.0 || a == 0.0 {
+/// Nearest intersection in `[tmin, tmax)` of the ray `o + t d` (relative to the centre) with
+/// the sphere of squared radius `r2`. The discriminant is taken from the distance of the
+/// centre to the line, `r² - |o - (o·d/d·d) d|²` (Haines et al., "Precision improvements for
+/// ray/sphere intersection", Ray Tracing Gems ch. 7), not from `b² - a c`, which cancels
+/// catastrophically far from the sphere or for a thin ellipsoid's stretched unit space; the
+/// roots use Numerical Recipes' `q` form.
+fn sphere_root(o: Vec3, d: Vec3, r2: f32, tmin: f32, tmax: f32) -> Option<f32> {
+    let a = d.length_squared();
+    if a == 0.0 {
         return None;
     }
+    let b = o.dot(d);
+    let l = o - (b / a) * d;
+    let disc = a * (r2 - l.length_squared());
+    if disc < 0.0 {
+        return None;
+    }
+    let c = o.length_squared() - r2;
     let q = -(b + b.signum() * disc.sqrt());
     let (mut t0, mut t1) = (q / a, if q != 0.0 { c / q } else { q / a });
     if t0 > t1 {
@@ -50,10 +61,7 @@ impl Sphere {
 
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<f32> {
         let oc = ray.org - Vec3::from(self.center);
-        let a = ray.dir.length_squared();
-        let b = oc.dot(ray.dir);
-        let c = oc.length_squared() - self.radius * self.radius;
-        nearest_root(a, b, c, ray.tmin, tmax)
+        sphere_root(oc, ray.dir, self.radius * self.radius, ray.tmin, tmax)
     }
 
     pub fn normal(&self, p: Vec3) -> Vec3 {
@@ -99,13 +107,7 @@ impl Ellipsoid {
         let inv = Mat3::from_cols_array(&self.inv);
         let o = inv * (ray.org - Vec3::from(self.center));
         let d = inv * ray.dir;
-        nearest_root(
-            d.length_squared(),
-            o.dot(d),
-            o.length_squared() - 1.0,
-            ray.tmin,
-            tmax,
-        )
+        sphere_root(o, d, 1.0, ray.tmin, tmax)
     }
 
     pub fn normal(&self, p: Vec3) -> Vec3 {

@@ -9,6 +9,6 @@ mod triangle;
 
 pub use aabb::Aabb;
 pub use analytic::{box_intersect, box_normal, Ellipsoid, Plane, Sphere};
-pub use primitives::{PrimKind, PrimitiveSet};
+pub use primitives::{PrimKind, PrimitiveSet, RayTest};
 pub use ray::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
-pub use triangle::Triangle;
+pub use triangle::{Triangle, TriangleTest};

@@ -3,8 +3,37 @@
 //! ellipsoids and boxes. Leaves of the kd-tree list these indices. Planes are unbounded and
 //! kept apart (see [`Plane`]).
 
-use super::{box_intersect, box_normal, Aabb, Ellipsoid, Hit, Plane, Ray, Sphere, Triangle};
+use super::triangle::watertight;
+use super::{
+    box_intersect, box_normal, Aabb, Ellipsoid, Hit, Plane, PrimIndex, Ray, Sphere, Triangle,
+    TriangleTest, INVALID,
+};
+use crate::precision::Intersector;
 use glam::Vec3;
+
+/// What the intersection core needs per ray besides the ray itself, prepared once per ray:
+/// the triangle test with its per-ray set-up, and the primitive to ignore (the one a
+/// secondary ray leaves, for `OffsetMode::ExcludePrim`; `INVALID` for none).
+#[derive(Clone, Copy, Debug)]
+pub struct RayTest {
+    pub triangle: TriangleTest,
+    pub exclude: PrimIndex,
+}
+
+impl RayTest {
+    pub fn new(ray: &Ray, intersector: Intersector, exclude: PrimIndex) -> Self {
+        RayTest {
+            triangle: TriangleTest::new(ray, intersector),
+            exclude,
+        }
+    }
+
+    /// Möller–Trumbore, nothing excluded: the defaults.
+    pub const PLAIN: RayTest = RayTest {
+        triangle: TriangleTest::MollerTrumbore,
+        exclude: INVALID,
+    };
+}
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PrimKind {
@@ -20,6 +49,10 @@ pub struct PrimitiveSet {
     pub spheres: Vec<Sphere>,
     pub ellipsoids: Vec<Ellipsoid>,
     pub boxes: Vec<Aabb>,
+    /// Exact corners of each triangle, only when the watertight test is asked for
+    /// (`Scene::ensure_exact_vertices`); empty otherwise, and the test then rebuilds them as
+    /// `v0 + e1`, which is not bit-exact at shared vertices.
+    pub vertices: Vec<[[f32; 3]; 3]>,
     /// Unbounded primitives, tested by every ray outside the tree. Their global index
     /// continues after the bounded ones.
     pub planes: Vec<Plane>,
@@ -77,12 +110,21 @@ impl PrimitiveSet {
         (0..self.len()).fold(Aabb::EMPTY, |b, i| b.union(self.bounds(i)))
     }
 
-    /// Tests bounded primitive `i` and keeps the hit if it is the closest so far.
+    /// Tests bounded primitive `i` and keeps the hit if it is the closest so far: the one
+    /// intersection core of every traversal.
     #[inline]
-    pub fn intersect(&self, i: u32, ray: &Ray, hit: &mut Hit) -> bool {
+    pub fn intersect(&self, i: u32, ray: &Ray, test: &RayTest, hit: &mut Hit) -> bool {
+        if i == test.exclude {
+            return false;
+        }
         let tmax = hit.bound(ray);
         let found = match self.locate(i as usize) {
-            (PrimKind::Triangle, k) => self.triangles[k].intersect(ray, tmax),
+            (PrimKind::Triangle, k) => match (&test.triangle, self.vertices.get(k)) {
+                (TriangleTest::Watertight { k: axes, s }, Some(v)) => {
+                    watertight(v.map(Vec3::from), ray, *axes, *s, tmax)
+                }
+                _ => self.triangles[k].intersect(ray, &test.triangle, tmax),
+            },
             (PrimKind::Sphere, k) => self.spheres[k].intersect(ray, tmax).map(|t| (t, 0.0, 0.0)),
             (PrimKind::Ellipsoid, k) => self.ellipsoids[k]
                 .intersect(ray, tmax)
@@ -96,9 +138,12 @@ impl PrimitiveSet {
     }
 
     /// Tests every plane (they are outside the tree); plane `k` has global index `len() + k`.
-    pub fn intersect_planes(&self, ray: &Ray, hit: &mut Hit) {
+    pub fn intersect_planes(&self, ray: &Ray, test: &RayTest, hit: &mut Hit) {
         let base = self.len() as u32;
         for (k, p) in self.planes.iter().enumerate() {
+            if base + k as u32 == test.exclude {
+                continue;
+            }
             if let Some(t) = p.intersect(ray, hit.bound(ray)) {
                 hit.offer(t, 0.0, 0.0, base + k as u32);
             }
@@ -119,6 +164,40 @@ impl PrimitiveSet {
         }
     }
 
+    /// Whether primitive `i` is flat (a triangle or a plane): a ray leaving it cannot hit it
+    /// again, on either side.
+    pub fn is_flat(&self, i: u32) -> bool {
+        let i = i as usize;
+        i >= self.len() || self.locate(i).0 == PrimKind::Triangle
+    }
+
+    /// The hit point of `hit` recomputed on the surface: from the barycentrics for triangles
+    /// (exact up to one rounding per coordinate, where `org + t·dir` carries the error of `t`
+    /// times the ray length), projected onto the sphere for spheres, `org + t·dir` otherwise.
+    pub fn hit_point(&self, hit: &Hit, ray: &Ray) -> Vec3 {
+        let p = ray.at(hit.t);
+        if hit.prim as usize >= self.len() {
+            return p;
+        }
+        match self.locate(hit.prim as usize) {
+            (PrimKind::Triangle, k) => {
+                let t = &self.triangles[k];
+                Vec3::from(t.v0) + hit.u * Vec3::from(t.e1) + hit.v * Vec3::from(t.e2)
+            }
+            (PrimKind::Sphere, k) => {
+                let s = &self.spheres[k];
+                let c = Vec3::from(s.center);
+                let d = (p - c).normalize_or_zero();
+                if d == Vec3::ZERO {
+                    p
+                } else {
+                    c + s.radius * d
+                }
+            }
+            _ => p,
+        }
+    }
+
     /// Bytes held by each kind's array, for the memory report.
     pub fn bytes(&self) -> usize {
         use std::mem::size_of;
@@ -127,5 +206,6 @@ impl PrimitiveSet {
             + self.ellipsoids.len() * size_of::<Ellipsoid>()
             + self.boxes.len() * size_of::<Aabb>()
             + self.planes.len() * size_of::<Plane>()
+            + self.vertices.len() * size_of::<[[f32; 3]; 3]>()
     }
 }

@@ -8,6 +8,7 @@ pub mod builtin;
 pub mod loaders;
 mod material;
 mod object;
+pub mod tessellate;
 
 pub use material::{Checker, Material, PointLight};
 pub use object::{Object, PrimOrigin, Shape};
@@ -337,6 +338,19 @@ impl Scene {
         self.committed()?;
         if let Some(c) = &mut self.committed {
             c.tree.ensure_ropes();
+        }
+        Ok(())
+    }
+
+    /// Keeps the exact corners of the committed triangles beside their edge form (36 bytes per
+    /// triangle), which the watertight test needs to be watertight: `v0 + e1` does not
+    /// reproduce a shared vertex bit for bit. Built on demand, like ropes.
+    pub fn ensure_exact_vertices(&mut self) -> Result<()> {
+        self.committed()?;
+        if let Some(c) = &mut self.committed {
+            if c.prims.vertices.len() != c.prims.triangles.len() {
+                c.prims.vertices = object::triangle_corners(&self.objects);
+            }
         }
         Ok(())
     }

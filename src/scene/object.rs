@@ -71,6 +71,35 @@ pub struct PrimOrigin {
     pub prim: u32,
 }
 
+/// The world-space corners of a mesh object's triangles, in file order (none for other shapes).
+fn world_triangles(obj: &Object) -> Vec<[Vec3; 3]> {
+    let Shape::Mesh {
+        positions,
+        triangles,
+    } = &obj.shape
+    else {
+        return Vec::new();
+    };
+    let world: Vec<Vec3> = positions
+        .iter()
+        .map(|&p| obj.transform.transform_point3(p))
+        .collect();
+    triangles
+        .iter()
+        .map(|tri| tri.map(|i| world[i as usize]))
+        .collect()
+}
+
+/// The exact corners of every triangle of `objects`, in the order [`place`] gives the
+/// triangles (`PrimitiveSet::vertices`, for the watertight test).
+pub fn triangle_corners(objects: &[Object]) -> Vec<[[f32; 3]; 3]> {
+    objects
+        .iter()
+        .flat_map(world_triangles)
+        .map(|t| t.map(|v| v.to_array()))
+        .collect()
+}
+
 /// Appends the world-space primitives of `obj` to `set`; `origins` receives one entry per
 /// bounded primitive, `plane_origins` per plane (they are indexed after the bounded ones).
 pub fn place(
@@ -86,13 +115,8 @@ pub fn place(
         prim: 0,
     };
     match &obj.shape {
-        Shape::Mesh {
-            positions,
-            triangles,
-        } => {
-            let world: Vec<Vec3> = positions.iter().map(|&p| t.transform_point3(p)).collect();
-            for (k, tri) in triangles.iter().enumerate() {
-                let [a, b, c] = tri.map(|i| world[i as usize]);
+        Shape::Mesh { .. } => {
+            for (k, [a, b, c]) in world_triangles(obj).into_iter().enumerate() {
                 set.triangles.push(Triangle::from_vertices(a, b, c));
                 origins[0].push(PrimOrigin {
                     object: object_id,

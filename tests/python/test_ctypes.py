@@ -24,6 +24,8 @@ class RenderOptions(ctypes.Structure):
         ("background", ctypes.c_float * 3),
         ("schedule", ctypes.c_uint32),
         ("gpu_path", ctypes.c_uint32),
+        ("intersector", ctypes.c_uint32),
+        ("offset_mode", ctypes.c_uint32),
     ]
 
 

@@ -2,6 +2,7 @@
 //! runs; Embree (the peer of `../shared/peers`) is measured in the same invocation when its
 //! harness is built, so ratios compare like with like on a noisy shared machine.
 
+mod chart;
 mod streams;
 
 use crate::load_scene;
@@ -20,7 +21,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-const USAGE: &str = "usage: rt2 bench [frames|build|rays|tables|streams|gpu|all] [--runs N] [--write FILE]
+const USAGE: &str = "usage: rt2 bench [frames|build|rays|tables|streams|gpu|chart|memory|all] [--runs N] [--write FILE]
   frames   ms per 1376x768 frame on the CPU: spheres3 and the bunny, with build time and memory
   build    kd-tree build time (SAH+perfect splits, midpoint) at 1 and 2 threads, Embree beside
   rays     Mrays/s per traversal on ../shared/raysets, agreement with Embree's hits, Embree beside
@@ -28,6 +29,11 @@ const USAGE: &str = "usage: rt2 bench [frames|build|rays|tables|streams|gpu|all]
            ms per 1376x768 frame for every traversal, beside the thesis' figures
   streams  n-ray streams vs packets vs single rays: the vectorised-traversal paper's tables, Embree beside
   gpu      thesis table 2 on the GPU backend: ms per frame per traversal, both render paths, vs CPU
+  chart    speed against accuracy: every traversal x intersector x offset mode against an f64
+           reference on the bunny sets and a stress scene; docs/chart.svg and .png with
+           --features chart
+  memory   bytes per primitive of each part of each built-in scene and the bunny, beside a
+           tessellation of their analytic primitives
   --runs N       timed runs per figure (default 5; the median is reported)
   --write FILE   also replace this benchmark's section in FILE (e.g. BENCHMARKS.md)
 Model files come from $RT2_SHARED (default ../shared); Embree from $RT2_EMBREE_BENCH or
@@ -72,6 +78,8 @@ pub fn run(args: &[String]) -> Result<()> {
         "tables" => vec![("tables", tables)],
         "streams" => vec![("streams", streams::streams)],
         "gpu" => vec![("gpu", gpu)],
+        "chart" => vec![("chart", chart::chart)],
+        "memory" => vec![("memory", chart::memory)],
         "all" => vec![
             ("frames", frames),
             ("build", build),
@@ -79,6 +87,8 @@ pub fn run(args: &[String]) -> Result<()> {
             ("tables", tables),
             ("streams", streams::streams),
             ("gpu", gpu),
+            ("chart", chart::chart),
+            ("memory", chart::memory),
         ],
         _ => {
             return Err(Error::invalid_argument(format!(
@@ -89,8 +99,9 @@ pub fn run(args: &[String]) -> Result<()> {
     for (name, f) in sections {
         let body = f(&a)?;
         let text = format!(
-            "Machine: {}. Command: `cargo run --release --bin rt2 -- bench {name} --runs {}`.\n\n{body}",
+            "Machine: {}. Command: `cargo run --release {}--bin rt2 -- bench {name} --runs {}`.\n\n{body}",
             machine(),
+            if name == "chart" { "--features chart " } else { "" },
             a.runs
         );
         println!("\n{text}");

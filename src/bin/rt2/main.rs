@@ -11,6 +11,7 @@ use rt2::dispatch::BackendRequest;
 use rt2::error::{Error, Result};
 use rt2::frame::Frame;
 use rt2::kdtree::{BuildOptions, Builder};
+use rt2::precision::{Intersector, OffsetMode};
 use rt2::render::{RenderOptions, Transparency};
 use rt2::scene::{builtin, loaders, Material, PointLight, Scene, Shape};
 use std::path::Path;
@@ -27,9 +28,11 @@ const USAGE: &str = "usage:
       --depth N             maximum ray depth (default: the scene's)
       --samples N           samples per pixel (default: 1)
       --straight            RT² transparency (no refraction)
+      --intersector I       moller-trumbore or watertight (default: moller-trumbore)
+      --offset M            secondary-ray origins: epsilon, robust, exclude-prim (default: epsilon)
       --threads N           worker threads (default: all cores)
       --builder B           sah (default, perfect splits) or midpoint
-  rt2 bench [frames|build|rays|tables|streams|all]    measure (rt2 bench --help)";
+  rt2 bench [frames|build|rays|tables|streams|gpu|chart|memory|all]    measure (rt2 bench --help)";
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -156,6 +159,16 @@ fn render(args: &[String]) -> Result<()> {
                     _ => return Err(Error::invalid_argument(format!("unknown builder '{b}'"))),
                 };
             }
+            "--intersector" => {
+                let i: String = parse(a, it.next())?;
+                opts.intersector = Intersector::from_name(&i)
+                    .ok_or_else(|| Error::invalid_argument(format!("unknown intersector '{i}'")))?;
+            }
+            "--offset" => {
+                let m: String = parse(a, it.next())?;
+                opts.offset_mode = OffsetMode::from_name(&m)
+                    .ok_or_else(|| Error::invalid_argument(format!("unknown offset mode '{m}'")))?;
+            }
             s if !s.starts_with('-') => name = s.to_string(),
             s => {
                 return Err(Error::invalid_argument(format!(
@@ -176,6 +189,9 @@ fn render(args: &[String]) -> Result<()> {
     ctx.install(|| loaded.scene.commit())?;
     if opts.traversal.is_some_and(|t| t.needs_ropes()) {
         loaded.scene.ensure_ropes()?;
+    }
+    if opts.intersector == Intersector::Watertight {
+        loaded.scene.ensure_exact_vertices()?;
     }
     let committed = loaded.scene.committed()?;
     let mut frame = Frame::new(width, height)?;

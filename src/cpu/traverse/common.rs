@@ -6,7 +6,7 @@
 //! makes the seven traversals return bit-identical hits, because they then agree on every leaf's
 //! exit distance and on every side decision.
 
-use crate::geometry::{Aabb, Hit, PrimitiveSet, Ray, TraversalStats};
+use crate::geometry::{Aabb, Hit, PrimitiveSet, Ray, RayTest, TraversalStats};
 use crate::kdtree::{KdNode, KdTree};
 use glam::Vec3;
 
@@ -253,6 +253,7 @@ pub(super) trait LeafQuery {
 pub(super) struct Closest<'a> {
     pub prims: &'a PrimitiveSet,
     pub ray: &'a Ray,
+    pub test: RayTest,
     pub hit: Hit,
 }
 
@@ -261,7 +262,7 @@ impl LeafQuery for Closest<'_> {
     fn visit(&mut self, prims: &[u32], t_exit: f32, stats: &mut TraversalStats) -> bool {
         stats.prim_tests += prims.len() as u64;
         for &p in prims {
-            self.prims.intersect(p, self.ray, &mut self.hit);
+            self.prims.intersect(p, self.ray, &self.test, &mut self.hit);
         }
         self.hit.t < t_exit
     }
@@ -271,6 +272,7 @@ impl LeafQuery for Closest<'_> {
 pub(super) struct AnyHit<'a> {
     pub prims: &'a PrimitiveSet,
     pub ray: &'a Ray,
+    pub test: RayTest,
     pub found: bool,
 }
 
@@ -280,7 +282,7 @@ impl LeafQuery for AnyHit<'_> {
         for &p in prims {
             stats.prim_tests += 1;
             let mut hit = Hit::MISS;
-            if self.prims.intersect(p, self.ray, &mut hit) {
+            if self.prims.intersect(p, self.ray, &self.test, &mut hit) {
                 self.found = true;
                 return true;
             }

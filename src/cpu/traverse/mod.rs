@@ -17,8 +17,9 @@ mod standard;
 pub use common::MAX_SHORT_STACK;
 pub(crate) use common::{clip, TRay};
 
-use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
+use crate::geometry::{Aabb, Hit, PrimIndex, PrimitiveSet, Ray, RayTest, TraversalStats, INVALID};
 use crate::kdtree::KdTree;
+use crate::precision::Intersector;
 use common::{AnyHit, Closest, LeafQuery};
 use restart::Restart;
 
@@ -77,6 +78,11 @@ pub struct TraverseOptions {
     /// origin, from `KdTree::locate_leaf`), so the walk starts there instead of at the root.
     /// Checked against the leaf's box; the other traversals ignore it.
     pub start_node: Option<u32>,
+    /// The ray–triangle test (see [`Intersector`] for what each guarantees).
+    pub intersector: Intersector,
+    /// A primitive the ray ignores (the one a secondary ray leaves, `OffsetMode::ExcludePrim`);
+    /// `INVALID` for none.
+    pub exclude: PrimIndex,
 }
 
 impl Default for TraverseOptions {
@@ -84,6 +90,27 @@ impl Default for TraverseOptions {
         TraverseOptions {
             short_stack_size: 3,
             start_node: None,
+            intersector: Intersector::MollerTrumbore,
+            exclude: INVALID,
+        }
+    }
+}
+
+/// The scene box the traversal clips rays to. The watertight test must not lose a hit on a
+/// triangle lying in a face of the box to the rounding of the clip (a grazing ray whose entry
+/// rounds past its exit), so for it the box is padded by a few ULPs of its largest coordinate:
+/// the conservative traversal bounds of Woop et al. §4. Inside the tree the rounded split
+/// distances are shared by consecutive leaves, so the leaves cover the clipped segment without
+/// gaps; a ray through a leaf corner may still be placed in a neighbouring leaf, which is why
+/// the builders list a primitive in every leaf it touches, with padded clipped boxes
+/// (`kdtree::split::classify`, `Triangle::clipped_bounds`).
+fn scene_box(tree: &KdTree, intersector: Intersector) -> Aabb {
+    match intersector {
+        Intersector::MollerTrumbore => tree.bounds,
+        Intersector::Watertight => {
+            let b = tree.bounds;
+            let pad = 4.0 * f32::EPSILON * b.min.abs().max(b.max.abs()).max_element();
+            Aabb::new(b.min - pad, b.max + pad)
         }
     }
 }
@@ -104,10 +131,11 @@ pub fn intersect(
     let mut query = Closest {
         prims,
         ray,
+        test: RayTest::new(ray, opts.intersector, opts.exclude),
         hit: Hit::MISS,
     };
     // Planes first: their hit bounds the tree search and ends it early.
-    prims.intersect_planes(ray, &mut query.hit);
+    prims.intersect_planes(ray, &query.test, &mut query.hit);
     traverse(tree, ray, how, opts, &mut query, stats);
     query.hit
 }
@@ -124,14 +152,16 @@ pub fn occluded(
     if ray.is_degenerate() {
         return false;
     }
+    let test = RayTest::new(ray, opts.intersector, opts.exclude);
     let mut planes = Hit::MISS;
-    prims.intersect_planes(ray, &mut planes);
+    prims.intersect_planes(ray, &test, &mut planes);
     if planes.is_hit() {
         return true;
     }
     let mut query = AnyHit {
         prims,
         ray,
+        test,
         found: false,
     };
     traverse(tree, ray, how, opts, &mut query, stats);
@@ -150,15 +180,16 @@ fn traverse(
         return;
     }
     let ray = TRay::new(ray);
+    let bounds = scene_box(tree, opts.intersector);
     let restart = |short_stack, push_down| Restart {
         short_stack,
         push_down,
     };
     // Ropes++ does its own, entry-only, scene test.
     if let (Traversal::RopesPlusPlus, Some(ropes)) = (how, &tree.ropes) {
-        return ropes::ropes_plus_plus(tree, ropes, &ray, opts.start_node, query, stats);
+        return ropes::ropes_plus_plus(tree, ropes, &bounds, &ray, opts.start_node, query, stats);
     }
-    let Some(scene) = clip(&tree.bounds, &ray) else {
+    let Some(scene) = clip(&bounds, &ray) else {
         return;
     };
     let short = opts.short_stack_size;

@@ -19,7 +19,9 @@ fn exit_six_faces(b: &Aabb, ray: &TRay) -> (f32, usize) {
     let mut best = (f32::INFINITY, 0);
     for axis in 0..3 {
         let (ta, tb) = (ray.dist(axis, b.min[axis]), ray.dist(axis, b.max[axis]));
-        let (t, face) = if ta > tb {
+        // A flat slab (`ta == tb`) is left through the face the direction points to: the other
+        // rope leads back to the leaf the ray came from.
+        let (t, face) = if ta > tb || (ta == tb && !ray.positive(axis)) {
             (ta, 2 * axis)
         } else if tb >= ta {
             (tb, 2 * axis + 1)
@@ -142,13 +144,15 @@ pub(super) fn ropes(
 }
 
 /// Ropes++ (the thesis' algorithm 8): exits from the three planes the direction selects, an
-/// entry-only scene test, and secondary rays start at `start`, the leaf node holding their origin.
+/// entry-only scene test (on `scene_box`, the tree's box or its padded version), and secondary
+/// rays start at `start`, the leaf node holding their origin.
 /// The hint is checked against the leaf's box and used only when the origin is strictly inside:
 /// on the boundary the neighbour holds the origin too (its primitives may touch it), and the
 /// descent from the root searches both. A wrong hint costs the descent, never the answer.
 pub(super) fn ropes_plus_plus(
     tree: &KdTree,
     ropes: &Ropes,
+    scene_box: &Aabb,
     ray: &TRay,
     start: Option<u32>,
     query: &mut impl LeafQuery,
@@ -164,7 +168,7 @@ pub(super) fn ropes_plus_plus(
     };
     let (node, t_entry, miss_test) = match start {
         Some(s) if holds_origin(s) => (s, ray.ray.tmin, false),
-        _ => (0, entry_three_faces(&tree.bounds, ray), true),
+        _ => (0, entry_three_faces(scene_box, ray), true),
     };
     // Past the window, or parallel to a slab it lies outside of.
     if t_entry > ray.ray.tmax || t_entry == f32::INFINITY {

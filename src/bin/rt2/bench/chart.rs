@@ -1,0 +1,837 @@
+//! `rt2 bench chart`: speed against accuracy for every traversal × intersector (ray queries)
+//! and traversal × intersector × offset mode (secondary rays) on the CPU backend, measured
+//! against an independent f64 reference (brute force over the exact triangle corners), and
+//! the chart of it (docs/chart.svg, docs/chart.png; needs `--features chart`).
+//! `rt2 bench memory`: bytes per primitive of each part of each scene, beside a tessellation.
+
+use super::{mib, shared, time_ms, Args};
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+use rt2::context::{Context, QueryOptions};
+use rt2::cpu::traverse::Traversal;
+use rt2::cpu::whitted::Tracer;
+use rt2::dispatch::BackendRequest;
+use rt2::error::Result;
+use rt2::geometry::{Hit, Ray, INVALID};
+use rt2::precision::{Intersector, OffsetMode};
+use rt2::rayset;
+use rt2::render::RenderOptions;
+use rt2::scene::tessellate::{self, Mesh};
+use rt2::scene::{builtin, Committed, PointLight, Scene, Shape};
+use std::fmt::Write as _;
+use std::time::Instant;
+
+/// One method measured on one ray set (or summed over the placements of the stress scene).
+#[derive(Clone, Debug)]
+pub(super) struct Point {
+    pub set: &'static str,
+    pub method: String,
+    pub mrays: f64,
+    /// Failures per million rays: false misses + false hits + wrong primitives (ray queries),
+    /// self-intersections (secondary rays).
+    pub error: f64,
+}
+
+/// Errors of one method against the reference, summed over rays.
+#[derive(Clone, Copy, Debug, Default)]
+struct Tally {
+    rays: usize,
+    /// Rays from inside a closed mesh whose first hit is not that mesh (a miss, or an object
+    /// beyond it): they slipped through. Exact, no reference needed.
+    leaks: usize,
+    false_misses: usize,
+    false_hits: usize,
+    wrong_prims: usize,
+    /// |Δt| · |dir| / scene diagonal, over rays both hit.
+    max_dt: f64,
+    sum_dt: f64,
+    both: usize,
+    ms: f64,
+    timed_rays: usize,
+}
+
+impl Tally {
+    fn add(&mut self, o: &Tally) {
+        self.rays += o.rays;
+        self.leaks += o.leaks;
+        self.false_misses += o.false_misses;
+        self.false_hits += o.false_hits;
+        self.wrong_prims += o.wrong_prims;
+        self.max_dt = self.max_dt.max(o.max_dt);
+        self.sum_dt += o.sum_dt;
+        self.both += o.both;
+        self.ms += o.ms;
+        self.timed_rays += o.timed_rays;
+    }
+
+    fn per_million(&self, n: usize) -> f64 {
+        n as f64 * 1e6 / self.rays.max(1) as f64
+    }
+
+    fn failures(&self) -> f64 {
+        self.per_million(self.leaks + self.false_misses + self.false_hits + self.wrong_prims)
+    }
+}
+
+/// The reference triangle test: Woop et al.'s watertight test in f64 on the exact corners,
+/// edges closed (a ray through an edge or vertex hits). f64 Möller–Trumbore is not enough: it
+/// leaks too where a ray passes exactly through a vertex, which the stress rays do.
+fn tri_t(c: &[[f32; 3]; 3], o: DVec3, d: DVec3) -> Option<f64> {
+    let kz = d.abs().max_position();
+    let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+    if d[kz] < 0.0 {
+        std::mem::swap(&mut kx, &mut ky);
+    }
+    let (sx, sy, sz) = (d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+    let [a, b, cc] = c.map(|v| Vec3::from(v).as_dvec3() - o);
+    let shear = |p: DVec3| (p[kx] - sx * p[kz], p[ky] - sy * p[kz]);
+    let ((ax, ay), (bx, by), (cx, cy)) = (shear(a), shear(b), shear(cc));
+    let (u, v, w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    (det != 0.0).then(|| sz * (u * a[kz] + v * b[kz] + w * cc[kz]) / det)
+}
+
+/// The f64 reference: closest `(t, triangle)` in `[tmin, tmax)`.
+fn reference(c: &Committed, ray: &Ray) -> Option<(f64, u32)> {
+    let (o, d) = (ray.org.as_dvec3(), ray.dir.as_dvec3());
+    c.prims
+        .vertices
+        .iter()
+        .enumerate()
+        .filter_map(|(i, v)| tri_t(v, o, d).map(|t| (t, i as u32)))
+        .filter(|&(t, _)| t >= ray.tmin as f64 && t < ray.tmax as f64)
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+}
+
+/// Scores `hits`: the must-hit rays by the object they hit, the sampled rays against the
+/// reference.
+fn score(c: &Committed, set: &RaySet, hits: &[Hit]) -> Tally {
+    let (rays, refs) = (&set.rays, &set.refs);
+    let diag = c.bounds.diagonal().max(f32::MIN_POSITIVE) as f64;
+    let mut t = Tally {
+        rays: refs.len() + set.must_hit.len(),
+        ..Tally::default()
+    };
+    for &(i, object) in &set.must_hit {
+        let h = &hits[i];
+        t.leaks += (!h.is_hit() || c.origins[h.prim as usize].object != object) as usize;
+    }
+    for &(i, r) in refs {
+        let (ray, h) = (&rays[i], &hits[i]);
+        let len = ray.dir.as_dvec3().length();
+        match (r, h.is_hit()) {
+            (Some(_), false) => t.false_misses += 1,
+            (None, true) => t.false_hits += 1,
+            (Some((tr, pr)), true) => {
+                let dt = (h.t as f64 - tr).abs() * len / diag;
+                t.max_dt = t.max_dt.max(dt);
+                t.sum_dt += dt;
+                t.both += 1;
+                // A different triangle is wrong unless it is a tie: the hit lies at the reference
+                // distance (a neighbour across the shared edge or vertex the ray passes within
+                // rounding of), or the reference puts that triangle at the same distance.
+                if h.prim != pr && dt * diag > 1e-6 * diag {
+                    let (o, d) = (ray.org.as_dvec3(), ray.dir.as_dvec3());
+                    let other = c
+                        .prims
+                        .vertices
+                        .get(h.prim as usize)
+                        .and_then(|v| tri_t(v, o, d));
+                    if other.is_none_or(|to| (to - tr).abs() * len > 1e-6 * diag) {
+                        t.wrong_prims += 1;
+                    }
+                }
+            }
+            (None, false) => {}
+        }
+    }
+    t
+}
+
+/// A ray set: a committed scene (with exact corners and ropes), its rays, the rays that start
+/// inside a closed mesh (with its object id) and the reference on sampled other rays.
+struct RaySet {
+    scene: Scene,
+    rays: Vec<Ray>,
+    must_hit: Vec<(usize, u32)>,
+    refs: Vec<(usize, Option<(f64, u32)>)>,
+}
+
+impl RaySet {
+    /// `must_hit[k]` is the object ray k starts inside, for the first `must_hit.len()` rays;
+    /// every `sample_every`-th of the others is checked against the reference.
+    fn new(
+        mut scene: Scene,
+        rays: Vec<Ray>,
+        must_hit: Vec<u32>,
+        sample_every: usize,
+    ) -> Result<Self> {
+        scene.commit()?;
+        scene.ensure_ropes()?;
+        scene.ensure_exact_vertices()?;
+        let c = scene.committed()?;
+        let first = must_hit.len();
+        let refs = (first..rays.len())
+            .into_par_iter()
+            .filter(|i| (i - first).is_multiple_of(sample_every))
+            .map(|i| (i, reference(c, &rays[i])))
+            .collect();
+        Ok(RaySet {
+            scene,
+            rays,
+            must_hit: must_hit.into_iter().enumerate().collect(),
+            refs,
+        })
+    }
+}
+
+fn mesh_scene(meshes: &[Mesh]) -> Result<Scene> {
+    let mut s = Scene::new();
+    for m in meshes {
+        s.add_object(
+            Shape::Mesh {
+                positions: m.positions.clone(),
+                triangles: m.triangles.clone(),
+            },
+            0,
+        )?;
+    }
+    Ok(s)
+}
+
+/// SplitMix64 in [0, 1).
+fn unit(state: &mut u64) -> f32 {
+    *state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+}
+
+/// The placements of the stress scene: tiny, unit, huge, and far from the origin.
+const PLACEMENTS: [(f32, f32); 4] = [(1e-7, 0.0), (1.0, 0.0), (1e7, 0.0), (1.0, 1e4)];
+
+/// The stress scene at one placement: a uv sphere (poles where 24 thin triangles meet), a
+/// torus and a cube of triangles (faces in the scene box), all closed. Rays: from inside each
+/// mesh to every vertex and edge midpoint; axis-parallel from inside with every sign of zero;
+/// grazing the sphere's silhouette from outside (±1e-4 of its radius).
+fn stress_set(scale: f32, offset: f32) -> Result<RaySet> {
+    let at = [
+        Vec3::ZERO,
+        Vec3::new(3.0, 0.0, 0.0),
+        Vec3::new(-3.0, -0.5, -0.5),
+    ];
+    let meshes = [
+        tessellate::uv_sphere(12, 24),
+        tessellate::torus(24, 12, 0.35),
+        tessellate::cube(),
+    ];
+    let inside = [
+        Vec3::new(0.1, 0.2, -0.1),
+        Vec3::new(1.0, 0.0, 0.05),
+        Vec3::splat(0.4),
+    ];
+    let place = |p: Vec3| p * scale + Vec3::splat(offset);
+    let placed: Vec<Mesh> = meshes
+        .iter()
+        .zip(at)
+        .map(|(m, a)| m.placed(1.0, a).placed(scale, Vec3::splat(offset)))
+        .collect();
+    let (mut rays, mut inside_of) = (Vec::new(), Vec::new());
+    for (k, m) in placed.iter().enumerate() {
+        let o = place(inside[k] + at[k]);
+        for t in m.positions.iter().chain(&m.edge_midpoints()) {
+            rays.push(Ray::new(o, *t - o, 0.0, f32::INFINITY));
+            inside_of.push(k as u32);
+        }
+        for axis in 0..3 {
+            for sign in [1.0f32, -1.0] {
+                for zeros in 0..4 {
+                    let mut d = Vec3::splat(0.0);
+                    d[(axis + 1) % 3] = if zeros & 1 == 0 { 0.0 } else { -0.0 };
+                    d[(axis + 2) % 3] = if zeros & 2 == 0 { 0.0 } else { -0.0 };
+                    d[axis] = sign;
+                    rays.push(Ray::new(o, d, 0.0, f32::INFINITY));
+                    inside_of.push(k as u32);
+                }
+            }
+        }
+    }
+    let mut rng = 7u64;
+    for _ in 0..4096 {
+        let a = std::f32::consts::TAU * unit(&mut rng);
+        let r = 1.0 + 2e-4 * (unit(&mut rng) - 0.5);
+        let edge = Vec3::new(a.cos() * r, a.sin() * r, 0.0);
+        let org = place(edge - 5.0 * Vec3::Z);
+        rays.push(Ray::new(org, place(edge) - org, 0.0, f32::INFINITY));
+    }
+    RaySet::new(mesh_scene(&placed)?, rays, inside_of, 1)
+}
+
+fn bunny_sets() -> Result<Vec<(&'static str, RaySet)>> {
+    let mut out = Vec::new();
+    for (label, file) in [
+        ("bunny incoherent", "incoherent_262144"),
+        ("bunny primary", "primary_262144"),
+    ] {
+        let path = shared().join("raysets/bunny").join(format!("{file}.rays"));
+        let (Some(scene), Ok(rays)) = (super::model_scene("bunny.ply")?, rayset::read_rays(&path))
+        else {
+            eprintln!(
+                "bench chart: the bunny or {} is missing; skipped",
+                path.display()
+            );
+            continue;
+        };
+        // 4096 of the 262144 rays against the f64 brute force over 69k triangles.
+        out.push((label, RaySet::new(scene, rays, Vec::new(), 64)?));
+    }
+    Ok(out)
+}
+
+/// Ray queries: every traversal × intersector on every set.
+fn queries(a: &Args, ctx: &Context) -> Result<(Vec<Point>, String)> {
+    let mut sets: Vec<(&'static str, Vec<RaySet>)> = bunny_sets()?
+        .into_iter()
+        .map(|(l, s)| (l, vec![s]))
+        .collect();
+    let stress = PLACEMENTS
+        .iter()
+        .map(|&(s, o)| stress_set(s, o))
+        .collect::<Result<Vec<_>>>()?;
+    sets.push(("stress", stress));
+    let mut points = Vec::new();
+    let mut table = String::from(
+        "| set | traversal | intersector | Mrays/s | leaks /M | false misses /M | false hits /M | wrong prim /M | max \\|Δt\\|/diag | mean \\|Δt\\|/diag |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for (label, group) in &sets {
+        for how in Traversal::ALL {
+            for intersector in Intersector::ALL {
+                let q = QueryOptions {
+                    traversal: Some(how),
+                    intersector,
+                    ..QueryOptions::default()
+                };
+                let mut total = Tally::default();
+                for set in group {
+                    let c = set.scene.committed()?;
+                    let mut hits = vec![Hit::MISS; set.rays.len()];
+                    let ms = time_ms(a.runs, || {
+                        let _ = ctx.intersect(c, &set.rays, &mut hits, &q);
+                    });
+                    let mut t = score(c, set, &hits);
+                    t.ms = ms;
+                    t.timed_rays = set.rays.len();
+                    total.add(&t);
+                }
+                let mrays = total.timed_rays as f64 / total.ms / 1e3;
+                writeln!(
+                    table,
+                    "| {label} | {} | {} | {mrays:.2} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1e} | {:.1e} |",
+                    how.name(),
+                    intersector.name(),
+                    total.per_million(total.leaks),
+                    total.per_million(total.false_misses),
+                    total.per_million(total.false_hits),
+                    total.per_million(total.wrong_prims),
+                    total.max_dt,
+                    total.sum_dt / total.both.max(1) as f64
+                )
+                .ok();
+                points.push(Point {
+                    set: label,
+                    method: format!("{} {}", how.name(), intersector.name()),
+                    mrays,
+                    error: total.failures(),
+                });
+            }
+        }
+    }
+    let checked: Vec<String> = sets
+        .iter()
+        .map(|(l, g)| {
+            let (r, m, c) = g.iter().fold((0, 0, 0), |(r, m, c), s| {
+                (r + s.rays.len(), m + s.must_hit.len(), c + s.refs.len())
+            });
+            format!("{l}: {r} rays, {m} from inside closed meshes, {c} checked against the f64 reference")
+        })
+        .collect();
+    Ok((points, format!("{}.\n\n{table}", checked.join("; "))))
+}
+
+/// Object id of the torus in the secondary-ray scene: the one object that is not convex.
+const TORUS: u32 = 1;
+
+/// Secondary rays: primary rays of a 192×192 view of the stress meshes on a floor, one shadow
+/// ray each to a light above. On the lit side of a convex object (uv sphere, cube, floor)
+/// nothing of that object can be in the way, so a shadow ray that hits its own object is a
+/// self-intersection (shadow acne). Placed at the origin and 1e3 away (where the fixed
+/// epsilon is below the coordinates' ULPs).
+fn secondary(a: &Args, ctx: &Context) -> Result<(Vec<Point>, String)> {
+    let mut scenes = Vec::new();
+    for offset in [0.0f32, 1e3] {
+        let o = Vec3::splat(offset);
+        let mut meshes = vec![
+            tessellate::uv_sphere(24, 48).placed(1.0, o + Vec3::new(0.0, 1.0, 0.0)),
+            tessellate::torus(48, 24, 0.35).placed(1.0, o + Vec3::new(2.6, 0.35, 0.0)),
+            tessellate::cube().placed(1.2, o + Vec3::new(-3.2, 0.0, -0.6)),
+        ];
+        meshes.push(Mesh {
+            positions: [(-6.0, -4.0), (6.0, -4.0), (6.0, 4.0), (-6.0, 4.0)]
+                .map(|(x, z)| o + Vec3::new(x, 0.0, z))
+                .to_vec(),
+            triangles: vec![[0, 2, 1], [0, 3, 2]],
+        });
+        let mut s = mesh_scene(&meshes)?;
+        s.add_light(PointLight {
+            position: o + Vec3::new(1.0, 6.0, 3.0),
+            color: Vec3::ONE,
+            intensity: 1.0,
+        })?;
+        s.commit()?;
+        s.ensure_ropes()?;
+        s.ensure_exact_vertices()?;
+        let (w, h) = (192u32, 192u32);
+        let eye = o + Vec3::new(0.0, 4.0, 9.0);
+        let rays: Vec<Ray> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 / w as f32, (i / w) as f32 / h as f32);
+                let target = o + Vec3::new(-5.0 + 10.0 * x, 3.0 - 3.5 * y, 0.0);
+                Ray::new(eye, target - eye, 0.0, f32::INFINITY)
+            })
+            .collect();
+        scenes.push((s, rays, o + Vec3::new(1.0, 6.0, 3.0)));
+    }
+    let mut points = Vec::new();
+    let mut table = String::from(
+        "| traversal | intersector | offset | Mrays/s (primary + shadow) | self-intersections /M shadow rays |\n\
+         |---|---|---|---|---|\n",
+    );
+    for how in Traversal::ALL {
+        for intersector in Intersector::ALL {
+            for mode in OffsetMode::ALL {
+                let opts = RenderOptions {
+                    intersector,
+                    offset_mode: mode,
+                    ..RenderOptions::default()
+                };
+                let (mut ms, mut traced, mut shadows, mut acne) = (0.0, 0usize, 0usize, 0usize);
+                for (s, rays, light) in &scenes {
+                    let c = s.committed()?;
+                    let tracer = Tracer::new(c, &opts, how);
+                    let object = |p: u32| c.origins[p as usize].object;
+                    // (shadow rays, of which checked, of which self-intersections)
+                    let shade = |ray: &Ray| -> (usize, usize, usize) {
+                        let hit = tracer.intersect(ray, INVALID);
+                        if !hit.is_hit() {
+                            return (0, 0, 0);
+                        }
+                        let surface = tracer.surface(ray, &hit);
+                        let (p, side) = (surface.p, surface.n);
+                        let (org, skip) = tracer.leave(&surface, side);
+                        let to_light = *light - org;
+                        let shadow = Ray::new(org, to_light.normalize(), 0.0, to_light.length());
+                        let sh = tracer.intersect(&shadow, skip);
+                        // Lit side of a convex object: nothing of it can be in the way.
+                        let checked = object(hit.prim) != TORUS && side.dot(*light - p) > 0.0;
+                        let selfhit = sh.is_hit() && object(sh.prim) == object(hit.prim);
+                        (1, checked as usize, (checked && selfhit) as usize)
+                    };
+                    let mut counts = (0, 0, 0);
+                    ms += time_ms(a.runs, || {
+                        counts = ctx.install(|| {
+                            rays.par_iter()
+                                .map(shade)
+                                .reduce(|| (0, 0, 0), |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2))
+                        });
+                    });
+                    traced += rays.len() + counts.0;
+                    shadows += counts.1;
+                    acne += counts.2;
+                }
+                let mrays = traced as f64 / ms / 1e3;
+                let error = acne as f64 * 1e6 / shadows.max(1) as f64;
+                writeln!(
+                    table,
+                    "| {} | {} | {} | {mrays:.2} | {error:.0} |",
+                    how.name(),
+                    intersector.name(),
+                    mode.name()
+                )
+                .ok();
+                points.push(Point {
+                    set: match mode {
+                        OffsetMode::Epsilon => "offset epsilon",
+                        OffsetMode::Robust => "offset robust",
+                        OffsetMode::ExcludePrim => "offset exclude-prim",
+                    },
+                    method: format!("{} {} {}", how.name(), intersector.name(), mode.name()),
+                    mrays,
+                    error,
+                });
+            }
+        }
+    }
+    Ok((points, table))
+}
+
+/// PSNR of renders of the built-in `default` scene (meshes, quadrics, a box, a plane; mirror
+/// and refraction, depth 6; 688x384) with each intersector x offset mode, against the render
+/// with the watertight test and the robust offset, standard traversal.
+fn psnr_table(ctx: &Context) -> Result<String> {
+    let mut b = builtin::by_name("default")?;
+    b.scene.commit()?;
+    b.scene.ensure_exact_vertices()?;
+    let c = b.scene.committed()?;
+    let render = |intersector, offset_mode| -> Result<Vec<u8>> {
+        let opts = RenderOptions {
+            max_depth: b.max_depth,
+            traversal: Some(Traversal::Standard),
+            intersector,
+            offset_mode,
+            ..RenderOptions::default()
+        };
+        let mut frame = rt2::frame::Frame::new(688, 384)?;
+        ctx.render(c, &b.camera, &opts, &mut frame)?;
+        Ok(frame.pixels().to_vec())
+    };
+    let reference = render(Intersector::Watertight, OffsetMode::Robust)?;
+    let mut out = String::from(
+        "\n#### Renders against a reference render\n\n\
+         The built-in `default` scene (688x384, depth 6), standard traversal; PSNR of the RGB \
+         channels against the render with the watertight test and the robust offset \
+         (inf: identical).\n\n| intersector | offset | PSNR dB | pixels differing |\n|---|---|---|---|\n",
+    );
+    for intersector in Intersector::ALL {
+        for mode in OffsetMode::ALL {
+            let img = render(intersector, mode)?;
+            let (mut se, mut n, mut differ) = (0.0f64, 0usize, 0usize);
+            for (p, q) in img.chunks_exact(4).zip(reference.chunks_exact(4)) {
+                differ += (p[..3] != q[..3]) as usize;
+                for k in 0..3 {
+                    se += (p[k] as f64 - q[k] as f64).powi(2);
+                    n += 1;
+                }
+            }
+            let psnr = 10.0 * (255.0f64 * 255.0 / (se / n as f64)).log10();
+            writeln!(
+                out,
+                "| {} | {} | {psnr:.1} | {differ} |",
+                intersector.name(),
+                mode.name()
+            )
+            .ok();
+        }
+    }
+    Ok(out)
+}
+
+/// The points no other point beats in both speed and error (lower error, higher Mrays/s),
+/// by increasing error.
+pub(super) fn pareto(points: &[Point]) -> Vec<Point> {
+    let mut sorted: Vec<&Point> = points.iter().collect();
+    sorted.sort_by(|a, b| {
+        a.error
+            .total_cmp(&b.error)
+            .then(b.mrays.total_cmp(&a.mrays))
+    });
+    let mut front: Vec<Point> = Vec::new();
+    for p in sorted {
+        if front.last().is_none_or(|f| p.mrays > f.mrays) {
+            front.push(p.clone());
+        }
+    }
+    front
+}
+
+/// The sets of `points`, in order of first appearance.
+fn sets_of(points: &[Point]) -> Vec<&'static str> {
+    let mut sets: Vec<&'static str> = Vec::new();
+    for p in points {
+        if !sets.contains(&p.set) {
+            sets.push(p.set);
+        }
+    }
+    sets
+}
+
+/// The Pareto front of each set (methods are compared on the same rays only).
+fn fronts(points: &[Point]) -> Vec<Vec<Point>> {
+    sets_of(points)
+        .into_iter()
+        .map(|set| {
+            let of_set: Vec<Point> = points.iter().filter(|p| p.set == set).cloned().collect();
+            pareto(&of_set)
+        })
+        .collect()
+}
+
+fn front_table(title: &str, points: &[Point]) -> String {
+    let mut s = format!(
+        "\nPareto fronts, {title} (per set):\n\n| set | method | Mrays/s | failures /M |\n|---|---|---|---|\n"
+    );
+    for p in fronts(points).iter().flatten() {
+        writeln!(
+            s,
+            "| {} | {} | {:.2} | {:.0} |",
+            p.set, p.method, p.mrays, p.error
+        )
+        .ok();
+    }
+    s
+}
+
+pub(super) fn chart(a: &Args) -> Result<String> {
+    let ctx = Context::new(BackendRequest::Cpu, 0)?;
+    let t0 = Instant::now();
+    let (qp, qt) = queries(a, &ctx)?;
+    let (sp, st) = secondary(a, &ctx)?;
+    let psnr = psnr_table(&ctx)?;
+    eprintln!(
+        "bench chart: measured in {:.0} s",
+        t0.elapsed().as_secs_f64()
+    );
+    let images = draw(&[("Ray queries", &qp), ("Secondary rays (shadow)", &sp)]);
+    Ok(format!(
+        "### Speed against accuracy (CPU backend)\n\n\
+         ![speed against accuracy](docs/chart.png)\n\n{images}\n\n\
+         Every traversal × intersector; Mrays/s with all cores (median of the runs); errors \
+         against an f64 brute force over the exact triangle corners (a watertight test in f64, \
+         closed edges; a neighbour hit at the same distance is a tie, not an error). Failures = false misses (leaks) + false hits + wrong \
+         primitive, per million rays; leaks are rays from inside a closed mesh whose first hit is \
+         not that mesh (exact: no reference needed). The stress scene (closed uv sphere, torus, cube of \
+         triangles; all closed) at scale 1e-7, 1, 1e7 and 1e4 from the origin: rays from inside \
+         to every vertex and edge midpoint and axis-parallel with every sign of zero (all must \
+         hit, and must hit the mesh they start in), and rays grazing the sphere's silhouette \
+         (checked against the reference).\n\n{qt}{}\n\
+         #### Secondary-ray origins\n\n\
+         192×192 primary rays onto the stress meshes on a floor, at the origin and 1e3 away, one \
+         shadow ray each; on the lit side of a convex object (sphere, cube, floor) a shadow ray \
+         that hits its own object is a self-intersection (acne), per million such shadow rays. \
+         They include silhouette edges where the primary ray's closest hit is the back face \
+         sharing the edge (the tie goes to the lower index): the shading side then points into \
+         the object and every offset mode starts inside it.\n\n{st}{}{psnr}",
+        front_table("ray queries", &qp),
+        front_table("secondary rays", &sp)
+    ))
+}
+
+#[cfg(feature = "chart")]
+fn draw(panels: &[(&str, &Vec<Point>)]) -> String {
+    match plot::draw(panels) {
+        Ok(()) => {
+            "Chart: [docs/chart.svg](docs/chart.svg), [docs/chart.png](docs/chart.png).".into()
+        }
+        Err(e) => {
+            eprintln!("bench chart: no chart drawn: {e}");
+            format!("(chart not drawn: {e})")
+        }
+    }
+}
+
+#[cfg(not(feature = "chart"))]
+fn draw(_: &[(&str, &Vec<Point>)]) -> String {
+    eprintln!("bench chart: built without the `chart` feature; no images drawn");
+    "(chart not drawn: build with `--features chart`)".into()
+}
+
+#[cfg(feature = "chart")]
+mod plot {
+    use super::{fronts, sets_of, Point};
+    use plotters::coord::Shift;
+    use plotters::prelude::*;
+    use std::error::Error;
+    use std::path::Path;
+
+    /// Zero failures are drawn here on the log axis (and labelled "0" in the axis text).
+    const FLOOR: f64 = 0.1;
+
+    const COLORS: [RGBColor; 6] = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(44, 160, 44),
+        RGBColor(214, 39, 40),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+    ];
+
+    fn panel<DB: DrawingBackend>(
+        area: &DrawingArea<DB, Shift>,
+        title: &str,
+        points: &[Point],
+    ) -> Result<(), Box<dyn Error>>
+    where
+        DB::ErrorType: 'static,
+    {
+        let x = |p: &Point| p.error.max(FLOOR);
+        // Room on the right for the names of the front's points.
+        let xmax = points.iter().map(x).fold(10.0, f64::max) * 60.0;
+        let ymax = points.iter().map(|p| p.mrays).fold(0.1, f64::max) * 1.15;
+        let mut chart = ChartBuilder::on(area)
+            .caption(title, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(44)
+            .y_label_area_size(56)
+            .build_cartesian_2d((FLOOR * 0.7..xmax).log_scale(), 0.0..ymax)?;
+        chart
+            .configure_mesh()
+            .x_desc("failures per million rays (log; 0 drawn at 0.1); lines: Pareto front per set")
+            .y_desc("Mrays/s")
+            .label_style(("sans-serif", 13))
+            .draw()?;
+        for (k, (set, front)) in sets_of(points).iter().zip(fronts(points)).enumerate() {
+            let color = COLORS[k % COLORS.len()];
+            let watertight = |p: &&Point| p.method.contains("watertight");
+            let of_set = || points.iter().filter(move |p| p.set == *set);
+            chart
+                .draw_series(
+                    of_set()
+                        .filter(watertight)
+                        .map(|p| Circle::new((x(p), p.mrays), 5, color.filled())),
+                )?
+                .label(format!("{set} (filled: watertight)"))
+                .legend(move |(lx, ly)| Circle::new((lx, ly), 5, color.filled()));
+            chart.draw_series(
+                of_set()
+                    .filter(|p| !watertight(p))
+                    .map(|p| Circle::new((x(p), p.mrays), 5, color.stroke_width(2))),
+            )?;
+            // The set's Pareto front: a line through it, each point named.
+            chart.draw_series(LineSeries::new(
+                front.iter().map(|p| (x(p), p.mrays)),
+                color.stroke_width(2),
+            ))?;
+            for p in &front {
+                chart.draw_series(std::iter::once(Text::new(
+                    p.method.clone(),
+                    (x(p) * 1.2, p.mrays),
+                    ("sans-serif", 12),
+                )))?;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .label_font(("sans-serif", 13))
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.85))
+            .draw()?;
+        Ok(())
+    }
+
+    fn all<DB: DrawingBackend>(
+        root: DrawingArea<DB, Shift>,
+        panels: &[(&str, &Vec<Point>)],
+    ) -> Result<(), Box<dyn Error>>
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        for (area, (title, points)) in root.split_evenly((1, panels.len())).iter().zip(panels) {
+            panel(area, title, points)?;
+        }
+        root.present()?;
+        Ok(())
+    }
+
+    /// Writes docs/chart.svg and docs/chart.png. Text needs a TTF font: `$RT2_FONT` or
+    /// DejaVu Sans where Debian and Ubuntu put it.
+    pub(super) fn draw(panels: &[(&str, &Vec<Point>)]) -> Result<(), Box<dyn Error>> {
+        let font = std::env::var("RT2_FONT")
+            .unwrap_or_else(|_| "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf".into());
+        let bytes = std::fs::read(&font).map_err(|e| format!("font {font}: {e} (set RT2_FONT)"))?;
+        plotters::style::register_font("sans-serif", FontStyle::Normal, Box::leak(bytes.into()))
+            .map_err(|_| format!("{font} is not a usable TTF font"))?;
+        std::fs::create_dir_all("docs")?;
+        let size = (1500u32, 650u32);
+        all(
+            SVGBackend::new(Path::new("docs/chart.svg"), size).into_drawing_area(),
+            panels,
+        )?;
+        let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
+        all(
+            BitMapBackend::with_buffer(&mut buf, size).into_drawing_area(),
+            panels,
+        )?;
+        image::RgbImage::from_raw(size.0, size.1, buf)
+            .ok_or("PNG buffer size")?
+            .save("docs/chart.png")?;
+        Ok(())
+    }
+}
+
+/// Bytes per primitive of each part of each built-in scene and the bunny, and what the same
+/// analytic primitives would cost tessellated (a 16×32 uv sphere per sphere: 960 triangles).
+pub(super) fn memory(_: &Args) -> Result<String> {
+    let tess = tessellate::uv_sphere(16, 32);
+    let tri_bytes = std::mem::size_of::<rt2::geometry::Triangle>();
+    let per_sphere = tess.triangles.len() * tri_bytes;
+    let mut out = format!(
+        "### Memory: bytes per primitive of each part\n\n\
+         Total = what a committed scene holds (primitives, nodes, leaf lists). Built only on \
+         demand, and shown at what they cost then: ropes + leaf boxes (rope traversals), exact \
+         triangle corners (watertight test). Tessellated: every sphere or ellipsoid as a \
+         closed {}-triangle uv sphere ({per_sphere} B of triangles, before any tree).\n\n\
+         | scene | primitives | kinds | primitive arrays B/prim | tree nodes B/prim | leaf lists B/prim | on demand: ropes + leaf boxes B/prim | on demand: exact corners B/prim | total MiB | tessellated triangles MiB |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
+        tess.triangles.len()
+    );
+    let mut scenes: Vec<(String, Scene)> = Vec::new();
+    for name in builtin::NAMES {
+        scenes.push((name.to_string(), builtin::by_name(name)?.scene));
+    }
+    if let Some(s) = super::model_scene("bunny.ply")? {
+        scenes.push(("bunny".into(), s));
+    }
+    for (name, mut s) in scenes {
+        s.commit()?;
+        let plain = s.committed()?.prims.bytes();
+        // The on-demand parts, built here to report what they cost when asked for.
+        s.ensure_ropes()?;
+        s.ensure_exact_vertices()?;
+        let c = s.committed()?;
+        let p = &c.prims;
+        let n = (p.len() + p.planes.len()).max(1) as f64;
+        let kinds = format!(
+            "{} tri, {} sph, {} ell, {} box, {} plane",
+            p.triangles.len(),
+            p.spheres.len(),
+            p.ellipsoids.len(),
+            p.boxes.len(),
+            p.planes.len()
+        );
+        let parts = [
+            plain,
+            c.tree.node_bytes(),
+            c.tree.leaf_list_bytes(),
+            c.tree.rope_bytes() + c.tree.leaf_box_bytes(),
+            p.vertices.len() * 36,
+        ];
+        let analytic = p.spheres.len() + p.ellipsoids.len();
+        writeln!(
+            out,
+            "| {name} | {} | {kinds} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {} |",
+            n,
+            parts[0] as f64 / n,
+            parts[1] as f64 / n,
+            parts[2] as f64 / n,
+            parts[3] as f64 / n,
+            parts[4] as f64 / n,
+            mib(parts[..3].iter().sum()),
+            if analytic > 0 {
+                format!(
+                    "{:.1}",
+                    mib(analytic * per_sphere + p.triangles.len() * tri_bytes)
+                )
+            } else {
+                "-".into()
+            }
+        )
+        .ok();
+    }
+    Ok(out)
+}
