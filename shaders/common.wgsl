@@ -141,11 +141,18 @@ fn hit_triangle(tri: Triangle, r: Ray, tmax: f32) -> Tuv {
     return no;
 }
 
-// Smallest root of a t^2 + 2 b t + c in [tmin, tmax) (`nearest_root`, Numerical Recipes' q).
-fn nearest_root(a: f32, b: f32, c: f32, tmin: f32, tmax: f32) -> Tuv {
+// `sphere_root` of src/geometry/analytic.rs: the nearest root in [tmin, tmax) of the ray
+// o + t d (relative to the centre) with the sphere of squared radius r2. The discriminant comes
+// from the centre-to-line distance (Ray Tracing Gems ch. 7), not from b² - ac, which cancels.
+fn sphere_root(o: vec3<f32>, d: vec3<f32>, r2: f32, tmin: f32, tmax: f32) -> Tuv {
     let no = Tuv(false, 0.0, 0.0, 0.0);
-    let disc = b * b - a * c;
-    if (disc < 0.0 || a == 0.0 || is_nan(disc)) { return no; }
+    let a = dot(d, d);
+    if (a == 0.0) { return no; }
+    let b = dot(o, d);
+    let l = o - (b / a) * d;
+    let disc = a * (r2 - dot(l, l));
+    if (disc < 0.0 || is_nan(disc)) { return no; }
+    let c = dot(o, o) - r2;
     let sgn = select(1.0, -1.0, negative(b));
     let q = -(b + sgn * sqrt(disc));
     var t0 = q / a;
@@ -158,8 +165,7 @@ fn nearest_root(a: f32, b: f32, c: f32, tmin: f32, tmax: f32) -> Tuv {
 }
 
 fn hit_sphere(s: Sphere, r: Ray, tmax: f32) -> Tuv {
-    let oc = r.org - v3(s.center);
-    return nearest_root(dot(r.dir, r.dir), dot(oc, r.dir), dot(oc, oc) - s.radius * s.radius, r.tmin, tmax);
+    return sphere_root(r.org - v3(s.center), r.dir, s.radius * s.radius, r.tmin, tmax);
 }
 
 fn ell_inv(e: Ellipsoid) -> mat3x3<f32> {
@@ -170,7 +176,7 @@ fn hit_ellipsoid(e: Ellipsoid, r: Ray, tmax: f32) -> Tuv {
     let m = ell_inv(e);
     let o = m * (r.org - v3(e.center));
     let d = m * r.dir;
-    return nearest_root(dot(d, d), dot(o, d), dot(o, o) - 1.0, r.tmin, tmax);
+    return sphere_root(o, d, 1.0, r.tmin, tmax);
 }
 
 // `Aabb::clip_ray` over the whole line, then the first end inside [tmin, tmax) (`box_intersect`).

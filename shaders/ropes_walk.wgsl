@@ -12,7 +12,9 @@ fn exit_six_faces(b: Aabb, r: TRay) -> Exit {
         let ta = dist(r, a, b.min[a]);
         let tb = dist(r, a, b.max[a]);
         var e: Exit;
-        if (ta > tb) { e = Exit(ta, 2u * a); } else if (tb >= ta) { e = Exit(tb, 2u * a + 1u); } else { continue; }
+        // A flat slab (ta == tb) is left through the face the direction points to: the other
+        // rope leads back to the leaf the ray came from (as exit_six_faces in ropes.rs).
+        if (ta > tb || (ta == tb && !positive(r, a))) { e = Exit(ta, 2u * a); } else if (tb >= ta) { e = Exit(tb, 2u * a + 1u); } else { continue; }
         if (e.t < best.t) { best = e; }
     }
     return best;

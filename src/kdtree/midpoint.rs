@@ -38,7 +38,7 @@ impl Midpoint<'_> {
         for (p, b) in prims {
             // A primitive in the plane touches both closed child voxels: it is clipped like a
             // straddling one, which keeps it in both.
-            match classify(b.min[axis], b.max[axis], split, Side::Both) {
+            match classify(b.min[axis], b.max[axis], split) {
                 Side::Below => sides[0].push((p, b)),
                 Side::Above => sides[1].push((p, b)),
                 Side::Both => {

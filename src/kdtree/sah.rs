@@ -126,11 +126,10 @@ pub(super) fn build(
     )
 }
 
-/// A candidate split plane and where the primitives lying in it go.
+/// A candidate split plane.
 struct Plane {
     axis: usize,
     pos: f32,
-    planar: Side,
     cost: f32,
 }
 
@@ -225,8 +224,9 @@ impl Sah<'_> {
         best
     }
 
-    /// Cost of the plane `axis = pos` with `below`, `planar` and `above` primitives, the planar
-    /// ones put on the cheaper side (Wald & Havran §4.2).
+    /// Cost of the plane `axis = pos` with `below`, `planar` and `above` primitives. The planar
+    /// ones go to both children (see `split::classify`: conservative leaf membership), where
+    /// Wald & Havran (§4.2) put them on the cheaper side.
     fn split_cost(&self, voxel: &Aabb, area: f32, axis: usize, pos: f32, n: [usize; 3]) -> Plane {
         let [below, planar, above] = n;
         let [vb, va] = child_voxels(voxel, axis, pos);
@@ -239,17 +239,10 @@ impl Sah<'_> {
             };
             lambda * (self.traversal_cost + INTERSECTION_COST * (pb * nb as f32 + pa * na as f32))
         };
-        let (cost_below, cost_above) = (cost(below + planar, above), cost(below, above + planar));
-        let (cost, planar) = if cost_below < cost_above {
-            (cost_below, Side::Below)
-        } else {
-            (cost_above, Side::Above)
-        };
         Plane {
             axis,
             pos,
-            planar,
-            cost,
+            cost: cost(below + planar, above + planar),
         }
     }
 
@@ -274,9 +267,7 @@ impl Sah<'_> {
                 Kind::Planar => (lo[p], hi[p]) = (e.pos, e.pos),
             }
         }
-        let side: Vec<Side> = (0..n)
-            .map(|p| classify(lo[p], hi[p], plane.pos, plane.planar))
-            .collect();
+        let side: Vec<Side> = (0..n).map(|p| classify(lo[p], hi[p], plane.pos)).collect();
         drop((lo, hi));
 
         let mut children: [(Vec<u32>, Events); 2] = Default::default();

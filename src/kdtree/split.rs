@@ -48,12 +48,11 @@ pub(super) enum Side {
 /// `tests/precision.rs`: 1% of the rays aimed at vertices of a tessellated sphere leaked with
 /// the watertight test). Listing it on both sides makes leaf membership conservative for every
 /// traversal at the cost of a few more references. A primitive lying in the plane
-/// (`lo == hi == split`) goes to `planar` — one side is enough for a traversal that treats
-/// voxels as closed intervals, `Both` keeps it in both.
-pub(super) fn classify(lo: f32, hi: f32, split: f32, planar: Side) -> Side {
-    if lo == split && hi == split {
-        planar
-    } else if hi < split {
+/// (`lo == hi == split`) goes to both sides too: a ray lying in the plane, or starting on it,
+/// then finds it in whichever child the traversal enters (and the GPU kernels, which do not
+/// search the child left out, give the CPU's answer).
+pub(super) fn classify(lo: f32, hi: f32, split: f32) -> Side {
+    if hi < split {
         Side::Below
     } else if lo > split {
         Side::Above
