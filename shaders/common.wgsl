@@ -188,9 +188,11 @@ fn hit_box(b: Aabb, r: Ray, tmax: f32) -> Tuv {
     for (var a = 0u; a < 3u; a++) {
         let ta = (b.min[a] - r.org[a]) * inv[a];
         let tb = (b.max[a] - r.org[a]) * inv[a];
+        // Near and far planes by the direction sign, as `Aabb::clip_ray`: a ray lying in a face
+        // plane (NaN distance) is inside the closed slab for either sign of zero.
         var near = tb;
         var far = ta;
-        if (ta <= tb) { near = ta; far = tb; }
+        if (!negative(inv[a])) { near = ta; far = tb; }
         if (near > t0) { t0 = near; }
         if (far < t1) { t1 = far; }
     }

@@ -83,18 +83,22 @@ impl Aabb {
         self.min.cmple(p).all() && p.cmple(self.max).all()
     }
 
-    /// Slab test: the parametric interval `[t0, t1]` of the ray inside the box,
-    /// clamped to `[tmin, tmax]`, or `None` when the ray misses it.
-    /// Zero direction components give infinite reciprocals; the `max`/`min`
-    /// below are written so that a NaN from `0 * inf` never widens the interval.
+    /// Slab test: the parametric interval `[t0, t1]` of the ray inside the closed box, clamped
+    /// to `[tmin, tmax]`, or `None` when the ray misses it. Each slab's near and far planes are
+    /// chosen by the sign of `inv_dir` (so by the sign of a zero direction component too): a ray
+    /// lying in a face plane gets a NaN distance there, which compares false and clips nothing,
+    /// so it is inside the closed slab for `+0.0` and `-0.0` alike.
     pub fn clip_ray(&self, org: Vec3, inv_dir: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32)> {
         let mut t0 = tmin;
         let mut t1 = tmax;
         for a in 0..3 {
             let ta = (self.min[a] - org[a]) * inv_dir[a];
             let tb = (self.max[a] - org[a]) * inv_dir[a];
-            let (near, far) = if ta <= tb { (ta, tb) } else { (tb, ta) };
-            // NaN (ray in the slab's plane with a zero direction) compares false: no clipping.
+            let (near, far) = if inv_dir[a].is_sign_positive() {
+                (ta, tb)
+            } else {
+                (tb, ta)
+            };
             if near > t0 {
                 t0 = near;
             }

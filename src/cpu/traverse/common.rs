@@ -80,25 +80,14 @@ pub(super) enum Crossing {
     },
 }
 
-/// A child that holds part of the ray although the descent does not enter it.
-#[derive(Clone, Copy, Debug)]
-enum Beside {
-    /// The segment starts exactly on the split plane: the near child's closed voxel holds the
-    /// start point too, though no part of the segment after it.
-    Start(u32),
-    /// The ray lies in the split plane (zero direction component, origin on the plane): the
-    /// whole segment lies in the closed voxel of the child the direction sign does not pick.
-    InPlane(u32),
-}
-
 /// One inner-node step for the segment `[t0, t1]`. Ties go to the far child when the split is at
 /// `t0` (the segment starts on the plane and moves into `far`) and to the near child when it is at
 /// `t1`. A NaN `t_split` (the ray lies in the split plane) also goes to `far`: for `+0.0` that is the
 /// child above, for `-0.0` the child below — the side the direction sign points to, the same rule
-/// point location uses for a point on the plane. The child left out in those two cases is returned
-/// too, as it may list primitives the ray touches (see [`descend`]).
+/// point location uses for a point on the plane. The child left out holds nothing the ray needs:
+/// the builders list every primitive touching or lying in a split plane on both sides of it.
 #[inline]
-fn step(node: KdNode, ray: &TRay, t0: f32, t1: f32) -> (Crossing, Option<Beside>) {
+fn step(node: KdNode, ray: &TRay, t0: f32, t1: f32) -> Crossing {
     let axis = node.axis();
     let t_split = ray.dist(axis, node.split);
     let (below, above) = (node.index(), node.index() + 1);
@@ -107,21 +96,17 @@ fn step(node: KdNode, ray: &TRay, t0: f32, t1: f32) -> (Crossing, Option<Beside>
     } else {
         (above, below)
     };
-    if t_split.is_nan() {
-        (Crossing::One { child: far }, Some(Beside::InPlane(near)))
-    } else if t_split <= t0 {
-        let beside = (t_split == t0).then_some(Beside::Start(near));
-        (Crossing::One { child: far }, beside)
+    if t_split.is_nan() || t_split <= t0 {
+        Crossing::One { child: far }
     } else if t_split >= t1 {
-        (Crossing::One { child: near }, None)
+        Crossing::One { child: near }
     } else {
-        let both = Crossing::Both {
+        Crossing::Both {
             near,
             far,
             t_split,
             t1,
-        };
-        (both, None)
+        }
     }
 }
 
@@ -138,23 +123,13 @@ fn next(c: Crossing) -> u32 {
 /// about every crossing (the stack-based traversals push there, push-down moves its root there).
 /// Counts every node fetched, the leaf included. Returns the leaf's node and its exit distance
 /// (`t1` shrunk to the near part at every two-child crossing).
-///
-/// The builders list a primitive that lies in or only touches a split plane on one side of it,
-/// which is enough for rays that cross the plane but not for the two cases of [`Beside`]; the
-/// child left out is searched through ([`beside`]) before the descent goes on:
-/// - a ray lying in the plane: on every descent (rare: it needs an exact zero component);
-/// - a segment starting on the plane: on the ray's `first` descent from the root only — later
-///   segments start on the plane they have just crossed, whose near side was the previous leaf.
 #[inline]
-#[allow(clippy::too_many_arguments)]
 pub(super) fn descend(
     tree: &KdTree,
     ray: &TRay,
     mut node: u32,
     t0: f32,
     mut t1: f32,
-    first: bool,
-    query: &mut impl LeafQuery,
     stats: &mut TraversalStats,
     mut seen: impl FnMut(Crossing),
 ) -> (KdNode, f32) {
@@ -164,77 +139,12 @@ pub(super) fn descend(
         if n.is_leaf() {
             return (n, t1);
         }
-        let (c, left_out) = step(n, ray, t0, t1);
-        match left_out {
-            Some(Beside::InPlane(child)) => beside(tree, ray, child, t0, t1, query, stats),
-            Some(Beside::Start(child)) if first => beside(tree, ray, child, t0, t0, query, stats),
-            _ => {}
-        }
+        let c = step(n, ray, t0, t1);
         if let Crossing::Both { t_split, .. } = c {
             t1 = t_split;
         }
         node = next(c);
         seen(c);
-    }
-}
-
-/// Visits every leaf under `node` whose closed voxel meets the segment `[t0, t1]`, taking both
-/// sides of every plane the segment starts on or lies in, and never stopping early: the caller's
-/// traversal goes on afterwards and decides when to stop.
-fn beside(
-    tree: &KdTree,
-    ray: &TRay,
-    node: u32,
-    t0: f32,
-    t1: f32,
-    query: &mut impl LeafQuery,
-    stats: &mut TraversalStats,
-) {
-    let mut pending = Stack::new();
-    pending.push(Entry { node, t0, t1 });
-    while let Some(Entry {
-        mut node,
-        t0,
-        mut t1,
-    }) = pending.pop()
-    {
-        loop {
-            let n = tree.nodes[node as usize];
-            stats.nodes_visited += 1;
-            if n.is_leaf() {
-                visit_leaf(tree, n, t1, query, stats);
-                break;
-            }
-            let (c, left_out) = step(n, ray, t0, t1);
-            match left_out {
-                Some(Beside::InPlane(child)) => pending.push(Entry {
-                    node: child,
-                    t0,
-                    t1,
-                }),
-                Some(Beside::Start(child)) => pending.push(Entry {
-                    node: child,
-                    t0,
-                    t1: t0,
-                }),
-                None => {}
-            }
-            if let Crossing::Both {
-                far,
-                t_split,
-                t1: end,
-                ..
-            } = c
-            {
-                pending.push(Entry {
-                    node: far,
-                    t0: t_split,
-                    t1: end,
-                });
-                t1 = t_split;
-            }
-            node = next(c);
-        }
     }
 }
 

@@ -35,36 +35,26 @@ pub(super) fn traverse(
     let mut root = 0;
     let mut t_max = scene_min;
     // One leaf per pass and no leaf twice: more passes than leaves would be a bug.
-    for pass in 0..tree.leaves.len() {
+    for _ in 0..tree.leaves.len() {
         let (node, t0, t1, mut push_down) = match stack.pop() {
             Some(e) => (e.node, e.t0, e.t1, false),
             // The restart event.
             None => (root, t_max, scene_max, how.push_down),
         };
-        let (leaf, t_exit) = descend(
-            tree,
-            ray,
-            node,
-            t0,
-            t1,
-            pass == 0,
-            query,
-            stats,
-            |c| match c {
-                Crossing::One { child } if push_down => root = child,
-                Crossing::One { .. } => {}
-                Crossing::Both {
-                    far, t_split, t1, ..
-                } => {
-                    push_down = false;
-                    stack.push(Entry {
-                        node: far,
-                        t0: t_split,
-                        t1,
-                    });
-                }
-            },
-        );
+        let (leaf, t_exit) = descend(tree, ray, node, t0, t1, stats, |c| match c {
+            Crossing::One { child } if push_down => root = child,
+            Crossing::One { .. } => {}
+            Crossing::Both {
+                far, t_split, t1, ..
+            } => {
+                push_down = false;
+                stack.push(Entry {
+                    node: far,
+                    t0: t_split,
+                    t1,
+                });
+            }
+        });
         if visit_leaf(tree, leaf, t_exit, query, stats) || t_exit >= scene_max {
             return;
         }

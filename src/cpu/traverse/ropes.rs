@@ -92,19 +92,8 @@ fn walk(
 ) {
     let (mut node, mut t_entry, mut miss_test) = (w.node, w.t_entry, w.miss_test);
     // Leaves are crossed in a strict front-to-back order: more steps than leaves would be a bug.
-    for step in 0..tree.leaves.len() {
-        let first = step == 0;
-        let (leaf, _) = descend(
-            tree,
-            ray,
-            node,
-            t_entry,
-            f32::INFINITY,
-            first,
-            query,
-            stats,
-            |_| {},
-        );
+    for _ in 0..tree.leaves.len() {
+        let (leaf, _) = descend(tree, ray, node, t_entry, f32::INFINITY, stats, |_| {});
         let leaf_index = leaf.index() as usize;
         let (t_exit, face) = (w.exit)(&ropes.leaf_bounds[leaf_index], ray);
         if miss_test && t_exit < t_entry {

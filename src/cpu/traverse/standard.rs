@@ -19,9 +19,8 @@ pub(super) fn traverse(
         t0: scene_min,
         t1: scene_max,
     });
-    let mut first = true;
     while let Some(Entry { node, t0, t1 }) = stack.pop() {
-        let (leaf, t_exit) = descend(tree, ray, node, t0, t1, first, query, stats, |c| {
+        let (leaf, t_exit) = descend(tree, ray, node, t0, t1, stats, |c| {
             if let Crossing::Both {
                 far, t_split, t1, ..
             } = c
@@ -33,7 +32,6 @@ pub(super) fn traverse(
                 });
             }
         });
-        first = false;
         if visit_leaf(tree, leaf, t_exit, query, stats) {
             return;
         }
