@@ -57,6 +57,11 @@ fn build_example(name: &str) -> PathBuf {
 
 /// Runs an example (under valgrind if `RT2_SANITIZE=valgrind`) and returns its output.
 fn run(exe: &Path, args: &[&std::ffi::OsStr]) -> Output {
+    run_with(exe, args, &[])
+}
+
+/// [`run`] with extra environment variables (e.g. `RT2_BACKEND`).
+fn run_with(exe: &Path, args: &[&std::ffi::OsStr], env: &[(&str, &str)]) -> Output {
     let mut cmd = match std::env::var("RT2_SANITIZE").as_deref() {
         Ok("valgrind") => {
             let mut c = Command::new("valgrind");
@@ -73,7 +78,9 @@ fn run(exe: &Path, args: &[&std::ffi::OsStr]) -> Output {
         Ok(other) => panic!("RT2_SANITIZE={other} is not supported (only \"valgrind\")"),
     };
     // Two workers keep runs of several test binaries at once from oversubscribing the machine.
-    cmd.args(args).env("RAYON_NUM_THREADS", "2");
+    cmd.args(args)
+        .env("RAYON_NUM_THREADS", "2")
+        .envs(env.iter().copied());
     // Cargo's LD_LIBRARY_PATH for tests also lists target/<profile>, whose librt2.so is only
     // refreshed by `cargo build` and would win over the rpath: name the library's own directory.
     let lib_dir = support::shared_library()
@@ -368,4 +375,48 @@ fn errors_example_passes_every_check() {
     );
     // errors.c makes more than 80 checks; 80 catches a run that stopped early but exited 0.
     assert!(passed >= 80, "only {passed} checks ran");
+}
+
+/// spheres.c on the GPU backend (`RT2_BACKEND=gpu`, lavapipe in CI) draws the CPU's image,
+/// within the tolerance of tests/gpu.rs (mean absolute difference <= 1.0 and 99th percentile
+/// <= 12 per channel: headroom for hardware GPUs, which fuse multiply-adds). Without an adapter
+/// it prints SKIPPED, unless `RT2_REQUIRE_GPU=1`.
+#[test]
+fn spheres_on_the_gpu_backend_draws_the_cpu_image() {
+    if let Err(e) = rt2::context::Context::new(rt2::dispatch::BackendRequest::Gpu, 1) {
+        assert!(
+            std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
+            "RT2_REQUIRE_GPU=1 but no GPU: {}",
+            e.message
+        );
+        eprintln!("SKIPPED (no GPU adapter): {}", e.message);
+        return;
+    }
+    let exe = build_example("spheres");
+    let dir = support::scratch("c_examples");
+    let mut images = Vec::new();
+    for backend in ["cpu", "gpu"] {
+        let png = dir.join(format!("spheres-{backend}.png"));
+        let _ = std::fs::remove_file(&png);
+        let out = run_with(&exe, &[png.as_os_str()], &[("RT2_BACKEND", backend)]);
+        assert_exit(&out, 0, &format!("spheres on the {backend} backend"));
+        let img = image::open(&png)
+            .unwrap_or_else(|e| panic!("cannot decode {}: {e}", png.display()))
+            .to_rgba8();
+        images.push(img);
+    }
+    let mut diffs: Vec<u8> = images[0]
+        .as_raw()
+        .iter()
+        .zip(images[1].as_raw())
+        .map(|(a, b)| a.abs_diff(*b))
+        .collect();
+    let mean = diffs.iter().map(|&d| d as f64).sum::<f64>() / diffs.len() as f64;
+    diffs.sort_unstable();
+    let p99 = diffs[diffs.len() * 99 / 100];
+    println!("spheres.c GPU against CPU: mean {mean:.3}, 99th percentile {p99}");
+    assert!(
+        mean <= 1.0 && p99 <= 12,
+        "GPU image differs: mean {mean:.3}, p99 {p99}"
+    );
 }
