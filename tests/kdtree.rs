@@ -588,13 +588,20 @@ fn shared_models_keep_every_triangle_in_its_leaves() {
             let what = format!("{model} {builder:?}");
             let leaves = leaves_of(&tree, &node_voxels(&tree));
             let mut found = vec![false; set.len()];
+            // References whose exact clip to the leaf is empty: the builder classifies by padded
+            // clipped boxes (a few ULPs, for conservative membership), so a triangle that only
+            // comes within that padding of a leaf may be listed there. Harmless (one more test),
+            // but counted: they must stay rare.
+            let (mut loose, mut refs) = (0usize, 0usize);
             for (k, &(leaf, voxel)) in leaves.iter().enumerate() {
                 let listed = tree.leaf_prims(leaf);
                 for &p in listed {
                     assert!(
-                        !set.clipped_bounds(p as usize, &voxel).is_empty(),
-                        "{what}: {p} misses leaf {leaf}"
+                        set.bounds(p as usize).overlaps(&voxel),
+                        "{what}: {p} listed in leaf {leaf} {voxel:?} its box misses"
                     );
+                    loose += set.clipped_bounds(p as usize, &voxel).is_empty() as usize;
+                    refs += 1;
                     found[p as usize] = true;
                 }
                 if k % 97 != 0 {
@@ -613,6 +620,11 @@ fn shared_models_keep_every_triangle_in_its_leaves() {
             }
             let lost = found.iter().filter(|f| !**f).count();
             assert_eq!(lost, 0, "{what}: {lost} triangles in no leaf");
+            println!("{what}: {loose} of {refs} references only within the padding of their leaf");
+            assert!(
+                loose * 1000 <= refs,
+                "{what}: {loose} of {refs} loose references"
+            );
         }
     }
 }
