@@ -41,6 +41,21 @@ fn entry_three_faces(r: TRay) -> f32 {
     return t;
 }
 
+// `tied_exit` of ropes.rs: leaving the scene through an edge or a corner of the leaf, the faces
+// meeting there tie up to rounding; go on through another of them whose rope leads somewhere.
+fn tied_exit(leaf: u32, r: TRay, ex: Exit) -> u32 {
+    let b = leaf_boxes[leaf];
+    let tol = 8.0 * 1.1920929e-7 * max(abs(ex.t), 1.1754944e-38);
+    for (var a = 0u; a < 3u; a++) {
+        let pos = positive(r, a);
+        let other = 2u * a + select(0u, 1u, pos);
+        let t = dist(r, a, select(b.min[a], b.max[a], pos));
+        let link = ropes[leaf].links[other];
+        if (other != ex.face && abs(t - ex.t) <= tol && link != INVALID) { return link; }
+    }
+    return INVALID;
+}
+
 // The loop of algorithms 7 and 8: locate the leaf, test its primitives, follow the rope.
 fn rope_walk(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, Stats>,
              start: u32, t_start: f32, t_end: f32, three_faces: bool, miss_test_on: bool) {
@@ -64,7 +79,10 @@ fn rope_walk(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, St
         miss_test = false;
         if (visit_leaf(leaf, ex.t, r.ray, h, any_hit, st) || ex.t >= t_end) { return; }
         node = ropes[leaf].links[ex.face];
-        if (node == INVALID) { return; }
+        if (node == INVALID) {
+            node = tied_exit(leaf, r, ex);
+            if (node == INVALID) { return; }
+        }
         t_entry = max(t_entry, ex.t);
     }
 }

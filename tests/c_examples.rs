@@ -21,12 +21,18 @@ use std::process::{Command, Output};
 
 /// Compiles `c_examples/<name>.c` into an executable in the scratch directory.
 fn build_example(name: &str) -> PathBuf {
+    build_example_as(name, name)
+}
+
+/// [`build_example`] into the executable `exe_name`: tests that run at the same time must not
+/// rewrite each other's executable.
+fn build_example_as(name: &str, exe_name: &str) -> PathBuf {
     let dir = support::scratch("c_examples");
     let lib_dir = support::shared_library()
         .parent()
         .expect("library directory")
         .to_path_buf();
-    let exe = dir.join(name);
+    let exe = dir.join(exe_name);
     let tool = support::compiler(false, &dir);
     let mut cmd = tool.to_command();
     cmd.args(["-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror"])
@@ -392,7 +398,7 @@ fn spheres_on_the_gpu_backend_draws_the_cpu_image() {
         eprintln!("SKIPPED (no GPU adapter): {}", e.message);
         return;
     }
-    let exe = build_example("spheres");
+    let exe = build_example_as("spheres", "spheres-backends");
     let dir = support::scratch("c_examples");
     let mut images = Vec::new();
     for backend in ["cpu", "gpu"] {

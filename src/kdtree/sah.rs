@@ -201,7 +201,7 @@ impl Sah<'_> {
         area: f32,
     ) -> Option<Plane> {
         let mut best: Option<Plane> = None;
-        // Primitives entirely below and entirely above the current plane.
+        // Primitives that start before the current plane, and that do not end before it.
         let (mut below, mut above) = (0usize, n);
         let mut i = 0;
         while i < list.len() {
@@ -212,23 +212,27 @@ impl Sah<'_> {
                 i += 1;
             }
             let [ends, planar, starts] = count;
-            above -= ends + planar;
             if pos > voxel.min[axis] && pos < voxel.max[axis] {
-                let candidate = self.split_cost(voxel, area, axis, pos, [below, planar, above]);
+                // `split::classify` sends every primitive touching the plane (ending, lying or
+                // starting on it) to both children: the cost counts them on both sides, or the
+                // builder would split forever at planes that only duplicate primitives.
+                let counts = [below + planar + starts, above];
+                let candidate = self.split_cost(voxel, area, axis, pos, counts);
                 if best.as_ref().is_none_or(|b| candidate.cost < b.cost) {
                     best = Some(candidate);
                 }
             }
+            above -= ends + planar;
             below += starts + planar;
         }
         best
     }
 
-    /// Cost of the plane `axis = pos` with `below`, `planar` and `above` primitives. The planar
-    /// ones go to both children (see `split::classify`: conservative leaf membership), where
-    /// Wald & Havran (§4.2) put them on the cheaper side.
-    fn split_cost(&self, voxel: &Aabb, area: f32, axis: usize, pos: f32, n: [usize; 3]) -> Plane {
-        let [below, planar, above] = n;
+    /// Cost of the plane `axis = pos` with `below` and `above` primitives in the two children
+    /// (those touching the plane in both: conservative leaf membership, where Wald & Havran
+    /// (§4.2) put the planar ones on the cheaper side).
+    fn split_cost(&self, voxel: &Aabb, area: f32, axis: usize, pos: f32, n: [usize; 2]) -> Plane {
+        let [below, above] = n;
         let [vb, va] = child_voxels(voxel, axis, pos);
         let (pb, pa) = (vb.surface_area() / area, va.surface_area() / area);
         let cost = |nb: usize, na: usize| {
@@ -242,7 +246,7 @@ impl Sah<'_> {
         Plane {
             axis,
             pos,
-            cost: cost(below + planar, above + planar),
+            cost: cost(below, above),
         }
     }
 

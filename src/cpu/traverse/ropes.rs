@@ -69,6 +69,20 @@ fn entry_three_faces(b: &Aabb, ray: &TRay) -> f32 {
     t
 }
 
+/// A rope other than `face` whose exit plane the ray meets at `t_exit` too, up to a few ULPs of
+/// rounding (the ray leaves the leaf through an edge or a corner), and that leads somewhere.
+fn tied_exit(b: &Aabb, links: &[u32; 6], ray: &TRay, face: usize, t_exit: f32) -> Option<u32> {
+    let tol = 8.0 * f32::EPSILON * t_exit.abs().max(f32::MIN_POSITIVE);
+    (0..3).find_map(|axis| {
+        let positive = ray.positive(axis);
+        let other = 2 * axis + positive as usize;
+        let plane = if positive { b.max[axis] } else { b.min[axis] };
+        let t = ray.dist(axis, plane);
+        (other != face && (t - t_exit).abs() <= tol && links[other] != INVALID)
+            .then_some(links[other])
+    })
+}
+
 /// Where a rope walk starts and how it reads leaf boxes.
 struct Walk<Exit> {
     node: u32,
@@ -105,7 +119,19 @@ fn walk(
         }
         node = ropes.links[leaf_index][face];
         if node == INVALID {
-            return;
+            // Leaving the scene through an edge or a corner of the leaf: the faces meeting there
+            // tie up to rounding, and the neighbour across another of them may hold a hit at
+            // that very point. Go on through such a face rather than stop.
+            match tied_exit(
+                &ropes.leaf_bounds[leaf_index],
+                &ropes.links[leaf_index],
+                ray,
+                face,
+                t_exit,
+            ) {
+                Some(n) => node = n,
+                None => return,
+            }
         }
         t_entry = t_entry.max(t_exit);
     }
