@@ -496,16 +496,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn precision_fields_convert_and_reject_unknown_values() {
+    fn precision_fields_convert_and_reject_unknown_values() -> Result<()> {
         let mut o = rt2_render_options_default();
-        let d = o.to_options().unwrap();
+        let d = o.to_options()?;
         assert_eq!(
             (d.intersector, d.offset_mode),
             (Intersector::MollerTrumbore, OffsetMode::Epsilon)
         );
         o.intersector = Rt2Intersector::Watertight as u32;
         o.offset_mode = Rt2OffsetMode::ExcludePrim as u32;
-        let r = o.to_options().unwrap();
+        let r = o.to_options()?;
         assert_eq!(
             (r.intersector, r.offset_mode),
             (Intersector::Watertight, OffsetMode::ExcludePrim)
@@ -515,5 +515,6 @@ mod tests {
         o.offset_mode = 1;
         o.intersector = 2;
         assert!(o.to_options().is_err());
+        Ok(())
     }
 }
