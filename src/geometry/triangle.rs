@@ -119,6 +119,16 @@ impl Triangle {
         let mut len = 3;
         for axis in 0..3 {
             for (plane, keep_below) in [(voxel.min[axis], false), (voxel.max[axis], true)] {
+                // A plane the triangle does not cross leaves the polygon as it is: skipping it
+                // is exact, and most clips of the builder cross one or two planes of six.
+                let crossed = if keep_below {
+                    bounds.max[axis] > plane
+                } else {
+                    bounds.min[axis] < plane
+                };
+                if !crossed {
+                    continue;
+                }
                 let inside = |p: Vec3| {
                     if keep_below {
                         p[axis] <= plane
@@ -128,7 +138,7 @@ impl Triangle {
                 };
                 let mut n = 0;
                 for i in 0..len {
-                    let (a, b) = (poly[i], poly[(i + 1) % len]);
+                    let (a, b) = (poly[i], poly[if i + 1 == len { 0 } else { i + 1 }]);
                     let (ia, ib) = (inside(a), inside(b));
                     if ia {
                         next[n] = a;

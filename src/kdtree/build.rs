@@ -102,7 +102,12 @@ pub fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
         BuildNode::Leaf(Vec::new())
     } else {
         match opts.builder {
-            Builder::Sah => sah::build(input, prims, bounds, max_depth, opts),
+            // Beyond 2^30 primitives (more memory than a machine of this kind has) the SAH
+            // builder's packed events run out of bits; the midpoint builder still works.
+            Builder::Sah if prims.len() <= sah::MAX_PRIMS => {
+                sah::build(input, prims, bounds, max_depth, opts)
+            }
+            Builder::Sah => midpoint::build(input, prims, bounds, max_depth, opts.leaf_size),
             Builder::Midpoint => midpoint::build(input, prims, bounds, max_depth, opts.leaf_size),
         }
     };

@@ -14,11 +14,9 @@
 //! (else 1); a leaf costs `K_I N`. A node becomes a leaf when no split is cheaper, at the depth
 //! limit, when it holds no primitive, or when its voxel has no area.
 
-use std::cmp::Ordering;
-
 use rayon::prelude::*;
 
-use super::split::{child_voxels, classify, clip, fork, parallel, BuildNode, Side};
+use super::split::{child_voxels, clip, fork, parallel, BuildNode, Side};
 use super::{BuildInput, BuildOptions};
 use crate::geometry::Aabb;
 
@@ -27,27 +25,70 @@ const INTERSECTION_COST: f32 = 1.0;
 
 /// Event kinds in their sort order at equal positions: the sweep must see the ends of the
 /// primitives left of a plane before the planar ones and the starts (Wald & Havran §4.2).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kind {
     End = 0,
     Planar = 1,
     Start = 2,
 }
 
-#[derive(Clone, Copy, Debug)]
-struct Event {
-    pos: f32,
-    /// Index into the node's primitive list.
-    prim: u32,
-    kind: Kind,
-}
+/// Bits of an event's key left for the primitive's index in its node (the top two hold the
+/// kind): a node of the SAH builder holds fewer than 2^30 primitives (`MAX_PRIMS`).
+const PRIM_BITS: u32 = 30;
+const PRIM_MASK: u32 = (1 << PRIM_BITS) - 1;
 
-/// Total order: position, kind, then primitive, so that sorting is deterministic.
-fn order(a: &Event, b: &Event) -> Ordering {
-    a.pos
-        .total_cmp(&b.pos)
-        .then(a.kind.cmp(&b.kind))
-        .then(a.prim.cmp(&b.prim))
+/// Most primitives the SAH builder takes; `build` hands larger inputs to the midpoint builder.
+pub(super) const MAX_PRIMS: usize = PRIM_MASK as usize;
+
+/// One event packed in a `u64` whose integer order is the sweep order: position (the `f32`
+/// bits mapped to an order-preserving `u32`), then kind, then primitive. Eight bytes instead of
+/// a 12-byte struct, and sorts and merges compare one integer: the event lists are most of the
+/// builder's memory traffic.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+struct Event(u64);
+
+impl Event {
+    fn new(pos: f32, prim: u32, kind: Kind) -> Self {
+        // `+ 0.0` turns -0 into +0, so that both zeros are one position of the sweep.
+        let bits = (pos + 0.0).to_bits();
+        let ordered = if bits >> 31 == 1 {
+            !bits
+        } else {
+            bits | 1 << 31
+        };
+        Event(u64::from(ordered) << 32 | u64::from(kind as u32) << PRIM_BITS | u64::from(prim))
+    }
+
+    /// The position's key: equal for equal positions, ordered like them.
+    fn pos_key(self) -> u32 {
+        (self.0 >> 32) as u32
+    }
+
+    fn pos(self) -> f32 {
+        let ordered = self.pos_key();
+        f32::from_bits(if ordered >> 31 == 1 {
+            ordered & !(1 << 31)
+        } else {
+            !ordered
+        })
+    }
+
+    fn kind(self) -> Kind {
+        match (self.0 as u32) >> PRIM_BITS {
+            0 => Kind::End,
+            1 => Kind::Planar,
+            _ => Kind::Start,
+        }
+    }
+
+    fn prim(self) -> usize {
+        (self.0 as u32 & PRIM_MASK) as usize
+    }
+
+    /// The same event for the primitive's index `prim` in a child's list.
+    fn renumbered(self, prim: u32) -> Self {
+        Event(self.0 & !u64::from(PRIM_MASK) | u64::from(prim))
+    }
 }
 
 /// Sorted event lists of one node, one per axis.
@@ -57,44 +98,28 @@ fn push_events(b: &Aabb, prim: u32, events: &mut Events) {
     for (axis, list) in events.iter_mut().enumerate() {
         let (lo, hi) = (b.min[axis], b.max[axis]);
         if lo == hi {
-            list.push(Event {
-                pos: lo,
-                prim,
-                kind: Kind::Planar,
-            });
+            list.push(Event::new(lo, prim, Kind::Planar));
         } else {
-            list.push(Event {
-                pos: lo,
-                prim,
-                kind: Kind::Start,
-            });
-            list.push(Event {
-                pos: hi,
-                prim,
-                kind: Kind::End,
-            });
+            list.push(Event::new(lo, prim, Kind::Start));
+            list.push(Event::new(hi, prim, Kind::End));
         }
     }
 }
 
-/// Merges two sorted lists.
-fn merge(a: Vec<Event>, b: Vec<Event>) -> Vec<Event> {
-    if b.is_empty() {
-        return a;
-    }
-    let mut out = Vec::with_capacity(a.len() + b.len());
-    let (mut a, mut b) = (a.into_iter().peekable(), b.into_iter().peekable());
-    while let (Some(x), Some(y)) = (a.peek(), b.peek()) {
-        let next = if order(x, y) == Ordering::Greater {
-            b.next()
+/// Merges the sorted `extra` into the sorted `list` in place, from the back, so that no list is
+/// allocated anew.
+fn merge_into(list: &mut Vec<Event>, extra: &[Event]) {
+    let (mut i, mut j) = (list.len(), extra.len());
+    list.resize(i + j, Event(0));
+    while j > 0 {
+        if i > 0 && list[i - 1] > extra[j - 1] {
+            list[i + j - 1] = list[i - 1];
+            i -= 1;
         } else {
-            a.next()
-        };
-        out.extend(next);
+            list[i + j - 1] = extra[j - 1];
+            j -= 1;
+        }
     }
-    out.extend(a);
-    out.extend(b);
-    out
 }
 
 /// `prims` are (index, bounds) pairs inside `voxel`.
@@ -110,7 +135,7 @@ pub(super) fn build(
         push_events(b, local as u32, &mut events);
     }
     for list in &mut events {
-        list.par_sort_unstable_by(order);
+        list.par_sort_unstable();
     }
     let sah = Sah {
         input,
@@ -200,26 +225,37 @@ impl Sah<'_> {
         voxel: &Aabb,
         area: f32,
     ) -> Option<Plane> {
+        // A child's area is linear in the plane's position: `2 (face + side · length)`, with
+        // `face` the area of the voxel's face across the axis and `side` the half perimeter.
+        let e = voxel.extent();
+        let (u, v) = (e[(axis + 1) % 3], e[(axis + 2) % 3]);
+        let (face, side) = (u * v, u + v);
+        let scale = 2.0 / area;
+        let (lo, hi) = (voxel.min[axis], voxel.max[axis]);
         let mut best: Option<Plane> = None;
         // Primitives that start before the current plane, and that do not end before it.
         let (mut below, mut above) = (0usize, n);
         let mut i = 0;
         while i < list.len() {
-            let pos = list[i].pos;
+            let key = list[i].pos_key();
             let mut count = [0usize; 3];
-            while i < list.len() && list[i].pos == pos {
-                count[list[i].kind as usize] += 1;
+            while i < list.len() && list[i].pos_key() == key {
+                count[list[i].kind() as usize] += 1;
                 i += 1;
             }
             let [ends, planar, starts] = count;
-            if pos > voxel.min[axis] && pos < voxel.max[axis] {
+            let pos = list[i - 1].pos();
+            if pos > lo && pos < hi {
                 // `split::classify` sends every primitive touching the plane (ending, lying or
                 // starting on it) to both children: the cost counts them on both sides, or the
                 // builder would split forever at planes that only duplicate primitives.
-                let counts = [below + planar + starts, above];
-                let candidate = self.split_cost(voxel, area, axis, pos, counts);
-                if best.as_ref().is_none_or(|b| candidate.cost < b.cost) {
-                    best = Some(candidate);
+                let probability = [
+                    scale * (face + side * (pos - lo)),
+                    scale * (face + side * (hi - pos)),
+                ];
+                let cost = self.split_cost(probability, [below + planar + starts, above]);
+                if best.as_ref().is_none_or(|b| cost < b.cost) {
+                    best = Some(Plane { axis, pos, cost });
                 }
             }
             above -= ends + planar;
@@ -228,26 +264,17 @@ impl Sah<'_> {
         best
     }
 
-    /// Cost of the plane `axis = pos` with `below` and `above` primitives in the two children
+    /// Cost of a split whose children are hit with probabilities `p` and hold `n` primitives
     /// (those touching the plane in both: conservative leaf membership, where Wald & Havran
     /// (§4.2) put the planar ones on the cheaper side).
-    fn split_cost(&self, voxel: &Aabb, area: f32, axis: usize, pos: f32, n: [usize; 2]) -> Plane {
-        let [below, above] = n;
-        let [vb, va] = child_voxels(voxel, axis, pos);
-        let (pb, pa) = (vb.surface_area() / area, va.surface_area() / area);
-        let cost = |nb: usize, na: usize| {
-            let lambda = if nb == 0 || na == 0 {
-                self.empty_bonus
-            } else {
-                1.0
-            };
-            lambda * (self.traversal_cost + INTERSECTION_COST * (pb * nb as f32 + pa * na as f32))
+    fn split_cost(&self, p: [f32; 2], n: [usize; 2]) -> f32 {
+        let lambda = if n[0] == 0 || n[1] == 0 {
+            self.empty_bonus
+        } else {
+            1.0
         };
-        Plane {
-            axis,
-            pos,
-            cost: cost(below, above),
-        }
+        lambda
+            * (self.traversal_cost + INTERSECTION_COST * (p[0] * n[0] as f32 + p[1] * n[1] as f32))
     }
 
     /// Splits the primitives and their events between the two children (Wald & Havran §5.2):
@@ -261,60 +288,134 @@ impl Sah<'_> {
         plane: &Plane,
     ) -> [(Vec<u32>, Events); 2] {
         let n = prims.len();
-        // Extent of each primitive along the split axis, read back from its events.
-        let (mut lo, mut hi) = (vec![0f32; n], vec![0f32; n]);
-        for e in &events[plane.axis] {
-            let p = e.prim as usize;
-            match e.kind {
-                Kind::Start => lo[p] = e.pos,
-                Kind::End => hi[p] = e.pos,
-                Kind::Planar => (lo[p], hi[p]) = (e.pos, e.pos),
+        // The side of each primitive, from its events along the split axis: the rule of
+        // `split::classify` (an end before the plane puts it below, a start after it above).
+        let mut side = vec![Side::Both; n];
+        for &e in &events[plane.axis] {
+            let pos = e.pos();
+            match e.kind() {
+                Kind::End | Kind::Planar if pos < plane.pos => side[e.prim()] = Side::Below,
+                Kind::Start | Kind::Planar if pos > plane.pos => side[e.prim()] = Side::Above,
+                _ => {}
             }
         }
-        let side: Vec<Side> = (0..n).map(|p| classify(lo[p], hi[p], plane.pos)).collect();
-        drop((lo, hi));
-
         let mut children: [(Vec<u32>, Events); 2] = Default::default();
         let mut straddling: [Events; 2] = Default::default();
-        // Position of each parent primitive in each child's list.
-        let mut moved = vec![[u32::MAX; 2]; n];
+        // Position of each one-sided primitive in its child's list.
+        let mut moved = vec![u32::MAX; n];
         for (p, &prim) in prims.iter().enumerate() {
-            for child in 0..2 {
-                // One-sided primitives keep their events (`None`); straddling ones get new
-                // events from their part inside the child voxel, or are culled there.
-                let clipped = match (side[p], child) {
-                    (Side::Both, _) => match clip(self.input, prim, &voxels[child]) {
-                        Some(b) => Some(b),
-                        None => continue,
-                    },
-                    (Side::Below, 0) | (Side::Above, 1) => None,
-                    _ => continue,
-                };
-                let (list, _) = &mut children[child];
-                moved[p][child] = list.len() as u32;
-                if let Some(b) = clipped {
-                    push_events(&b, list.len() as u32, &mut straddling[child]);
+            let child = match side[p] {
+                Side::Below => 0,
+                Side::Above => 1,
+                Side::Both => {
+                    // Clipped to each child voxel: new events there, or culled.
+                    for (child, voxel) in voxels.iter().enumerate() {
+                        if let Some(b) = clip(self.input, prim, voxel) {
+                            let list = &mut children[child].0;
+                            push_events(&b, list.len() as u32, &mut straddling[child]);
+                            list.push(prim);
+                        }
+                    }
+                    continue;
                 }
-                list.push(prim);
-            }
+            };
+            let list = &mut children[child].0;
+            moved[p] = list.len() as u32;
+            list.push(prim);
         }
-        for (axis, list) in events.into_iter().enumerate() {
-            for e in list {
-                let child = match side[e.prim as usize] {
+        for (axis, list) in events.iter().enumerate() {
+            // Each child gets about its share of the parent's events.
+            for (child, (prims, events)) in children.iter_mut().enumerate() {
+                let extra = straddling[child][axis].len();
+                events[axis].reserve(list.len() * prims.len() / n.max(1) + extra);
+            }
+            for &e in list {
+                let child = match side[e.prim()] {
                     Side::Below => 0,
                     Side::Above => 1,
                     Side::Both => continue,
                 };
-                let prim = moved[e.prim as usize][child];
-                children[child].1[axis].push(Event { prim, ..e });
+                children[child].1[axis].push(e.renumbered(moved[e.prim()]));
             }
         }
+        drop(events);
         for ((_, events), mut extra) in children.iter_mut().zip(straddling) {
             for (list, extra) in events.iter_mut().zip(&mut extra) {
-                extra.sort_unstable_by(order);
-                *list = merge(std::mem::take(list), std::mem::take(extra));
+                extra.sort_unstable();
+                merge_into(list, extra);
             }
         }
         children
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const POSITIONS: [f32; 10] = [
+        f32::NEG_INFINITY,
+        -1e30,
+        -1.5,
+        -1e-40, // subnormal
+        -0.0,
+        0.0,
+        1e-40,
+        1.0,
+        3e7,
+        f32::INFINITY,
+    ];
+
+    #[test]
+    fn packed_events_round_trip_and_sort_like_the_sweep_order() {
+        let kinds = [Kind::End, Kind::Planar, Kind::Start];
+        let mut all = Vec::new();
+        for &pos in &POSITIONS {
+            for kind in kinds {
+                for prim in [0, 7, PRIM_MASK] {
+                    let e = Event::new(pos, prim, kind);
+                    assert_eq!(e.pos(), pos + 0.0, "position of {pos:e}");
+                    assert_eq!((e.kind(), e.prim()), (kind, prim as usize));
+                    assert_eq!(e.renumbered(3).prim(), 3);
+                    assert_eq!(
+                        (e.renumbered(3).pos(), e.renumbered(3).kind()),
+                        (e.pos(), kind)
+                    );
+                    all.push((pos + 0.0, kind as u32, prim, e));
+                }
+            }
+        }
+        for a in &all {
+            for b in &all {
+                let expected = a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2));
+                assert_eq!(a.3.cmp(&b.3), expected, "{a:?} against {b:?}");
+                assert_eq!(a.3.pos_key() == b.3.pos_key(), a.0 == b.0);
+            }
+        }
+    }
+
+    #[test]
+    fn merge_into_gives_the_sorted_union() {
+        let events = |positions: &[f32]| -> Vec<Event> {
+            let mut v: Vec<Event> = positions
+                .iter()
+                .enumerate()
+                .map(|(i, &p)| Event::new(p, i as u32, Kind::Start))
+                .collect();
+            v.sort_unstable();
+            v
+        };
+        for (a, b) in [
+            (&POSITIONS[..], &[0.5, -2.0, 1e31][..]),
+            (&[], &POSITIONS[..]),
+            (&POSITIONS[..], &[]),
+            (&[1.0, 1.0], &[1.0]),
+        ] {
+            let (mut list, extra) = (events(a), events(b));
+            let mut expected = [list.clone(), extra.clone()].concat();
+            expected.sort_unstable();
+            merge_into(&mut list, &extra);
+            assert_eq!(list, expected);
+        }
     }
 }
