@@ -112,10 +112,13 @@ impl Triangle {
             return bounds;
         }
         // A triangle cut by six planes has at most 9 corners: fixed arrays, no allocation
-        // (the SAH builder clips every straddling triangle at every level).
-        let mut poly = [Vec3::ZERO; 9];
-        let mut next = [Vec3::ZERO; 9];
-        poly[..3].copy_from_slice(&self.vertices());
+        // (the SAH builder clips every straddling triangle at every level). Corners are plain
+        // arrays so that the axis indexes them directly.
+        let mut poly = [[0f32; 3]; 9];
+        let mut next = [[0f32; 3]; 9];
+        for (corner, v) in poly.iter_mut().zip(self.vertices()) {
+            *corner = v.to_array();
+        }
         let mut len = 3;
         for axis in 0..3 {
             for (plane, keep_below) in [(voxel.min[axis], false), (voxel.max[axis], true)] {
@@ -129,7 +132,7 @@ impl Triangle {
                 if !crossed {
                     continue;
                 }
-                let inside = |p: Vec3| {
+                let inside = |p: &[f32; 3]| {
                     if keep_below {
                         p[axis] <= plane
                     } else {
@@ -137,20 +140,25 @@ impl Triangle {
                     }
                 };
                 let mut n = 0;
-                for i in 0..len {
-                    let (a, b) = (poly[i], poly[if i + 1 == len { 0 } else { i + 1 }]);
-                    let (ia, ib) = (inside(a), inside(b));
-                    if ia {
-                        next[n] = a;
-                        n += 1;
-                    }
-                    if ia != ib {
+                // Each edge runs from `a` to `b` in the polygon's order, so that a shared edge
+                // is cut at the same point whichever corner the loop starts from.
+                let mut a = poly[len - 1];
+                for &b in &poly[..len] {
+                    if inside(&a) != inside(&b) {
                         let t = (plane - a[axis]) / (b[axis] - a[axis]);
-                        let mut p = a + t * (b - a);
+                        let mut p = [0f32; 3];
+                        for k in 0..3 {
+                            p[k] = a[k] + t * (b[k] - a[k]);
+                        }
                         p[axis] = plane; // exact on the plane despite rounding
                         next[n] = p;
                         n += 1;
                     }
+                    if inside(&b) {
+                        next[n] = b;
+                        n += 1;
+                    }
+                    a = b;
                 }
                 if n == 0 {
                     return Aabb::EMPTY;
@@ -165,7 +173,9 @@ impl Triangle {
         // touches, or a ray through the shared edge can miss it there; `tests/precision.rs`); the
         // pad follows the largest coordinate, as the error of the ray's position does,
         // then clamped back to the voxel.
-        let b = Aabb::from_points(&poly[..len]);
+        let b = poly[..len]
+            .iter()
+            .fold(Aabb::EMPTY, |b, &p| b.grow(Vec3::from(p)));
         let pad = 4.0 * f32::EPSILON * b.min.abs().max(b.max.abs()).max_element();
         Aabb::new(b.min - pad, b.max + pad).intersection(*voxel)
     }
