@@ -347,16 +347,7 @@ fn build(a: &Args) -> Result<String> {
             )
             .ok();
         }
-        let stem = model.trim_end_matches(".ply");
-        let sets = shared().join("raysets").join(stem);
-        if let Some(shadow) = std::fs::read_dir(&sets).ok().and_then(|d| {
-            d.filter_map(|e| e.ok().map(|e| e.path())).find(|p| {
-                p.file_name().is_some_and(|n| {
-                    n.to_string_lossy().starts_with("shadow_")
-                        && n.to_string_lossy().ends_with(".rays")
-                })
-            })
-        }) {
+        if let Some(shadow) = find_set(model.trim_end_matches(".ply"), "shadow") {
             for r in embree_rows(&shared().join("models").join(model), &[shadow], a.runs) {
                 if r.get(2).is_some_and(|s| s == "BUILD") {
                     writeln!(
@@ -373,11 +364,109 @@ fn build(a: &Args) -> Result<String> {
         }
     }
     out += &layout_effect(a)?;
+    out += &traversal_cost_effect(a)?;
     if !embree.is_empty() {
         out += "\nEmbree 3 in the same run:\n\n| model | build | threads | median ms | MiB |\n|---|---|---|---|---|\n";
         out += &embree;
     }
     Ok(out)
+}
+
+/// The SAH's traversal cost `K_T` trades memory and build time against speed: a larger `K_T`
+/// makes fewer, fuller leaves. For the bunny and the dragon: tree size with and without ropes,
+/// build time (2 threads), and Mrays/s (1 thread, standard traversal) of single rays, packets
+/// and streams on the incoherent and primary sets.
+fn traversal_cost_effect(a: &Args) -> Result<String> {
+    use rt2::cpu::query::QueryMode;
+    let mut out = String::from(
+        "\nEffect of the SAH traversal cost K_T (intersection cost 1; default marked *): tree \
+         size, build time (2 threads) and Mrays/s (1 thread, standard traversal) on the \
+         incoherent (inc) and primary (pri) sets:\n\n\
+         | model | K_T | nodes | refs/leaf | tree MiB | with ropes MiB | ropes / plain | build ms | \
+         inc single | inc packets | inc stream | pri single | pri packets | pri stream |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let (build_ctx, ctx) = (
+        Context::new(BackendRequest::Cpu, 2)?,
+        Context::new(BackendRequest::Cpu, 1)?,
+    );
+    for model in ["bunny", "dragon"] {
+        let Some(mut scene) = model_scene(&format!("{model}.ply"))? else {
+            continue;
+        };
+        let sets: Vec<Vec<Ray>> = ["incoherent", "primary"]
+            .iter()
+            .filter_map(|kind| find_set(model, kind))
+            .filter_map(|path| rayset::read_rays(&path).ok())
+            .collect();
+        for traversal_cost in [1.0, 1.5, 2.0, 3.0, 4.0] {
+            let options = BuildOptions {
+                traversal_cost,
+                ..BuildOptions::default()
+            };
+            scene.set_build_options(options);
+            let build_ms = median(
+                (0..a.runs.min(3))
+                    .map(|_| {
+                        let _ = build_ctx.install(|| scene.commit());
+                        scene
+                            .committed()
+                            .map_or(f64::NAN, |c| c.tree.stats.build_ms as f64)
+                    })
+                    .collect(),
+            );
+            scene.ensure_ropes()?;
+            let c = scene.committed()?;
+            let plain = c.tree.node_bytes() + c.tree.leaf_list_bytes();
+            let ropes = plain + c.tree.rope_bytes() + c.tree.leaf_box_bytes();
+            let default = if traversal_cost == BuildOptions::default().traversal_cost {
+                "*"
+            } else {
+                ""
+            };
+            let mut row = format!(
+                "| {model} | {traversal_cost}{default} | {} | {:.2} | {:.2} | {:.2} | {:.2}x | {build_ms:.0} |",
+                c.tree.stats.node_count,
+                c.tree.stats.avg_prims_per_leaf,
+                mib(plain),
+                mib(ropes),
+                ropes as f64 / plain as f64,
+            );
+            for rays in &sets {
+                for mode in [QueryMode::Single, QueryMode::Packet, QueryMode::Stream] {
+                    let q = QueryOptions {
+                        traversal: Some(Traversal::Standard),
+                        mode,
+                        ..QueryOptions::default()
+                    };
+                    let mut hits = vec![Hit::MISS; rays.len()];
+                    let ms = time_ms(a.runs, || {
+                        let _ = ctx.intersect(c, rays, &mut hits, &q);
+                    });
+                    write!(row, " {:.2} |", rays.len() as f64 / ms / 1e3).ok();
+                }
+            }
+            writeln!(out, "{row}").ok();
+        }
+    }
+    Ok(out)
+}
+
+/// The first ray set of `kind` (e.g. "incoherent") for `model` in the shared ray sets.
+fn find_set(model: &str, kind: &str) -> Option<PathBuf> {
+    let dir = shared().join("raysets").join(model);
+    let found = std::fs::read_dir(&dir).ok().and_then(|d| {
+        d.filter_map(|e| e.ok().map(|e| e.path())).find(|p| {
+            p.file_name().is_some_and(|n| {
+                let n = n.to_string_lossy();
+                n.starts_with(&format!("{kind}_")) && n.ends_with(".rays")
+            })
+        })
+    });
+    if found.is_none() {
+        eprintln!("bench: no {kind}_*.rays in {}; skipped", dir.display());
+    }
+    found
 }
 
 /// Effect of the van Emde Boas node order on traversal speed: the standard traversal on the
