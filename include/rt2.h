@@ -332,6 +332,16 @@ typedef struct rt2_context_properties {
    * Why that backend was chosen; valid while the context lives.
    */
   const char *reason;
+  /**
+   * Why the context's last render or ray query ran on the CPU although `backend` is GPU:
+   * an AUTO context whose device could not take that job (the scene or the job exceeds a
+   * device limit such as the largest storage buffer binding, or an option the GPU kernels
+   * lack, e.g. the watertight intersector). NULL when that job ran on `backend`, when no job
+   * ran yet, and always on a CPU context. With several threads using the context, it is
+   * the job that chose its backend last. A copy, valid until the next `rt2_context_info`
+   * on this thread.
+   */
+  const char *fallback;
 } rt2_context_properties;
 
 /**
@@ -638,7 +648,8 @@ enum rt2_status rt2_context_create(const struct rt2_context_desc *desc, rt2_cont
 void rt2_context_destroy(rt2_context *ctx);
 
 /**
- * Reports the backend tracing runs on and why.
+ * Reports the backend tracing runs on and why, and why the last job ran on the CPU instead
+ * (`fallback`, NULL when it did not). On failure `*out` is untouched.
  *
  * # Safety
  * `ctx` is a live context; `out` points to an `rt2_context_properties` whose `struct_size` is set.
