@@ -272,7 +272,8 @@ enum rt2_traversal
 #endif // __cplusplus
  {
   /**
-   * The library picks per scene and backend (see `rt2_context_info`).
+   * The library picks per scene and backend: standard on the CPU; on the GPU ropes++ when
+   * the scene's tree has ropes (built on request), else standard.
    */
   RT2_TRAVERSAL_AUTO = 0,
   RT2_TRAVERSAL_STANDARD = 1,
