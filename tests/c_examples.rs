@@ -492,7 +492,8 @@ fn minimal_on_the_gpu_backend_renders_the_triangle() {
     assert!(stdout(&out).contains("minimal: OK"));
 }
 
-/// No usable adapter (`RT2_ADAPTER` names none): the GPU requested is
+/// No usable adapter (`RT2_ADAPTER` names none, or `WGPU_BACKEND` a backend RT2 lacks): the
+/// GPU requested is
 /// `RT2_STATUS_BACKEND_UNAVAILABLE` with the reason; AUTO traces on the CPU and
 /// `rt2_context_info` says why. Needs no GPU.
 #[test]
@@ -509,6 +510,14 @@ fn no_adapter_is_an_error_for_gpu_and_the_cpu_for_auto() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("rt2_context_create failed: RT2_STATUS_BACKEND_UNAVAILABLE: GPU requested by RT2_BACKEND=gpu, but "),
+        "unclear message: {err}"
+    );
+    // WGPU_BACKEND is honoured: a backend RT2 is not built with leaves no adapter.
+    let out = run_with(&exe, &[], &[("RT2_BACKEND", "gpu"), ("WGPU_BACKEND", "gl")]);
+    assert_exit(&out, 1, "minimal asking for a GPU on WGPU_BACKEND=gl");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("RT2_STATUS_BACKEND_UNAVAILABLE") && err.contains("WGPU_BACKEND=gl"),
         "unclear message: {err}"
     );
     let model = shared().join("models/bunny.ply");

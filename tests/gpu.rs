@@ -426,6 +426,49 @@ fn masked_pixels_are_left_alone() {
     }
 }
 
+/// `RT2_ADAPTER` (`GpuOptions::adapter`) picks adapters by a case-insensitive part of their
+/// name; a name that matches none is `BACKEND_UNAVAILABLE` with the adapters it saw, and AUTO
+/// then traces on the CPU.
+#[test]
+fn adapters_are_picked_by_a_part_of_their_name() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    if std::env::var_os("RT2_BACKEND").is_some() {
+        return;
+    }
+    let name = g.gpu().unwrap().devices[0].name.clone();
+    let part: String = name
+        .chars()
+        .skip(1)
+        .take(4)
+        .collect::<String>()
+        .to_uppercase();
+    let picked = gpu(GpuOptions {
+        adapter: Some(part.clone()),
+        ..GpuOptions::default()
+    })
+    .unwrap_or_else(|| panic!("'{part}' does not pick {name}"));
+    assert_eq!(picked.gpu().unwrap().devices[0].name, name);
+    let none = GpuOptions {
+        adapter: Some("no-such-adapter-rt2".into()),
+        ..GpuOptions::default()
+    };
+    let e = match Context::with_gpu_options(BackendRequest::Gpu, 1, &none) {
+        Ok(_) => panic!("an adapter matched 'no-such-adapter-rt2'"),
+        Err(e) => e,
+    };
+    assert_eq!(e.status, Rt2Status::BackendUnavailable);
+    assert!(
+        e.message.contains("matches none") && e.message.contains(&name),
+        "{}",
+        e.message
+    );
+    let auto = Context::with_gpu_options(BackendRequest::Auto, 1, &none).unwrap();
+    assert_eq!(auto.decision().backend, Backend::Cpu);
+    assert!(auto.decision().reason.contains("matches none"));
+}
+
 /// AUTO takes the CPU when the only adapter is a software one, and says so.
 #[test]
 fn auto_prefers_the_cpu_to_a_software_adapter() {
