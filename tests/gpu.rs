@@ -372,6 +372,48 @@ fn images_match_the_cpu_on_spheres1() {
     );
 }
 
+/// What the built-in scenes leave at its default: a thin lens (depth of field), several
+/// samples per pixel and straight (unbent) transparency, on both paths. The default scene
+/// has a transparent sphere.
+#[test]
+fn lens_samples_and_straight_transparency_match_the_cpu() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let mut b = builtin::by_name("default").unwrap();
+    let mut scene = std::mem::take(&mut b.scene);
+    scene.commit().unwrap();
+    b.camera.set_lens(0.2, 6.0).unwrap();
+    let base = RenderOptions {
+        samples: 4,
+        transparency: rt2::render::Transparency::Straight,
+        max_depth: b.max_depth,
+        ..RenderOptions::default()
+    };
+    let want = render(&cpu(), &mut scene, &b, &base, 64, 48);
+    let mut pinhole = b.camera.clone();
+    pinhole.set_lens(0.0, 6.0).unwrap();
+    let mut sharp = Frame::new(64, 48).unwrap();
+    cpu()
+        .render(scene.committed().unwrap(), &pinhole, &base, &mut sharp)
+        .unwrap();
+    assert!(
+        sharp != want,
+        "the lens changes nothing: the test would prove nothing"
+    );
+    for path in [GpuPathRequest::Megakernel, GpuPathRequest::Wavefront] {
+        let opts = RenderOptions {
+            gpu_path: path,
+            ..base
+        };
+        let d = image_diff(&render(&g, &mut scene, &b, &opts, 64, 48), &want);
+        println!("lens, 4 samples, straight {path:?}: (mean, p99) per channel {d:?}");
+        for (mean, p99) in d {
+            assert!(mean <= MEAN_MAX && p99 <= P99_MAX, "{path:?}: {d:?}");
+        }
+    }
+}
+
 /// Two logical devices on one adapter each render half the rows: the same image as one.
 #[test]
 fn two_devices_split_the_frame_rows() {
