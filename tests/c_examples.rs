@@ -360,9 +360,24 @@ fn load_model_reports_a_missing_file() {
 
 #[test]
 fn errors_example_passes_every_check() {
-    let exe = build_example("errors");
+    errors_example(build_example("errors"), &[]);
+}
+
+/// errors.c with its contexts on the GPU: the same statuses, messages and untouched outputs.
+#[test]
+fn errors_example_passes_every_check_on_the_gpu_backend() {
+    if !gpu_available("errors_example_passes_every_check_on_the_gpu_backend") {
+        return;
+    }
+    errors_example(
+        build_example_as("errors", "errors-gpu"),
+        &[("RT2_BACKEND", "gpu")],
+    );
+}
+
+fn errors_example(exe: PathBuf, env: &[(&str, &str)]) {
     let tmp = support::scratch("c_examples");
-    let out = run(&exe, &[tmp.as_os_str()]);
+    let out = run_with(&exe, &[tmp.as_os_str()], env);
     let text = stdout(&out);
     let failed: Vec<&str> = text.lines().filter(|l| l.starts_with("FAIL")).collect();
     assert!(
