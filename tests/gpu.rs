@@ -391,7 +391,7 @@ fn lens_samples_and_straight_transparency_match_the_cpu() {
         ..RenderOptions::default()
     };
     let want = render(&cpu(), &mut scene, &b, &base, 64, 48);
-    let mut pinhole = b.camera.clone();
+    let mut pinhole = b.camera;
     pinhole.set_lens(0.0, 6.0).unwrap();
     let mut sharp = Frame::new(64, 48).unwrap();
     cpu()
