@@ -77,7 +77,7 @@ int main(int argc, char **argv) {
     props.struct_size = 4;
     expect(rt2_context_info(ctx, &props), RT2_STATUS_INVALID_ARGUMENT, "sizeof(rt2_context_properties)",
            "rt2_context_info(wrong struct_size)");
-    report(props.reason == NULL && props.threads == 0, "  ... *out untouched", NULL);
+    report(props.reason == NULL && props.fallback == NULL && props.threads == 0, "  ... *out untouched", NULL);
     expect(rt2_context_info(NULL, &props), RT2_STATUS_INVALID_ARGUMENT, "ctx", "rt2_context_info(ctx = NULL)");
 
     rt2_scene *scene = (rt2_scene *)SENTINEL;
@@ -285,6 +285,12 @@ int main(int argc, char **argv) {
     expect(rt2_scene_stats(scene, &st2), RT2_STATUS_INVALID_OPERATION, "commit", "rt2_scene_stats after an edit without commit");
     must(rt2_scene_commit(scene), "rt2_scene_commit (again)");
     expect(rt2_render(ctx, scene, camera, NULL, frame), RT2_STATUS_OK, NULL, "rt2_render after commit");
+    /* A backend asked for by name never falls back: `fallback` is NULL after a render (rt2.h). */
+    props.struct_size = sizeof props;
+    props.fallback = (const char *)SENTINEL;
+    expect(rt2_context_info(ctx, &props), RT2_STATUS_OK, NULL, "rt2_context_info after a render");
+    report(props.backend != RT2_BACKEND_AUTO && props.reason != NULL && props.fallback == NULL,
+           "  ... a backend, a reason, no fallback", props.reason);
 
     /* ---- destroy(NULL) is a no-op; the process survives and later calls still work ---- */
     rt2_context_destroy(NULL);

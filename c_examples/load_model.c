@@ -1,5 +1,5 @@
 /* load_model.c: loads a .ply/.obj model, prints its triangle count and kd-tree statistics
- * (rt2_scene_stats) and renders it to a PNG.
+ * (rt2_scene_stats), renders it to a PNG and prints where the render ran (rt2_context_info).
  *
  *   ./load_model MODEL [OUT.png] [cx cy cz size]
  *
@@ -89,6 +89,13 @@ int main(int argc, char **argv) {
     options.background[1] = 0.0f;
     options.background[2] = 0.0f;
     check(rt2_render(ctx, scene, camera, &options, frame), "rt2_render");
+    /* Where the render ran and why: an AUTO context on a GPU runs a model too large for the
+     * device's buffers on the CPU and says so in `fallback`. */
+    rt2_context_properties props = {0};
+    props.struct_size = sizeof props;
+    check(rt2_context_info(ctx, &props), "rt2_context_info");
+    printf("backend: %s (%s)\n", props.backend == RT2_BACKEND_GPU ? "GPU" : "CPU", props.reason);
+    if (props.fallback != NULL) printf("this render ran on the CPU: %s\n", props.fallback);
     check(rt2_frame_save_png(frame, out_path), "rt2_frame_save_png");
 
     /* Count pixels that are not the black background: the model must show. */

@@ -272,7 +272,8 @@ enum rt2_traversal
 #endif // __cplusplus
  {
   /**
-   * The library picks per scene and backend (see `rt2_context_info`).
+   * The library picks per scene and backend: standard on the CPU; on the GPU ropes++ when
+   * the scene's tree has ropes (built on request), else standard.
    */
   RT2_TRAVERSAL_AUTO = 0,
   RT2_TRAVERSAL_STANDARD = 1,
@@ -332,6 +333,16 @@ typedef struct rt2_context_properties {
    * Why that backend was chosen; valid while the context lives.
    */
   const char *reason;
+  /**
+   * Why the context's last render or ray query ran on the CPU although `backend` is GPU:
+   * an AUTO context whose device could not take that job (the scene or the job exceeds a
+   * device limit such as the largest storage buffer binding, or an option the GPU kernels
+   * lack, e.g. the watertight intersector). NULL when that job ran on `backend`, when no job
+   * ran yet, and always on a CPU context. With several threads using the context, it is
+   * the job that chose its backend last. A copy, valid until the next `rt2_context_info`
+   * on this thread.
+   */
+  const char *fallback;
 } rt2_context_properties;
 
 /**
@@ -638,7 +649,8 @@ enum rt2_status rt2_context_create(const struct rt2_context_desc *desc, rt2_cont
 void rt2_context_destroy(rt2_context *ctx);
 
 /**
- * Reports the backend tracing runs on and why.
+ * Reports the backend tracing runs on and why, and why the last job ran on the CPU instead
+ * (`fallback`, NULL when it did not). On failure `*out` is untouched.
  *
  * # Safety
  * `ctx` is a live context; `out` points to an `rt2_context_properties` whose `struct_size` is set.

@@ -120,6 +120,7 @@ impl Context {
     }
 
     /// Why the last job of an AUTO GPU context ran on the CPU instead (`None`: it did not).
+    /// The C API reports it as `rt2_context_properties.fallback`.
     pub fn last_fallback(&self) -> Option<String> {
         self.fallback.lock().ok().and_then(|f| f.clone())
     }

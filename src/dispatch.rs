@@ -170,3 +170,66 @@ pub fn choose_traversal(
         ),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Material, Scene, Shape};
+    use glam::Vec3;
+
+    /// `mirrors` of `n` spheres reflect, the rest are matte.
+    fn spheres(n: u32, mirrors: u32) -> Scene {
+        let mut s = Scene::new();
+        let matte = s.add_material(Material::default()).unwrap();
+        let mirror = s
+            .add_material(Material {
+                reflectivity: 0.5,
+                ..Material::default()
+            })
+            .unwrap();
+        for i in 0..n {
+            let shape = Shape::Sphere {
+                center: Vec3::X * 3.0 * i as f32,
+                radius: 1.0,
+            };
+            s.add_object(shape, if i < mirrors { mirror } else { matte })
+                .unwrap();
+        }
+        s.commit().unwrap();
+        s
+    }
+
+    #[test]
+    fn auto_gpu_path_is_wavefront_when_most_primitives_spawn_rays() {
+        let opts = RenderOptions::default();
+        assert!(opts.max_depth > 1);
+        let path = |s: &Scene, o: &RenderOptions| choose_gpu_path(s.committed().unwrap(), o).0;
+        assert_eq!(path(&spheres(4, 2), &opts), GpuPath::Wavefront);
+        assert_eq!(path(&spheres(4, 1), &opts), GpuPath::Megakernel);
+        let casting = RenderOptions {
+            max_depth: 1,
+            ..opts
+        };
+        assert_eq!(path(&spheres(4, 4), &casting), GpuPath::Megakernel);
+        let asked = RenderOptions {
+            gpu_path: GpuPathRequest::Megakernel,
+            ..opts
+        };
+        assert_eq!(path(&spheres(4, 4), &asked), GpuPath::Megakernel);
+    }
+
+    #[test]
+    fn auto_gpu_traversal_is_ropes_pp_when_the_tree_has_ropes() {
+        let mut s = spheres(8, 0);
+        let pick = |s: &Scene| choose_gpu_traversal(s.committed().unwrap(), None).0;
+        assert_eq!(pick(&s), Traversal::Standard);
+        s.ensure_ropes().unwrap();
+        assert_eq!(pick(&s), Traversal::RopesPlusPlus);
+        let asked = choose_gpu_traversal(s.committed().unwrap(), Some(Traversal::KdRestart));
+        assert_eq!(asked.0, Traversal::KdRestart);
+        assert_eq!(
+            choose_traversal(s.committed().unwrap(), None).0,
+            Traversal::Standard
+        );
+    }
+}

@@ -270,12 +270,16 @@ fn spheres_png_shows_the_spheres_and_the_sky() {
     );
 }
 
+/// `$RT2_SHARED`, by default `../shared` next to the crate.
+fn shared() -> PathBuf {
+    std::env::var_os("RT2_SHARED")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| support::manifest_dir().join("../shared"))
+}
+
 #[test]
 fn load_model_renders_the_bunny() {
-    let shared = std::env::var_os("RT2_SHARED")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| support::manifest_dir().join("../shared"));
-    let model = shared.join("models/bunny.ply");
+    let model = shared().join("models/bunny.ply");
     if !model.is_file() {
         eprintln!(
             "SKIPPED load_model_renders_the_bunny: {} is missing (set RT2_SHARED)",
@@ -356,9 +360,24 @@ fn load_model_reports_a_missing_file() {
 
 #[test]
 fn errors_example_passes_every_check() {
-    let exe = build_example("errors");
+    errors_example(build_example("errors"), &[]);
+}
+
+/// errors.c with its contexts on the GPU: the same statuses, messages and untouched outputs.
+#[test]
+fn errors_example_passes_every_check_on_the_gpu_backend() {
+    if !gpu_available("errors_example_passes_every_check_on_the_gpu_backend") {
+        return;
+    }
+    errors_example(
+        build_example_as("errors", "errors-gpu"),
+        &[("RT2_BACKEND", "gpu")],
+    );
+}
+
+fn errors_example(exe: PathBuf, env: &[(&str, &str)]) {
     let tmp = support::scratch("c_examples");
-    let out = run(&exe, &[tmp.as_os_str()]);
+    let out = run_with(&exe, &[tmp.as_os_str()], env);
     let text = stdout(&out);
     let failed: Vec<&str> = text.lines().filter(|l| l.starts_with("FAIL")).collect();
     assert!(
@@ -383,33 +402,44 @@ fn errors_example_passes_every_check() {
     assert!(passed >= 80, "only {passed} checks ran");
 }
 
-/// spheres.c on the GPU backend (`RT2_BACKEND=gpu`, lavapipe in CI) draws the CPU's image,
-/// within the tolerance of tests/gpu.rs (mean absolute difference <= 1.0 and 99th percentile
-/// <= 12 per channel: headroom for hardware GPUs, which fuse multiply-adds). Without an adapter
-/// it prints SKIPPED, unless `RT2_REQUIRE_GPU=1`.
-#[test]
-fn spheres_on_the_gpu_backend_draws_the_cpu_image() {
-    if let Err(e) = rt2::context::Context::new(rt2::dispatch::BackendRequest::Gpu, 1) {
-        assert!(
-            std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
-            "RT2_REQUIRE_GPU=1 but no GPU: {}",
-            e.message
-        );
-        eprintln!("SKIPPED (no GPU adapter): {}", e.message);
-        return;
+/// Whether a GPU adapter is usable; without one the caller prints SKIPPED and returns,
+/// unless `RT2_REQUIRE_GPU=1`.
+fn gpu_available(test: &str) -> bool {
+    match rt2::context::Context::new(rt2::dispatch::BackendRequest::Gpu, 1) {
+        Ok(_) => true,
+        Err(e) => {
+            assert!(
+                std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
+                "RT2_REQUIRE_GPU=1 but no GPU: {}",
+                e.message
+            );
+            eprintln!("SKIPPED {test} (no GPU adapter): {}", e.message);
+            false
+        }
     }
-    let exe = build_example_as("spheres", "spheres-backends");
+}
+
+/// Runs `exe` with `args` plus an output PNG on the CPU and on the GPU backend
+/// (`RT2_BACKEND`), and checks that the GPU drew the CPU's image within the tolerance of
+/// tests/gpu.rs: mean absolute difference <= 1.0 and 99th percentile <= 12 per channel
+/// (headroom for hardware GPUs, which fuse multiply-adds; lavapipe draws the same bytes).
+/// Returns the two runs' outputs.
+fn cpu_and_gpu_images_agree(exe: &Path, args: &[&std::ffi::OsStr], name: &str) -> [Output; 2] {
     let dir = support::scratch("c_examples");
     let mut images = Vec::new();
+    let mut outputs = Vec::new();
     for backend in ["cpu", "gpu"] {
-        let png = dir.join(format!("spheres-{backend}.png"));
+        let png = dir.join(format!("{name}-{backend}.png"));
         let _ = std::fs::remove_file(&png);
-        let out = run_with(&exe, &[png.as_os_str()], &[("RT2_BACKEND", backend)]);
-        assert_exit(&out, 0, &format!("spheres on the {backend} backend"));
+        let mut all = args.to_vec();
+        all.push(png.as_os_str());
+        let out = run_with(exe, &all, &[("RT2_BACKEND", backend)]);
+        assert_exit(&out, 0, &format!("{name} on the {backend} backend"));
         let img = image::open(&png)
             .unwrap_or_else(|e| panic!("cannot decode {}: {e}", png.display()))
             .to_rgba8();
         images.push(img);
+        outputs.push(out);
     }
     let mut diffs: Vec<u8> = images[0]
         .as_raw()
@@ -420,9 +450,107 @@ fn spheres_on_the_gpu_backend_draws_the_cpu_image() {
     let mean = diffs.iter().map(|&d| d as f64).sum::<f64>() / diffs.len() as f64;
     diffs.sort_unstable();
     let p99 = diffs[diffs.len() * 99 / 100];
-    println!("spheres.c GPU against CPU: mean {mean:.3}, 99th percentile {p99}");
+    println!("{name} GPU against CPU: mean {mean:.3}, 99th percentile {p99}");
     assert!(
         mean <= 1.0 && p99 <= 12,
-        "GPU image differs: mean {mean:.3}, p99 {p99}"
+        "{name}: GPU image differs: mean {mean:.3}, p99 {p99}"
+    );
+    [outputs.remove(0), outputs.remove(0)]
+}
+
+/// spheres.c on the GPU backend (`RT2_BACKEND=gpu`, lavapipe in CI) draws the CPU's image.
+#[test]
+fn spheres_on_the_gpu_backend_draws_the_cpu_image() {
+    if !gpu_available("spheres_on_the_gpu_backend_draws_the_cpu_image") {
+        return;
+    }
+    let exe = build_example_as("spheres", "spheres-backends");
+    cpu_and_gpu_images_agree(&exe, &[], "spheres");
+}
+
+/// load_model.c renders the bunny (69k triangles) on the GPU backend as on the CPU, and
+/// reports through `rt2_context_info` that the render ran where the context said.
+#[test]
+fn load_model_on_the_gpu_backend_draws_the_cpu_image() {
+    let model = shared().join("models/bunny.ply");
+    if !model.is_file() {
+        eprintln!("SKIPPED: {} is missing (set RT2_SHARED)", model.display());
+        return;
+    }
+    if !gpu_available("load_model_on_the_gpu_backend_draws_the_cpu_image") {
+        return;
+    }
+    let exe = build_example_as("load_model", "load_model-backends");
+    let [cpu, gpu] = cpu_and_gpu_images_agree(&exe, &[model.as_os_str()], "bunny");
+    for (out, want) in [
+        (cpu, "backend: CPU (CPU requested by RT2_BACKEND=cpu)"),
+        (gpu, "backend: GPU (GPU requested by RT2_BACKEND=gpu"),
+    ] {
+        let text = stdout(&out);
+        assert!(text.contains(want), "no {want:?} in:\n{text}");
+        assert!(
+            !text.contains("ran on the CPU"),
+            "a fallback on an explicit backend:\n{text}"
+        );
+    }
+}
+
+/// minimal.c passes its own check on the GPU backend.
+#[test]
+fn minimal_on_the_gpu_backend_renders_the_triangle() {
+    if !gpu_available("minimal_on_the_gpu_backend_renders_the_triangle") {
+        return;
+    }
+    let exe = build_example_as("minimal", "minimal-gpu");
+    let out = run_with(&exe, &[], &[("RT2_BACKEND", "gpu")]);
+    assert_exit(&out, 0, "minimal on the GPU backend");
+    assert!(stdout(&out).contains("minimal: OK"));
+}
+
+/// No usable adapter (`RT2_ADAPTER` names none, or `WGPU_BACKEND` a backend RT2 lacks): the
+/// GPU requested is
+/// `RT2_STATUS_BACKEND_UNAVAILABLE` with the reason; AUTO traces on the CPU and
+/// `rt2_context_info` says why. Needs no GPU.
+#[test]
+fn no_adapter_is_an_error_for_gpu_and_the_cpu_for_auto() {
+    let env = |backend| {
+        [
+            ("RT2_BACKEND", backend),
+            ("RT2_ADAPTER", "no-such-adapter-rt2"),
+        ]
+    };
+    let exe = build_example_as("minimal", "minimal-no-adapter");
+    let out = run_with(&exe, &[], &env("gpu"));
+    assert_exit(&out, 1, "minimal asking for a GPU that is not there");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("rt2_context_create failed: RT2_STATUS_BACKEND_UNAVAILABLE: GPU requested by RT2_BACKEND=gpu, but "),
+        "unclear message: {err}"
+    );
+    // WGPU_BACKEND is honoured: a backend RT2 is not built with leaves no adapter.
+    let out = run_with(&exe, &[], &[("RT2_BACKEND", "gpu"), ("WGPU_BACKEND", "gl")]);
+    assert_exit(&out, 1, "minimal asking for a GPU on WGPU_BACKEND=gl");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("RT2_STATUS_BACKEND_UNAVAILABLE") && err.contains("WGPU_BACKEND=gl"),
+        "unclear message: {err}"
+    );
+    let model = shared().join("models/bunny.ply");
+    if !model.is_file() {
+        eprintln!(
+            "SKIPPED the AUTO half: {} is missing (set RT2_SHARED)",
+            model.display()
+        );
+        return;
+    }
+    let exe = build_example_as("load_model", "load_model-no-adapter");
+    let png = support::scratch("c_examples").join("bunny-no-adapter.png");
+    let out = run_with(&exe, &[model.as_os_str(), png.as_os_str()], &env("auto"));
+    assert_exit(&out, 0, "load_model on AUTO without an adapter");
+    let text = stdout(&out);
+    assert!(
+        text.contains("backend: CPU (AUTO from RT2_BACKEND=auto: ")
+            && text.contains("so tracing runs on the CPU)"),
+        "no reason for the CPU in:\n{text}"
     );
 }

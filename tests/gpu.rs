@@ -8,6 +8,7 @@ use glam::{Mat3, Vec3};
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::{Backend, BackendRequest};
+use rt2::error::Rt2Status;
 use rt2::frame::Frame;
 use rt2::geometry::{Hit, Ray};
 use rt2::gpu::GpuOptions;
@@ -371,6 +372,48 @@ fn images_match_the_cpu_on_spheres1() {
     );
 }
 
+/// What the built-in scenes leave at its default: a thin lens (depth of field), several
+/// samples per pixel and straight (unbent) transparency, on both paths. The default scene
+/// has a transparent sphere.
+#[test]
+fn lens_samples_and_straight_transparency_match_the_cpu() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let mut b = builtin::by_name("default").unwrap();
+    let mut scene = std::mem::take(&mut b.scene);
+    scene.commit().unwrap();
+    b.camera.set_lens(0.2, 6.0).unwrap();
+    let base = RenderOptions {
+        samples: 4,
+        transparency: rt2::render::Transparency::Straight,
+        max_depth: b.max_depth,
+        ..RenderOptions::default()
+    };
+    let want = render(&cpu(), &mut scene, &b, &base, 64, 48);
+    let mut pinhole = b.camera;
+    pinhole.set_lens(0.0, 6.0).unwrap();
+    let mut sharp = Frame::new(64, 48).unwrap();
+    cpu()
+        .render(scene.committed().unwrap(), &pinhole, &base, &mut sharp)
+        .unwrap();
+    assert!(
+        sharp != want,
+        "the lens changes nothing: the test would prove nothing"
+    );
+    for path in [GpuPathRequest::Megakernel, GpuPathRequest::Wavefront] {
+        let opts = RenderOptions {
+            gpu_path: path,
+            ..base
+        };
+        let d = image_diff(&render(&g, &mut scene, &b, &opts, 64, 48), &want);
+        println!("lens, 4 samples, straight {path:?}: (mean, p99) per channel {d:?}");
+        for (mean, p99) in d {
+            assert!(mean <= MEAN_MAX && p99 <= P99_MAX, "{path:?}: {d:?}");
+        }
+    }
+}
+
 /// Two logical devices on one adapter each render half the rows: the same image as one.
 #[test]
 fn two_devices_split_the_frame_rows() {
@@ -423,6 +466,49 @@ fn masked_pixels_are_left_alone() {
             assert_eq!(mask[i] == 0, px == [7, 7, 7, 7], "{path:?} pixel {i}");
         }
     }
+}
+
+/// `RT2_ADAPTER` (`GpuOptions::adapter`) picks adapters by a case-insensitive part of their
+/// name; a name that matches none is `BACKEND_UNAVAILABLE` with the adapters it saw, and AUTO
+/// then traces on the CPU.
+#[test]
+fn adapters_are_picked_by_a_part_of_their_name() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    if std::env::var_os("RT2_BACKEND").is_some() {
+        return;
+    }
+    let name = g.gpu().unwrap().devices[0].name.clone();
+    let part: String = name
+        .chars()
+        .skip(1)
+        .take(4)
+        .collect::<String>()
+        .to_uppercase();
+    let picked = gpu(GpuOptions {
+        adapter: Some(part.clone()),
+        ..GpuOptions::default()
+    })
+    .unwrap_or_else(|| panic!("'{part}' does not pick {name}"));
+    assert_eq!(picked.gpu().unwrap().devices[0].name, name);
+    let none = GpuOptions {
+        adapter: Some("no-such-adapter-rt2".into()),
+        ..GpuOptions::default()
+    };
+    let e = match Context::with_gpu_options(BackendRequest::Gpu, 1, &none) {
+        Ok(_) => panic!("an adapter matched 'no-such-adapter-rt2'"),
+        Err(e) => e,
+    };
+    assert_eq!(e.status, Rt2Status::BackendUnavailable);
+    assert!(
+        e.message.contains("matches none") && e.message.contains(&name),
+        "{}",
+        e.message
+    );
+    let auto = Context::with_gpu_options(BackendRequest::Auto, 1, &none).unwrap();
+    assert_eq!(auto.decision().backend, Backend::Cpu);
+    assert!(auto.decision().reason.contains("matches none"));
 }
 
 /// AUTO takes the CPU when the only adapter is a software one, and says so.
@@ -478,6 +564,136 @@ fn auto_falls_back_to_the_cpu_beyond_device_limits() {
         "{}",
         e.message
     );
+}
+
+/// `rt2_context_properties.fallback` of `ctx` as a string (`None`: NULL), after checking that
+/// the backend is the GPU.
+fn c_fallback(ctx: *const rt2::api::rt2_context) -> Option<String> {
+    use rt2::api::*;
+    let mut p = rt2_context_properties {
+        struct_size: std::mem::size_of::<rt2_context_properties>() as u32,
+        backend: 99,
+        threads: 0,
+        reason: std::ptr::null(),
+        fallback: std::ptr::null(),
+    };
+    assert_eq!(unsafe { rt2_context_info(ctx, &mut p) }, Rt2Status::Ok);
+    assert_eq!(p.backend, Rt2Backend::Gpu as u32);
+    (!p.fallback.is_null()).then(|| {
+        unsafe { std::ffi::CStr::from_ptr(p.fallback) }
+            .to_string_lossy()
+            .into_owned()
+    })
+}
+
+/// An AUTO context on the GPU reports through `rt2_context_info` why one render or query ran
+/// on the CPU (a scene array beyond the device's storage binding; the watertight test the
+/// kernels lack), and reports nothing once a job runs on the GPU again.
+#[test]
+fn c_api_reports_why_a_job_ran_on_the_cpu() {
+    use rt2::api::*;
+    use std::ptr::{null, null_mut};
+    if gpu(GpuOptions::default()).is_none() || std::env::var_os("RT2_BACKEND").is_some() {
+        return;
+    }
+    let auto = |max_binding| {
+        let opts = GpuOptions {
+            auto_accepts_software: true,
+            max_binding_override: max_binding,
+            ..GpuOptions::default()
+        };
+        let c = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
+        assert_eq!(c.decision().backend, Backend::Gpu);
+        rt2_context::from_context(c)
+    };
+    // 1 KiB bindings hold 64 spheres at most (16 bytes each): 200 do not fit (nor, in the
+    // tree, their 4-byte references, which reach 1 KiB first).
+    let (small, roomy) = (auto(Some(1024)), auto(None));
+    unsafe {
+        let mut scene = null_mut();
+        assert_eq!(rt2_scene_create(small, &mut scene), Rt2Status::Ok);
+        for i in 0..200 {
+            let c = [(i % 20) as f32 - 10.0, (i / 20) as f32 - 5.0, -10.0];
+            let s = rt2_scene_add_sphere(scene, c.as_ptr(), 0.4, 0, null_mut());
+            assert_eq!(s, Rt2Status::Ok);
+        }
+        let (pos, white) = ([0.0f32, 10.0, 10.0], [1.0f32; 3]);
+        let s = rt2_scene_add_point_light(scene, pos.as_ptr(), white.as_ptr(), 1.0, null_mut());
+        assert_eq!(s, Rt2Status::Ok);
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        let (mut camera, mut frame) = (null_mut(), null_mut());
+        assert_eq!(rt2_camera_create(&mut camera), Rt2Status::Ok);
+        assert_eq!(rt2_frame_create(40, 30, &mut frame), Rt2Status::Ok);
+        assert_eq!(c_fallback(small), None, "no job ran yet");
+
+        assert_eq!(
+            rt2_render(small, scene, camera, null(), frame),
+            Rt2Status::Ok
+        );
+        let why = c_fallback(small).expect("the render ran on the CPU: a reason");
+        println!("fallback after the render: {why}");
+        assert!(
+            why.contains("storage binding") && why.contains("1024 bytes") && why.contains("CPU"),
+            "{why}"
+        );
+
+        // Rays at the sphere centres of the first row: every one hits.
+        let rays: Vec<rt2_ray> = (0..20)
+            .map(|i| rt2_ray {
+                org: [i as f32 - 10.0, -5.0, 0.0],
+                tmin: 0.0,
+                dir: [0.0, 0.0, -1.0],
+                tmax: f32::INFINITY,
+            })
+            .collect();
+        let query = |ctx, intersector: Rt2Intersector| {
+            let mut o = rt2_query_options_default();
+            o.intersector = intersector as u32;
+            let mut hits = vec![
+                rt2_hit {
+                    t: 0.0,
+                    u: 0.0,
+                    v: 0.0,
+                    object: 0,
+                    prim: 0
+                };
+                rays.len()
+            ];
+            let s = rt2_intersect(
+                ctx,
+                scene,
+                rays.as_ptr(),
+                rays.len(),
+                hits.as_mut_ptr(),
+                &o,
+                null_mut(),
+            );
+            assert_eq!(s, Rt2Status::Ok);
+            assert!(hits.iter().all(|h| (h.t - 9.6).abs() < 1e-4), "{hits:?}");
+            hits
+        };
+        query(small, Rt2Intersector::MollerTrumbore);
+        let why = c_fallback(small).expect("the query ran on the CPU: a reason");
+        assert!(why.contains("1024 bytes"), "{why}");
+
+        // The roomy context holds the scene, but not the watertight test.
+        let on_cpu = query(roomy, Rt2Intersector::Watertight);
+        let why = c_fallback(roomy).expect("a watertight query runs on the CPU: a reason");
+        println!("fallback after a watertight query: {why}");
+        assert!(why.contains("watertight") && why.contains("CPU"), "{why}");
+        // The small context's record is its own.
+        assert!(c_fallback(small).is_some_and(|w| w.contains("1024 bytes")));
+        let on_gpu = query(roomy, Rt2Intersector::MollerTrumbore);
+        assert_eq!(c_fallback(roomy), None, "the query ran on the GPU");
+        let objects = |h: &[rt2_hit]| h.iter().map(|h| h.object).collect::<Vec<_>>();
+        assert_eq!(objects(&on_cpu), objects(&on_gpu));
+
+        rt2_frame_destroy(frame);
+        rt2_camera_destroy(camera);
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(small);
+        rt2_context_destroy(roomy);
+    }
 }
 
 /// A commit re-sends only the arrays whose bytes changed; a render of the same commit

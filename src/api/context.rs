@@ -1,13 +1,22 @@
 //! `rt2_context`: the thread pool and backend choice. Thread-safe: any number of threads may
 //! use one context at once. Scenes keep their context alive, so destroy order is free.
+//! `rt2_context_info` reports the backend, why it was chosen, and why the last job ran on
+//! the CPU after all when an AUTO context's GPU could not take it.
 
 use super::ffi::{check_out, check_struct_size, destroy, guard, handle, write_out, Handle};
 use super::options::{backend_from, rt2_context_desc, Rt2Backend};
 use crate::context::Context;
 use crate::dispatch::Backend;
 use crate::error::Rt2Status;
+use std::cell::RefCell;
 use std::ffi::{c_char, CString};
 use std::sync::Arc;
+
+thread_local! {
+    /// This thread's copy of the fallback reason that `rt2_context_info` last returned. A copy,
+    /// because the context's own record changes with every job of any thread.
+    static FALLBACK: RefCell<Option<CString>> = const { RefCell::new(None) };
+}
 
 /// Opaque context handle. Create with `rt2_context_create`, free with `rt2_context_destroy`.
 #[repr(C)]
@@ -38,6 +47,14 @@ pub struct rt2_context_properties {
     pub threads: u32,
     /// Why that backend was chosen; valid while the context lives.
     pub reason: *const c_char,
+    /// Why the context's last render or ray query ran on the CPU although `backend` is GPU:
+    /// an AUTO context whose device could not take that job (the scene or the job exceeds a
+    /// device limit such as the largest storage buffer binding, or an option the GPU kernels
+    /// lack, e.g. the watertight intersector). NULL when that job ran on `backend`, when no job
+    /// ran yet, and always on a CPU context. With several threads using the context, it is
+    /// the job that chose its backend last. A copy, valid until the next `rt2_context_info`
+    /// on this thread.
+    pub fallback: *const c_char,
 }
 
 /// Creates a context. `desc` may be NULL for the defaults. On failure `*out` is untouched.
@@ -58,14 +75,21 @@ pub unsafe extern "C" fn rt2_context_create(
         };
         check_struct_size::<rt2_context_desc>(d.struct_size, "rt2_context_desc")?;
         let ctx = Context::new(backend_from(d.backend)?, d.threads)?;
+        write_out(out, "out", rt2_context::from_context(ctx))
+    })
+}
+
+impl rt2_context {
+    /// Hands a Rust [`Context`] to C code as an `rt2_context` (for Rust programs that made the
+    /// context with [`Context::with_gpu_options`]); free it with `rt2_context_destroy`.
+    pub fn from_context(ctx: Context) -> *mut rt2_context {
         let reason = CString::new(ctx.decision().reason.replace('\0', "")).unwrap_or_default();
-        let h = Box::new(rt2_context {
+        Box::into_raw(Box::new(rt2_context {
             magic: rt2_context::MAGIC,
             inner: Arc::new(ctx),
             reason,
-        });
-        write_out(out, "out", Box::into_raw(h))
-    })
+        }))
+    }
 }
 
 /// Releases the caller's reference; scenes created from it keep working. NULL is a no-op.
@@ -80,7 +104,8 @@ pub unsafe extern "C" fn rt2_context_destroy(ctx: *mut rt2_context) {
     });
 }
 
-/// Reports the backend tracing runs on and why.
+/// Reports the backend tracing runs on and why, and why the last job ran on the CPU instead
+/// (`fallback`, NULL when it did not). On failure `*out` is untouched.
 ///
 /// # Safety
 /// `ctx` is a live context; `out` points to an `rt2_context_properties` whose `struct_size` is set.
@@ -97,6 +122,16 @@ pub unsafe extern "C" fn rt2_context_info(
             Backend::Cpu => Rt2Backend::Cpu,
             Backend::Gpu => Rt2Backend::Gpu,
         };
+        let fallback = c
+            .inner
+            .last_fallback()
+            .map(|f| CString::new(f.replace('\0', "")).unwrap_or_default());
+        // Every check passed: only now is the pointer of the previous call replaced.
+        let fallback = FALLBACK.with(|cell| {
+            let mut slot = cell.borrow_mut();
+            *slot = fallback;
+            slot.as_ref().map_or(std::ptr::null(), |f| f.as_ptr())
+        });
         write_out(
             out,
             "out",
@@ -105,6 +140,7 @@ pub unsafe extern "C" fn rt2_context_info(
                 backend: backend as u32,
                 threads: c.inner.threads() as u32,
                 reason: c.reason.as_ptr(),
+                fallback,
             },
         )
     })

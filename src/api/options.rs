@@ -26,7 +26,8 @@ pub enum Rt2Backend {
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Rt2Traversal {
-    /// The library picks per scene and backend (see `rt2_context_info`).
+    /// The library picks per scene and backend: standard on the CPU; on the GPU ropes++ when
+    /// the scene's tree has ropes (built on request), else standard.
     Auto = 0,
     Standard = 1,
     KdRestart = 2,

@@ -105,7 +105,14 @@ pub fn open(opts: &GpuOptions, accept_software: bool) -> std::result::Result<Gpu
     let instance = wgpu::Instance::new(desc);
     let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
     if adapters.is_empty() {
-        return Err("no GPU adapter was found (wgpu found no Vulkan driver)".into());
+        // RT2 builds wgpu with Vulkan only: WGPU_BACKEND naming another backend finds nothing.
+        return Err(match std::env::var("WGPU_BACKEND") {
+            Ok(v) => format!(
+                "no GPU adapter was found among the backends WGPU_BACKEND={v} allows (RT2 \
+                 drives Vulkan only)"
+            ),
+            Err(_) => "no GPU adapter was found (wgpu found no Vulkan driver)".into(),
+        });
     }
     if let Some(want) = &opts.adapter {
         let want = want.to_lowercase();
