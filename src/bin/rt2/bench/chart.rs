@@ -723,56 +723,92 @@ fn breadth_first(
         .fold(Acne::default(), sum))
 }
 
-/// PSNR of renders of the built-in `default` scene (meshes, quadrics, a box, a plane; mirror
-/// and refraction, depth 6; 688x384) with each intersector x offset mode, against the render
-/// with the watertight test and the robust offset, standard traversal.
+/// Size of the PSNR renders: half the README's 1376x768 in each direction.
+const PSNR_SIZE: (u32, u32) = (688, 384);
+
+/// PSNR of renders of every built-in scene with each offset mode (and each intersector where
+/// the scene has triangles; on the GPU: the epsilon and Möller–Trumbore it has), standard
+/// traversal, against the CPU render with the watertight test and the robust offset.
 fn psnr_table(b: &Backends) -> Result<String> {
-    let ctx = &b.cpu;
-    let mut d = builtin::by_name("default")?;
-    d.scene.commit()?;
-    d.scene.ensure_exact_vertices()?;
-    let c = d.scene.committed()?;
-    let render = |intersector, offset_mode| -> Result<Vec<u8>> {
-        let opts = RenderOptions {
-            max_depth: d.max_depth,
-            traversal: Some(Traversal::Standard),
-            intersector,
-            offset_mode,
-            ..RenderOptions::default()
-        };
-        let mut frame = rt2::frame::Frame::new(688, 384)?;
-        ctx.render(c, &d.camera, &opts, &mut frame)?;
-        Ok(frame.pixels().to_vec())
-    };
-    let reference = render(Intersector::Watertight, OffsetMode::Robust)?;
-    let mut out = String::from(
+    let (w, h) = PSNR_SIZE;
+    let mut out = format!(
         "\n#### Renders against a reference render\n\n\
-         The built-in `default` scene (688x384, depth 6), standard traversal; PSNR of the RGB \
-         channels against the render with the watertight test and the robust offset \
-         (inf: identical).\n\n| intersector | offset | PSNR dB | pixels differing |\n|---|---|---|---|\n",
+         Every built-in scene at {w}x{h} and its own depth, standard traversal; PSNR in dB of \
+         the RGB channels against the CPU render with the watertight test and the robust offset \
+         (inf: identical), and in brackets the pixels that differ. Only triangles have two \
+         intersectors: scenes without any show one row. The GPU kernels have the epsilon \
+         offset only.\n\n| scene | mode | intersector |"
     );
-    for intersector in Intersector::ALL {
-        for mode in OffsetMode::ALL {
-            let img = render(intersector, mode)?;
-            let (mut se, mut n, mut differ) = (0.0f64, 0usize, 0usize);
-            for (p, q) in img.chunks_exact(4).zip(reference.chunks_exact(4)) {
-                differ += (p[..3] != q[..3]) as usize;
-                for k in 0..3 {
-                    se += (p[k] as f64 - q[k] as f64).powi(2);
-                    n += 1;
+    for mode in OffsetMode::ALL {
+        write!(out, " {} |", mode.name()).ok();
+    }
+    out.push_str("\n|---|---|---|");
+    out.push_str(&"---|".repeat(OffsetMode::ALL.len()));
+    out.push('\n');
+    for name in builtin::NAMES {
+        let mut scene = builtin::by_name(name)?;
+        b.cpu.install(|| scene.scene.commit())?;
+        scene.scene.ensure_exact_vertices()?;
+        let c = scene.scene.committed()?;
+        let render = |ctx: &Context, intersector, offset_mode| -> Result<Vec<u8>> {
+            let opts = RenderOptions {
+                max_depth: scene.max_depth,
+                traversal: Some(Traversal::Standard),
+                intersector,
+                offset_mode,
+                ..RenderOptions::default()
+            };
+            let mut frame = rt2::frame::Frame::new(w, h)?;
+            ctx.render(c, &scene.camera, &opts, &mut frame)?;
+            Ok(frame.pixels().to_vec())
+        };
+        let reference = render(&b.cpu, Intersector::Watertight, OffsetMode::Robust)?;
+        let intersectors: &[Intersector] = if c.prims.triangles.is_empty() {
+            &[Intersector::MollerTrumbore]
+        } else {
+            &Intersector::ALL
+        };
+        let mut rows: Vec<(Engine, &Context, Intersector)> = intersectors
+            .iter()
+            .map(|&i| (Engine::Cpu(QueryMode::Single), &b.cpu, i))
+            .collect();
+        if let Some(g) = &b.gpu {
+            rows.push((Engine::Gpu, g, Intersector::MollerTrumbore));
+        }
+        for (engine, ctx, intersector) in rows {
+            let shown = if c.prims.triangles.is_empty() {
+                "any (no triangles)"
+            } else {
+                intersector.name()
+            };
+            write!(out, "| {name} | {} | {shown} |", engine.name()).ok();
+            for mode in OffsetMode::ALL {
+                if engine.offsets().contains(&mode) {
+                    let (db, differ) = psnr(&render(ctx, intersector, mode)?, &reference);
+                    write!(out, " {db:.1} ({differ}) |").ok();
+                } else {
+                    out.push_str(" — |");
                 }
             }
-            let psnr = 10.0 * (255.0f64 * 255.0 / (se / n as f64)).log10();
-            writeln!(
-                out,
-                "| {} | {} | {psnr:.1} | {differ} |",
-                intersector.name(),
-                mode.name()
-            )
-            .ok();
+            out.push('\n');
         }
     }
     Ok(out)
+}
+
+/// PSNR in dB of the RGB channels of RGBA image `img` against `reference` (inf when they are
+/// equal), and how many pixels differ in RGB. Alpha is left out: it is 255 in every render.
+fn psnr(img: &[u8], reference: &[u8]) -> (f64, usize) {
+    let (mut se, mut n, mut differ) = (0.0f64, 0usize, 0usize);
+    for (p, q) in img.chunks_exact(4).zip(reference.chunks_exact(4)) {
+        differ += (p[..3] != q[..3]) as usize;
+        for k in 0..3 {
+            se += (p[k] as f64 - q[k] as f64).powi(2);
+            n += 1;
+        }
+    }
+    let db = 10.0 * (255.0f64 * 255.0 / (se / n.max(1) as f64)).log10();
+    (db, differ)
 }
 
 /// The points no other point beats in both speed and error (lower error, higher Mrays/s),
