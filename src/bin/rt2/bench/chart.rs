@@ -1226,3 +1226,55 @@ pub(super) fn memory(_: &Args) -> Result<String> {
     }
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn psnr_is_over_rgb_and_counts_differing_pixels() {
+        let a = [10u8, 20, 30, 255, 0, 0, 0, 255];
+        assert_eq!(psnr(&a, &a), (f64::INFINITY, 0));
+        // Alpha is not an image channel here.
+        let mut b = a;
+        b[3] = 0;
+        assert_eq!(psnr(&b, &a), (f64::INFINITY, 0));
+        // One of 6 channels off by 255: MSE = 255² / 6, PSNR = 10 log10(6) dB.
+        b[4] = 255;
+        let (db, differ) = psnr(&b, &a);
+        assert!((db - 10.0 * 6f64.log10()).abs() < 1e-12, "{db}");
+        assert_eq!(differ, 1);
+    }
+
+    /// The breadth-first measurement (batch queries in every CPU mode) finds the same shadow
+    /// rays and the same self-intersections as the depth-first one: the modes return the same
+    /// hits, so the chart's packet and stream points differ from the single-ray point of the
+    /// same method in speed only. Both offsets the batches support; the robust one has acne
+    /// on this scene (BENCHMARKS.md), so the counts compared are not all zero.
+    #[test]
+    fn schedules_count_the_same_acne() -> Result<()> {
+        let ctx = Context::new(BackendRequest::Cpu, 2)?;
+        let scenes = secondary_scenes()?;
+        let mut acne_seen = 0;
+        for mode in [OffsetMode::Epsilon, OffsetMode::Robust] {
+            let opts = RenderOptions {
+                offset_mode: mode,
+                ..RenderOptions::default()
+            };
+            for (s, rays, light) in &scenes {
+                let tracer = Tracer::new(s.committed()?, &opts, Traversal::Standard);
+                let depth = depth_first(&ctx, &tracer, rays, *light);
+                assert!(depth.checked > 1000, "{depth:?}");
+                acne_seen += depth.selfhits;
+                for engine in [QueryMode::Single, QueryMode::Packet, QueryMode::Stream] {
+                    let (how, intersector) = Engine::Cpu(engine).methods()[0];
+                    let q = Engine::Cpu(engine).query(how, intersector);
+                    let breadth = breadth_first(&ctx, &tracer, &q, rays, *light)?;
+                    assert_eq!(breadth, depth, "{engine:?} {mode:?}");
+                }
+            }
+        }
+        assert!(acne_seen > 0);
+        Ok(())
+    }
+}
