@@ -29,9 +29,10 @@ const USAGE: &str = "usage: rt2 bench [frames|build|rays|tables|streams|gpu|char
            ms per 1376x768 frame for every traversal, beside the thesis' figures
   streams  n-ray streams vs packets vs single rays: the vectorised-traversal paper's tables, Embree beside
   gpu      thesis table 2 on the GPU backend: ms per frame per traversal, both render paths, vs CPU
-  chart    speed against accuracy: every traversal x intersector x offset mode against an f64
-           reference on the bunny sets and a stress scene; docs/chart.svg and .png with
-           --features chart
+  chart    speed against accuracy: every traversal x intersector x offset mode, packets,
+           streams and the GPU backend (when an adapter opens) against an f64 reference on
+           the bunny sets and a stress scene; PSNR per offset mode on every built-in scene;
+           docs/chart.svg and .png with --features chart
   memory   bytes per primitive of each part of each built-in scene and the bunny, beside a
            tessellation of their analytic primitives
   --runs N       timed runs per figure (default 5; the median is reported)
