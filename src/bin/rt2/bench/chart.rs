@@ -737,7 +737,10 @@ fn psnr_table(b: &Backends) -> Result<String> {
          the RGB channels against the CPU render with the watertight test and the robust offset \
          (inf: identical), and in brackets the pixels that differ. Only triangles have two \
          intersectors: scenes without any show one row. The GPU kernels have the epsilon \
-         offset only.\n\n| scene | mode | intersector |"
+         offset only. This table measures how far the modes move an image from each other; \
+         against an independent f64 brute-force tracer (spheres, plane, two lights, \
+         reflection; `cargo test --release --test render_reference -- --nocapture`) every \
+         offset mode scores above 62 dB in both schedules.\n\n| scene | mode | intersector |"
     );
     for mode in OffsetMode::ALL {
         write!(out, " {} |", mode.name()).ok();
