@@ -19,7 +19,8 @@ pub struct Context {
     decision: Decision,
     /// The devices, when tracing runs on the GPU.
     gpu: Option<Gpu>,
-    /// Why the last job of an AUTO context ran on the CPU after all (device limits).
+    /// Why the last job of an AUTO context ran on the CPU after all (device limits, out of
+    /// memory, a lost device).
     fallback: Mutex<Option<String>>,
     /// Declared after `pool`, so dropped after it: waits for the workers to exit.
     _workers: Workers,
@@ -136,7 +137,8 @@ impl Context {
 
     /// Runs `job` on the GPU when tracing runs there. `Ok(None)`: the CPU must do the job,
     /// because the backend is the CPU, or because AUTO chose the GPU and the job exceeds its
-    /// limits (the reason is kept for [`Context::last_fallback`]).
+    /// limits, ran out of device memory or found the device lost (the reason is kept for
+    /// [`Context::last_fallback`]).
     /// `unsupported` says why the kernels cannot do this job (a precision mode they lack): an
     /// AUTO context then runs it on the CPU, a context asked for the GPU fails.
     fn gpu_job<T>(
@@ -154,10 +156,12 @@ impl Context {
         };
         let (out, why) = match result {
             Ok(v) => (Ok(Some(v)), None),
-            Err(gpu::GpuError::Limits(why)) if self.decision.auto => {
-                (Ok(None), Some(format!("{why}, so this job ran on the CPU")))
-            }
-            Err(e) => (Err(e.into_error()), None),
+            Err(e) => match e.fallback_reason() {
+                Some(why) if self.decision.auto => {
+                    (Ok(None), Some(format!("{why}, so this job ran on the CPU")))
+                }
+                _ => (Err(e.into_error()), None),
+            },
         };
         if let Ok(mut f) = self.fallback.lock() {
             *f = why;

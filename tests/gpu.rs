@@ -566,6 +566,128 @@ fn auto_falls_back_to_the_cpu_beyond_device_limits() {
     );
 }
 
+/// An AUTO context whose device runs out of memory during a job (wgpu's out-of-memory error,
+/// injected where a driver reports it) runs that job on the CPU, says why, and gives the
+/// CPU's answer; the failed upload is not taken for the scene, so the next job re-sends it
+/// and runs on the GPU. Asked for by name, the GPU fails the job with `OUT_OF_MEMORY`.
+#[test]
+fn auto_runs_a_job_on_the_cpu_when_the_device_runs_out_of_memory() {
+    use rt2::gpu::InjectedFault;
+    if gpu(GpuOptions::default()).is_none() || std::env::var_os("RT2_BACKEND").is_some() {
+        return;
+    }
+    let opts = GpuOptions {
+        auto_accepts_software: true,
+        ..GpuOptions::default()
+    };
+    let auto = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
+    assert_eq!(auto.decision().backend, Backend::Gpu);
+    let dev = &auto.gpu().unwrap().devices[0];
+    let mut b = builtin::by_name("spheres3").unwrap();
+    let mut scene = std::mem::take(&mut b.scene);
+    scene.commit().unwrap();
+    let o = RenderOptions::default();
+    let want = render(&cpu(), &mut scene, &b, &o, 40, 30);
+
+    dev.inject_fault(InjectedFault::OutOfMemory);
+    let got = render(&auto, &mut scene, &b, &o, 40, 30);
+    let why = auto
+        .last_fallback()
+        .expect("the render ran on the CPU: a reason");
+    println!("fallback after out of memory: {why}");
+    assert!(
+        why.contains("ran out of memory") && why.contains(&dev.name) && why.ends_with("CPU"),
+        "{why}"
+    );
+    assert!(got == want, "the fallback render is the CPU's");
+    render(&auto, &mut scene, &b, &o, 40, 30);
+    assert_eq!(auto.last_fallback(), None, "out of memory passes");
+    assert_eq!(
+        dev.last_uploads().len(),
+        13,
+        "the failed upload was dropped"
+    );
+
+    // A query whose read-back sees the error (the scene is already there) falls back too.
+    let rays: Vec<Ray> = (0..64)
+        .map(|i| {
+            let to = b.camera.target - b.camera.eye + Vec3::X * (i as f32 / 8.0 - 4.0);
+            Ray::new(b.camera.eye, to.normalize(), 0.0, f32::INFINITY)
+        })
+        .collect();
+    let c = scene.committed().unwrap();
+    let mut want_hits = vec![Hit::MISS; rays.len()];
+    cpu()
+        .intersect(c, &rays, &mut want_hits, &QueryOptions::default())
+        .unwrap();
+    dev.inject_fault(InjectedFault::OutOfMemory);
+    let mut hits = vec![Hit::MISS; rays.len()];
+    auto.intersect(c, &rays, &mut hits, &QueryOptions::default())
+        .unwrap();
+    assert!(auto
+        .last_fallback()
+        .is_some_and(|w| w.contains("ran out of memory")));
+    assert_eq!(hits, want_hits);
+
+    let explicit = Context::with_gpu_options(BackendRequest::Gpu, 2, &opts).unwrap();
+    explicit.gpu().unwrap().devices[0].inject_fault(InjectedFault::OutOfMemory);
+    let mut f = Frame::new(40, 30).unwrap();
+    let e = explicit.render(c, &b.camera, &o, &mut f).unwrap_err();
+    assert_eq!(e.status, Rt2Status::OutOfMemory, "{}", e.message);
+    assert!(e.message.contains("ran out of memory"), "{}", e.message);
+    assert_eq!(
+        explicit.last_fallback(),
+        None,
+        "a named backend never falls back"
+    );
+    assert!(
+        f == Frame::new(40, 30).unwrap(),
+        "a failed frame is left alone"
+    );
+}
+
+/// An AUTO context whose device is lost runs every later job on the CPU and says why; asked
+/// for by name, the GPU fails with `BACKEND_UNAVAILABLE`. The loss is real:
+/// `wgpu::Device::destroy`, which wgpu reports through the device-lost callback.
+#[test]
+fn auto_runs_jobs_on_the_cpu_once_the_device_is_lost() {
+    use rt2::gpu::InjectedFault;
+    if gpu(GpuOptions::default()).is_none() || std::env::var_os("RT2_BACKEND").is_some() {
+        return;
+    }
+    let opts = GpuOptions {
+        auto_accepts_software: true,
+        ..GpuOptions::default()
+    };
+    let auto = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
+    let mut b = builtin::by_name("spheres3").unwrap();
+    let mut scene = std::mem::take(&mut b.scene);
+    scene.commit().unwrap();
+    let o = RenderOptions::default();
+    render(&auto, &mut scene, &b, &o, 40, 30);
+    assert_eq!(auto.last_fallback(), None, "the device works before");
+    auto.gpu().unwrap().devices[0].inject_fault(InjectedFault::Lost);
+    let want = render(&cpu(), &mut scene, &b, &o, 40, 30);
+    for _ in 0..2 {
+        let got = render(&auto, &mut scene, &b, &o, 40, 30);
+        let why = auto
+            .last_fallback()
+            .expect("the render ran on the CPU: a reason");
+        println!("fallback on a lost device: {why}");
+        assert!(why.contains("was lost") && why.ends_with("CPU"), "{why}");
+        assert!(got == want, "the fallback render is the CPU's");
+    }
+
+    let explicit = Context::with_gpu_options(BackendRequest::Gpu, 2, &opts).unwrap();
+    explicit.gpu().unwrap().devices[0].inject_fault(InjectedFault::Lost);
+    let mut f = Frame::new(40, 30).unwrap();
+    let e = explicit
+        .render(scene.committed().unwrap(), &b.camera, &o, &mut f)
+        .unwrap_err();
+    assert_eq!(e.status, Rt2Status::BackendUnavailable, "{}", e.message);
+    assert!(e.message.contains("was lost"), "{}", e.message);
+}
+
 /// `rt2_context_properties.fallback` of `ctx` as a string (`None`: NULL), after checking that
 /// the backend is the GPU.
 fn c_fallback(ctx: *const rt2::api::rt2_context) -> Option<String> {
@@ -685,6 +807,20 @@ fn c_api_reports_why_a_job_ran_on_the_cpu() {
         assert!(c_fallback(small).is_some_and(|w| w.contains("1024 bytes")));
         let on_gpu = query(roomy, Rt2Intersector::MollerTrumbore);
         assert_eq!(c_fallback(roomy), None, "the query ran on the GPU");
+        // A device out of memory is reported the same way.
+        let oom = {
+            let opts = GpuOptions {
+                auto_accepts_software: true,
+                ..GpuOptions::default()
+            };
+            let c = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
+            c.gpu().unwrap().devices[0].inject_fault(rt2::gpu::InjectedFault::OutOfMemory);
+            rt2_context::from_context(c)
+        };
+        query(oom, Rt2Intersector::MollerTrumbore);
+        let why = c_fallback(oom).expect("the query ran on the CPU: a reason");
+        assert!(why.contains("ran out of memory"), "{why}");
+        rt2_context_destroy(oom);
         let objects = |h: &[rt2_hit]| h.iter().map(|h| h.object).collect::<Vec<_>>();
         assert_eq!(objects(&on_cpu), objects(&on_gpu));
 

@@ -49,8 +49,9 @@ pub struct rt2_context_properties {
     pub reason: *const c_char,
     /// Why the context's last render or ray query ran on the CPU although `backend` is GPU:
     /// an AUTO context whose device could not take that job (the scene or the job exceeds a
-    /// device limit such as the largest storage buffer binding, or an option the GPU kernels
-    /// lack, e.g. the watertight intersector). NULL when that job ran on `backend`, when no job
+    /// device limit such as the largest storage buffer binding, the device ran out of memory
+    /// during the job or was lost, or an option the GPU kernels lack, e.g. the watertight
+    /// intersector). NULL when that job ran on `backend`, when no job
     /// ran yet, and always on a CPU context. With several threads using the context, it is
     /// the job that chose its backend last. A copy, valid until the next `rt2_context_info`
     /// on this thread.
