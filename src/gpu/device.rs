@@ -176,22 +176,51 @@ pub fn open(opts: &GpuOptions, accept_software: bool) -> std::result::Result<Gpu
     } else {
         adapters.iter().collect()
     };
-    let mut devices = Vec::new();
-    for a in chosen {
-        devices.push(open_device(a, opts)?);
+    let results = chosen
+        .into_iter()
+        .map(|a| open_device(a, opts).map(|d| (a.get_info(), d)))
+        .collect();
+    let (opened, failed) = keep_opened(results)?;
+    let info = opened[0].0.clone();
+    let devices: Vec<Device> = opened.into_iter().map(|(_, d)| d).collect();
+    let mut description = format!(
+        "{} x{} ({:?}, {:?})",
+        info.name,
+        devices.len(),
+        info.device_type,
+        info.backend
+    );
+    if !failed.is_empty() {
+        description += &format!("; skipped: {}", failed.join("; "));
     }
-    let info = adapters[0].get_info();
     Ok(Gpu {
-        description: format!(
-            "{} x{} ({:?}, {:?})",
-            info.name,
-            devices.len(),
-            info.device_type,
-            info.backend
-        ),
+        description,
         software: best == wgpu::DeviceType::Cpu,
         devices,
     })
+}
+
+/// Splits the outcome of opening each chosen adapter into the devices that opened and the
+/// reasons of those that did not: one adapter refusing a device (a driver fault, limits too
+/// small) does not keep the others from tracing. `Err`, with every reason, when none opened.
+fn keep_opened<T>(
+    results: Vec<std::result::Result<T, String>>,
+) -> std::result::Result<(Vec<T>, Vec<String>), String> {
+    let (mut opened, mut failed) = (Vec::new(), Vec::new());
+    for r in results {
+        match r {
+            Ok(d) => opened.push(d),
+            Err(why) => failed.push(why),
+        }
+    }
+    if opened.is_empty() {
+        return Err(if failed.is_empty() {
+            "no adapter was left to open".into()
+        } else {
+            format!("no adapter opened a device: {}", failed.join("; "))
+        });
+    }
+    Ok((opened, failed))
 }
 
 fn open_device(adapter: &wgpu::Adapter, opts: &GpuOptions) -> std::result::Result<Device, String> {
@@ -637,4 +666,36 @@ fn poisoned() -> Error {
         Rt2Status::Internal,
         "a GPU lock was poisoned by an earlier panic",
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::keep_opened;
+
+    /// Adapters that refuse a device are skipped with their reasons; only when none opens
+    /// does opening fail, with every reason.
+    #[test]
+    fn open_keeps_the_adapters_that_open() {
+        let results = vec![
+            Err("adapter A refused a device: lost".to_string()),
+            Ok(1),
+            Err("adapter C allows 8 storage buffers per shader stage".to_string()),
+            Ok(3),
+        ];
+        let (opened, failed) = keep_opened(results).unwrap();
+        assert_eq!(opened, vec![1, 3]);
+        assert_eq!(failed.len(), 2);
+        assert!(failed[0].contains("adapter A") && failed[1].contains("adapter C"));
+
+        let none: Vec<Result<u32, String>> =
+            vec![Err("adapter A: x".into()), Err("adapter B: y".into())];
+        let why = keep_opened(none).unwrap_err();
+        assert!(
+            why.contains("no adapter opened")
+                && why.contains("adapter A: x")
+                && why.contains("adapter B: y"),
+            "{why}"
+        );
+        assert!(keep_opened::<u32>(Vec::new()).is_err());
+    }
 }
