@@ -344,6 +344,16 @@ typedef struct rt2_context_properties {
    * on this thread.
    */
   const char *fallback;
+  /**
+   * What the library chose for the context's last render or ray query where the caller
+   * left the choice to it (`RT2_TRAVERSAL_AUTO`, `RT2_GPU_PATH_AUTO`), and why, on the
+   * backend that ran the job, as `"<what> <choice>: <why>"` items joined by `"; "`, e.g.
+   * `"GPU traversal ropes++: ...; GPU render path megakernel: ..."` or
+   * `"CPU traversal standard: ..."`. NULL when the caller chose everything or no job ran
+   * yet. Same job and same lifetime as `fallback`: a copy, valid until the next
+   * `rt2_context_info` on this thread.
+   */
+  const char *auto_choice;
 } rt2_context_properties;
 
 /**
@@ -650,8 +660,9 @@ enum rt2_status rt2_context_create(const struct rt2_context_desc *desc, rt2_cont
 void rt2_context_destroy(rt2_context *ctx);
 
 /**
- * Reports the backend tracing runs on and why, and why the last job ran on the CPU instead
- * (`fallback`, NULL when it did not). On failure `*out` is untouched.
+ * Reports the backend tracing runs on and why, why the last job ran on the CPU instead
+ * (`fallback`, NULL when it did not), and what AUTO chose for that job (`auto_choice`). On
+ * failure `*out` is untouched.
  *
  * # Safety
  * `ctx` is a live context; `out` points to an `rt2_context_properties` whose `struct_size` is set.

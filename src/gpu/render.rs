@@ -26,6 +26,15 @@ pub enum GpuPath {
     Wavefront,
 }
 
+impl GpuPath {
+    pub fn name(self) -> &'static str {
+        match self {
+            GpuPath::Megakernel => "megakernel",
+            GpuPath::Wavefront => "wavefront",
+        }
+    }
+}
+
 /// Items of one chunk's wave queue per pixel: a pixel's ray tree may widen (refraction plus
 /// reflection); wider waves make the chunk fall back to the megakernel.
 const QUEUE_PER_PIXEL: u64 = 2;
