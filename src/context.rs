@@ -122,7 +122,7 @@ impl Context {
     /// Why the last job of an AUTO GPU context ran on the CPU instead (`None`: it did not).
     /// The C API reports it as `rt2_context_properties.fallback`.
     pub fn last_fallback(&self) -> Option<String> {
-        self.last_job.lock().ok().and_then(|r| r.fallback.clone())
+        self.last_job().0
     }
 
     /// What the library chose for the last render or query where the caller left the choice
@@ -131,10 +131,7 @@ impl Context {
     /// `None` when the caller chose everything (or no job ran yet). The C API reports it as
     /// `rt2_context_properties.auto_choice`.
     pub fn last_auto_choice(&self) -> Option<String> {
-        self.last_job
-            .lock()
-            .ok()
-            .and_then(|r| r.auto_choice.clone())
+        self.last_job().1
     }
 
     /// [`Context::last_fallback`] and [`Context::last_auto_choice`] of the same job.
