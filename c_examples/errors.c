@@ -77,7 +77,8 @@ int main(int argc, char **argv) {
     props.struct_size = 4;
     expect(rt2_context_info(ctx, &props), RT2_STATUS_INVALID_ARGUMENT, "sizeof(rt2_context_properties)",
            "rt2_context_info(wrong struct_size)");
-    report(props.reason == NULL && props.fallback == NULL && props.threads == 0, "  ... *out untouched", NULL);
+    report(props.reason == NULL && props.fallback == NULL && props.auto_choice == NULL && props.threads == 0,
+           "  ... *out untouched", NULL);
     expect(rt2_context_info(NULL, &props), RT2_STATUS_INVALID_ARGUMENT, "ctx", "rt2_context_info(ctx = NULL)");
 
     rt2_scene *scene = (rt2_scene *)SENTINEL;
@@ -288,9 +289,14 @@ int main(int argc, char **argv) {
     /* A backend asked for by name never falls back: `fallback` is NULL after a render (rt2.h). */
     props.struct_size = sizeof props;
     props.fallback = (const char *)SENTINEL;
+    props.auto_choice = (const char *)SENTINEL;
     expect(rt2_context_info(ctx, &props), RT2_STATUS_OK, NULL, "rt2_context_info after a render");
     report(props.backend != RT2_BACKEND_AUTO && props.reason != NULL && props.fallback == NULL,
            "  ... a backend, a reason, no fallback", props.reason);
+    /* The render left the traversal to AUTO (NULL options): `auto_choice` says which and why. */
+    int written = props.auto_choice != NULL && props.auto_choice != (const char *)SENTINEL;
+    report(written && strstr(props.auto_choice, "traversal standard: ") != NULL, "  ... AUTO's traversal and why",
+           written ? props.auto_choice : NULL);
 
     /* ---- destroy(NULL) is a no-op; the process survives and later calls still work ---- */
     rt2_context_destroy(NULL);

@@ -336,13 +336,24 @@ typedef struct rt2_context_properties {
   /**
    * Why the context's last render or ray query ran on the CPU although `backend` is GPU:
    * an AUTO context whose device could not take that job (the scene or the job exceeds a
-   * device limit such as the largest storage buffer binding, or an option the GPU kernels
-   * lack, e.g. the watertight intersector). NULL when that job ran on `backend`, when no job
+   * device limit such as the largest storage buffer binding, the device ran out of memory
+   * during the job or was lost, or an option the GPU kernels lack, e.g. the watertight
+   * intersector). NULL when that job ran on `backend`, when no job
    * ran yet, and always on a CPU context. With several threads using the context, it is
    * the job that chose its backend last. A copy, valid until the next `rt2_context_info`
    * on this thread.
    */
   const char *fallback;
+  /**
+   * What the library chose for the context's last render or ray query where the caller
+   * left the choice to it (`RT2_TRAVERSAL_AUTO`, `RT2_GPU_PATH_AUTO`), and why, on the
+   * backend that ran the job, as `"<what> <choice>: <why>"` items joined by `"; "`, e.g.
+   * `"GPU traversal ropes++: ...; GPU render path megakernel: ..."` or
+   * `"CPU traversal standard: ..."`. NULL when the caller chose everything or no job ran
+   * yet. Same job and same lifetime as `fallback`: a copy, valid until the next
+   * `rt2_context_info` on this thread.
+   */
+  const char *auto_choice;
 } rt2_context_properties;
 
 /**
@@ -650,8 +661,9 @@ enum rt2_status rt2_context_create(const struct rt2_context_desc *desc, rt2_cont
 void rt2_context_destroy(rt2_context *ctx);
 
 /**
- * Reports the backend tracing runs on and why, and why the last job ran on the CPU instead
- * (`fallback`, NULL when it did not). On failure `*out` is untouched.
+ * Reports the backend tracing runs on and why, why the last job ran on the CPU instead
+ * (`fallback`, NULL when it did not), and what AUTO chose for that job (`auto_choice`). On
+ * failure `*out` is untouched.
  *
  * # Safety
  * `ctx` is a live context; `out` points to an `rt2_context_properties` whose `struct_size` is set.

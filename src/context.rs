@@ -10,7 +10,7 @@ use crate::frame::Frame;
 use crate::geometry::{Hit, Ray, TraversalStats};
 use crate::gpu::{self, Gpu, GpuOptions, GpuResult};
 use crate::precision::{Intersector, OffsetMode};
-use crate::render::RenderOptions;
+use crate::render::{GpuPathRequest, RenderOptions};
 use crate::scene::Committed;
 use std::sync::Mutex;
 
@@ -19,8 +19,8 @@ pub struct Context {
     decision: Decision,
     /// The devices, when tracing runs on the GPU.
     gpu: Option<Gpu>,
-    /// Why the last job of an AUTO context ran on the CPU after all (device limits).
-    fallback: Mutex<Option<String>>,
+    /// Where the last job ran and what AUTO chose for it.
+    last_job: Mutex<JobRecord>,
     /// Declared after `pool`, so dropped after it: waits for the workers to exit.
     _workers: Workers,
 }
@@ -105,7 +105,7 @@ impl Context {
             pool,
             decision,
             gpu,
-            fallback: Mutex::new(None),
+            last_job: Mutex::new(JobRecord::default()),
             _workers: workers,
         })
     }
@@ -122,7 +122,24 @@ impl Context {
     /// Why the last job of an AUTO GPU context ran on the CPU instead (`None`: it did not).
     /// The C API reports it as `rt2_context_properties.fallback`.
     pub fn last_fallback(&self) -> Option<String> {
-        self.fallback.lock().ok().and_then(|f| f.clone())
+        self.last_job().0
+    }
+
+    /// What the library chose for the last render or query where the caller left the choice
+    /// to it (AUTO), and why, on the backend that ran the job: `"GPU traversal ropes++: …;
+    /// GPU render path wavefront: …"`, or `"CPU traversal standard: …"` for a job on the CPU.
+    /// `None` when the caller chose everything (or no job ran yet). The C API reports it as
+    /// `rt2_context_properties.auto_choice`.
+    pub fn last_auto_choice(&self) -> Option<String> {
+        self.last_job().1
+    }
+
+    /// [`Context::last_fallback`] and [`Context::last_auto_choice`] of the same job.
+    pub fn last_job(&self) -> (Option<String>, Option<String>) {
+        self.last_job
+            .lock()
+            .map(|r| (r.fallback.clone(), r.auto_choice.clone()))
+            .unwrap_or_default()
     }
 
     pub fn threads(&self) -> usize {
@@ -134,35 +151,52 @@ impl Context {
         self.pool.install(f)
     }
 
-    /// Runs `job` on the GPU when tracing runs there. `Ok(None)`: the CPU must do the job,
-    /// because the backend is the CPU, or because AUTO chose the GPU and the job exceeds its
-    /// limits (the reason is kept for [`Context::last_fallback`]).
-    /// `unsupported` says why the kernels cannot do this job (a precision mode they lack): an
-    /// AUTO context then runs it on the CPU, a context asked for the GPU fails.
-    fn gpu_job<T>(
+    /// Runs a job on the GPU when tracing runs there, else on the CPU, and records where it
+    /// ran and what AUTO chose for it ([`Context::last_fallback`],
+    /// [`Context::last_auto_choice`]). An AUTO context runs the job on the CPU after all when
+    /// the GPU cannot take it: the job exceeds the device's limits, the device ran out of
+    /// memory or was lost, or `unsupported` says why the kernels cannot do it (a precision mode
+    /// they lack); a context asked for the GPU fails instead. Each closure notes the choices
+    /// it made in [`AutoChoices`]; `out` is what the job writes (either closure may).
+    fn job<O: ?Sized, T>(
         &self,
+        out: &mut O,
         unsupported: Option<&str>,
-        job: impl FnOnce(&Gpu) -> GpuResult<T>,
-    ) -> Result<Option<T>> {
-        let Some(g) = &self.gpu else {
-            return Ok(None);
+        on_gpu: impl FnOnce(&Gpu, &mut O, &mut AutoChoices) -> GpuResult<T>,
+        on_cpu: impl FnOnce(&mut O, &mut AutoChoices) -> T,
+    ) -> Result<T> {
+        let mut choices = AutoChoices::default();
+        let mut fallback = None;
+        let result = match &self.gpu {
+            None => Ok(None),
+            Some(g) => match unsupported {
+                Some(why) if self.decision.auto => Err(gpu::GpuError::Limits(why.to_string())),
+                Some(why) => Err(gpu::GpuError::Other(Error::unsupported(format!(
+                    "the GPU backend: {why}"
+                )))),
+                None => on_gpu(g, out, &mut choices).map(Some),
+            },
         };
-        let result = match unsupported {
-            Some(why) if self.decision.auto => Err(gpu::GpuError::Limits(why.to_string())),
-            Some(why) => return Err(Error::unsupported(format!("the GPU backend: {why}"))),
-            None => job(g),
+        let result = match result {
+            Ok(Some(v)) => Ok(v),
+            Ok(None) => Ok(on_cpu(out, &mut choices)),
+            Err(e) => match e.fallback_reason() {
+                Some(why) if self.decision.auto => {
+                    fallback = Some(format!("{why}, so this job ran on the CPU"));
+                    // What was chosen for the GPU did not run.
+                    choices = AutoChoices::default();
+                    Ok(on_cpu(out, &mut choices))
+                }
+                _ => Err(e.into_error()),
+            },
         };
-        let (out, why) = match result {
-            Ok(v) => (Ok(Some(v)), None),
-            Err(gpu::GpuError::Limits(why)) if self.decision.auto => {
-                (Ok(None), Some(format!("{why}, so this job ran on the CPU")))
-            }
-            Err(e) => (Err(e.into_error()), None),
-        };
-        if let Ok(mut f) = self.fallback.lock() {
-            *f = why;
+        if let Ok(mut r) = self.last_job.lock() {
+            *r = JobRecord {
+                fallback,
+                auto_choice: choices.report(),
+            };
         }
-        out
+        result
     }
 
     pub fn render(
@@ -173,16 +207,33 @@ impl Context {
         frame: &mut Frame,
     ) -> Result<()> {
         cpu::whitted::check_schedule(opts)?;
-        let done = self.gpu_job(gpu_lacks(opts.intersector, opts.offset_mode), |g| {
-            let (traversal, _) = dispatch::choose_gpu_traversal(scene, opts.traversal);
-            let (path, _) = dispatch::choose_gpu_path(scene, opts);
-            gpu::render(g, scene, camera, opts, traversal, path, frame)
-        })?;
-        if done.is_none() {
-            let (traversal, _why) = dispatch::choose_traversal(scene, opts.traversal);
-            self.install(|| cpu::whitted::render(scene, camera, opts, traversal, frame));
-        }
-        Ok(())
+        self.job(
+            frame,
+            gpu_lacks(opts.intersector, opts.offset_mode),
+            |g, frame, choices| {
+                let (traversal, why) = dispatch::choose_gpu_traversal(scene, opts.traversal);
+                choices.note(
+                    opts.traversal.is_none(),
+                    "GPU traversal",
+                    traversal.name(),
+                    why,
+                );
+                let (path, why) = dispatch::choose_gpu_path(scene, opts);
+                let auto = opts.gpu_path == GpuPathRequest::Auto;
+                choices.note(auto, "GPU render path", path.name(), &why);
+                gpu::render(g, scene, camera, opts, traversal, path, frame)
+            },
+            |frame, choices| {
+                let (traversal, why) = dispatch::choose_traversal(scene, opts.traversal);
+                choices.note(
+                    opts.traversal.is_none(),
+                    "CPU traversal",
+                    traversal.name(),
+                    why,
+                );
+                self.install(|| cpu::whitted::render(scene, camera, opts, traversal, frame))
+            },
+        )
     }
 
     /// Closest hits of a batch of rays; the traversal is the caller's or AUTO's choice.
@@ -194,15 +245,18 @@ impl Context {
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
         check_query(q)?;
-        let on_gpu = self.gpu_job(gpu_lacks(q.intersector, OffsetMode::Epsilon), |g| {
-            let (how, _) = dispatch::choose_gpu_traversal(scene, q.traversal);
-            gpu::intersect(g, scene, rays, hits, how, q.short_stack_size)
-        })?;
-        if let Some(stats) = on_gpu {
-            return Ok(stats);
-        }
-        let (how, opts) = self.query_setup(scene, q);
-        Ok(self.install(|| cpu::query::intersect(scene, rays, hits, how, &opts, q.mode)))
+        self.job(
+            hits,
+            gpu_lacks(q.intersector, OffsetMode::Epsilon),
+            |g, hits, choices| {
+                let how = gpu_query_traversal(scene, q, choices);
+                gpu::intersect(g, scene, rays, hits, how, q.short_stack_size)
+            },
+            |hits, choices| {
+                let (how, opts) = self.query_setup(scene, q, choices);
+                self.install(|| cpu::query::intersect(scene, rays, hits, how, &opts, q.mode))
+            },
+        )
     }
 
     /// Any-hit queries for a batch of rays.
@@ -214,22 +268,28 @@ impl Context {
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
         check_query(q)?;
-        let on_gpu = self.gpu_job(gpu_lacks(q.intersector, OffsetMode::Epsilon), |g| {
-            let (how, _) = dispatch::choose_gpu_traversal(scene, q.traversal);
-            gpu::occluded(g, scene, rays, out, how, q.short_stack_size)
-        })?;
-        if let Some(stats) = on_gpu {
-            return Ok(stats);
-        }
-        let (how, opts) = self.query_setup(scene, q);
-        Ok(self.install(|| cpu::query::occluded(scene, rays, out, how, &opts, q.mode)))
+        self.job(
+            out,
+            gpu_lacks(q.intersector, OffsetMode::Epsilon),
+            |g, out, choices| {
+                let how = gpu_query_traversal(scene, q, choices);
+                gpu::occluded(g, scene, rays, out, how, q.short_stack_size)
+            },
+            |out, choices| {
+                let (how, opts) = self.query_setup(scene, q, choices);
+                self.install(|| cpu::query::occluded(scene, rays, out, how, &opts, q.mode))
+            },
+        )
     }
+
     fn query_setup(
         &self,
         scene: &Committed,
         q: &QueryOptions,
+        choices: &mut AutoChoices,
     ) -> (crate::cpu::traverse::Traversal, TraverseOptions) {
-        let (how, _why) = dispatch::choose_traversal(scene, q.traversal);
+        let (how, why) = dispatch::choose_traversal(scene, q.traversal);
+        choices.note(q.traversal.is_none(), "CPU traversal", how.name(), why);
         (
             how,
             TraverseOptions {
@@ -238,6 +298,40 @@ impl Context {
                 ..TraverseOptions::default()
             },
         )
+    }
+}
+
+fn gpu_query_traversal(
+    scene: &Committed,
+    q: &QueryOptions,
+    choices: &mut AutoChoices,
+) -> crate::cpu::traverse::Traversal {
+    let (how, why) = dispatch::choose_gpu_traversal(scene, q.traversal);
+    choices.note(q.traversal.is_none(), "GPU traversal", how.name(), why);
+    how
+}
+
+/// What the last job left for `rt2_context_info`; one lock, so both belong to the same job.
+#[derive(Clone, Debug, Default)]
+struct JobRecord {
+    fallback: Option<String>,
+    auto_choice: Option<String>,
+}
+
+/// The choices a job left to AUTO, each with its reason.
+#[derive(Default)]
+struct AutoChoices(Vec<String>);
+
+impl AutoChoices {
+    /// Notes `what` = `name` because of `why`, if AUTO chose it (`auto`).
+    fn note(&mut self, auto: bool, what: &str, name: &str, why: &str) {
+        if auto {
+            self.0.push(format!("{what} {name}: {why}"));
+        }
+    }
+
+    fn report(self) -> Option<String> {
+        (!self.0.is_empty()).then(|| self.0.join("; "))
     }
 }
 

@@ -121,16 +121,17 @@ pub fn choose_gpu_traversal(
         // visits the fewest nodes (thesis table 1); a 64-entry private stack fits a thread.
         None => (
             Traversal::Standard,
-            "the tree has no ropes: standard visits the fewest nodes of the stack methods",
+            "the tree has no ropes, and standard visits the fewest nodes of the stack methods \
+             (thesis table 1)",
         ),
     }
 }
 
 /// The render path AUTO picks on the GPU (thesis §3.3), and why.
-pub fn choose_gpu_path(scene: &Committed, opts: &RenderOptions) -> (GpuPath, &'static str) {
+pub fn choose_gpu_path(scene: &Committed, opts: &RenderOptions) -> (GpuPath, String) {
     match opts.gpu_path {
-        GpuPathRequest::Megakernel => (GpuPath::Megakernel, "requested by the caller"),
-        GpuPathRequest::Wavefront => (GpuPath::Wavefront, "requested by the caller"),
+        GpuPathRequest::Megakernel => (GpuPath::Megakernel, "requested by the caller".into()),
+        GpuPathRequest::Wavefront => (GpuPath::Wavefront, "requested by the caller".into()),
         GpuPathRequest::Auto => {
             // Thesis: the megakernel for primary rays with few reflections; one kernel per
             // bounce, with compaction, pays off when most objects spawn secondary rays.
@@ -142,13 +143,28 @@ pub fn choose_gpu_path(scene: &Committed, opts: &RenderOptions) -> (GpuPath, &'s
                     m.reflectivity > 0.0 || m.transparency > 0.0
                 })
                 .count();
-            if opts.max_depth > 1 && 2 * secondary >= scene.origins.len().max(1) {
+            let total = scene.origins.len();
+            if opts.max_depth <= 1 {
+                (
+                    GpuPath::Megakernel,
+                    format!("max_depth {} spawns no secondary rays", opts.max_depth),
+                )
+            } else if 2 * secondary >= total.max(1) {
                 (
                     GpuPath::Wavefront,
-                    "most primitives reflect or transmit: wavefront",
+                    format!(
+                        "{secondary} of {total} primitives reflect or transmit, so most rays \
+                         spawn secondary rays (thesis §3.3)"
+                    ),
                 )
             } else {
-                (GpuPath::Megakernel, "few secondary rays: megakernel")
+                (
+                    GpuPath::Megakernel,
+                    format!(
+                        "{secondary} of {total} primitives reflect or transmit, so few rays \
+                         spawn secondary rays (thesis §3.3)"
+                    ),
+                )
             }
         }
     }
@@ -166,7 +182,8 @@ pub fn choose_traversal(
         // about 3x the tree memory.
         None => (
             Traversal::Standard,
-            "the CPU has a cheap stack: standard visits the fewest nodes and needs no ropes",
+            "a CPU's stack is cheap, and standard visits the fewest nodes (thesis table 1) \
+             and needs no ropes",
         ),
     }
 }
@@ -205,6 +222,8 @@ mod tests {
         assert!(opts.max_depth > 1);
         let path = |s: &Scene, o: &RenderOptions| choose_gpu_path(s.committed().unwrap(), o).0;
         assert_eq!(path(&spheres(4, 2), &opts), GpuPath::Wavefront);
+        let why = choose_gpu_path(spheres(4, 1).committed().unwrap(), &opts).1;
+        assert!(why.starts_with("1 of 4 primitives reflect"), "{why}");
         assert_eq!(path(&spheres(4, 1), &opts), GpuPath::Megakernel);
         let casting = RenderOptions {
             max_depth: 1,

@@ -566,24 +566,156 @@ fn auto_falls_back_to_the_cpu_beyond_device_limits() {
     );
 }
 
-/// `rt2_context_properties.fallback` of `ctx` as a string (`None`: NULL), after checking that
-/// the backend is the GPU.
-fn c_fallback(ctx: *const rt2::api::rt2_context) -> Option<String> {
+/// An AUTO context whose device runs out of memory during a job (wgpu's out-of-memory error,
+/// injected where a driver reports it) runs that job on the CPU, says why, and gives the
+/// CPU's answer; the failed upload is not taken for the scene, so the next job re-sends it
+/// and runs on the GPU. Asked for by name, the GPU fails the job with `OUT_OF_MEMORY`.
+#[test]
+fn auto_runs_a_job_on_the_cpu_when_the_device_runs_out_of_memory() {
+    use rt2::gpu::InjectedFault;
+    if gpu(GpuOptions::default()).is_none() || std::env::var_os("RT2_BACKEND").is_some() {
+        return;
+    }
+    let opts = GpuOptions {
+        auto_accepts_software: true,
+        ..GpuOptions::default()
+    };
+    let auto = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
+    assert_eq!(auto.decision().backend, Backend::Gpu);
+    let dev = &auto.gpu().unwrap().devices[0];
+    let mut b = builtin::by_name("spheres3").unwrap();
+    let mut scene = std::mem::take(&mut b.scene);
+    scene.commit().unwrap();
+    let o = RenderOptions::default();
+    let want = render(&cpu(), &mut scene, &b, &o, 40, 30);
+
+    dev.inject_fault(InjectedFault::OutOfMemory);
+    let got = render(&auto, &mut scene, &b, &o, 40, 30);
+    let why = auto
+        .last_fallback()
+        .expect("the render ran on the CPU: a reason");
+    println!("fallback after out of memory: {why}");
+    assert!(
+        why.contains("ran out of memory") && why.contains(&dev.name) && why.ends_with("CPU"),
+        "{why}"
+    );
+    assert!(got == want, "the fallback render is the CPU's");
+    render(&auto, &mut scene, &b, &o, 40, 30);
+    assert_eq!(auto.last_fallback(), None, "out of memory passes");
+    assert_eq!(
+        dev.last_uploads().len(),
+        13,
+        "the failed upload was dropped"
+    );
+
+    // A query whose read-back sees the error (the scene is already there) falls back too.
+    let rays: Vec<Ray> = (0..64)
+        .map(|i| {
+            let to = b.camera.target - b.camera.eye + Vec3::X * (i as f32 / 8.0 - 4.0);
+            Ray::new(b.camera.eye, to.normalize(), 0.0, f32::INFINITY)
+        })
+        .collect();
+    let c = scene.committed().unwrap();
+    let mut want_hits = vec![Hit::MISS; rays.len()];
+    cpu()
+        .intersect(c, &rays, &mut want_hits, &QueryOptions::default())
+        .unwrap();
+    dev.inject_fault(InjectedFault::OutOfMemory);
+    let mut hits = vec![Hit::MISS; rays.len()];
+    auto.intersect(c, &rays, &mut hits, &QueryOptions::default())
+        .unwrap();
+    assert!(auto
+        .last_fallback()
+        .is_some_and(|w| w.contains("ran out of memory")));
+    assert_eq!(hits, want_hits);
+
+    let explicit = Context::with_gpu_options(BackendRequest::Gpu, 2, &opts).unwrap();
+    explicit.gpu().unwrap().devices[0].inject_fault(InjectedFault::OutOfMemory);
+    let mut f = Frame::new(40, 30).unwrap();
+    let e = explicit.render(c, &b.camera, &o, &mut f).unwrap_err();
+    assert_eq!(e.status, Rt2Status::OutOfMemory, "{}", e.message);
+    assert!(e.message.contains("ran out of memory"), "{}", e.message);
+    assert_eq!(
+        explicit.last_fallback(),
+        None,
+        "a named backend never falls back"
+    );
+    assert!(
+        f == Frame::new(40, 30).unwrap(),
+        "a failed frame is left alone"
+    );
+}
+
+/// An AUTO context whose device is lost runs every later job on the CPU and says why; asked
+/// for by name, the GPU fails with `BACKEND_UNAVAILABLE`. The loss is real:
+/// `wgpu::Device::destroy`, which wgpu reports through the device-lost callback.
+#[test]
+fn auto_runs_jobs_on_the_cpu_once_the_device_is_lost() {
+    use rt2::gpu::InjectedFault;
+    if gpu(GpuOptions::default()).is_none() || std::env::var_os("RT2_BACKEND").is_some() {
+        return;
+    }
+    let opts = GpuOptions {
+        auto_accepts_software: true,
+        ..GpuOptions::default()
+    };
+    let auto = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
+    let mut b = builtin::by_name("spheres3").unwrap();
+    let mut scene = std::mem::take(&mut b.scene);
+    scene.commit().unwrap();
+    let o = RenderOptions::default();
+    render(&auto, &mut scene, &b, &o, 40, 30);
+    assert_eq!(auto.last_fallback(), None, "the device works before");
+    auto.gpu().unwrap().devices[0].inject_fault(InjectedFault::Lost);
+    let want = render(&cpu(), &mut scene, &b, &o, 40, 30);
+    for _ in 0..2 {
+        let got = render(&auto, &mut scene, &b, &o, 40, 30);
+        let why = auto
+            .last_fallback()
+            .expect("the render ran on the CPU: a reason");
+        println!("fallback on a lost device: {why}");
+        assert!(why.contains("was lost") && why.ends_with("CPU"), "{why}");
+        assert!(got == want, "the fallback render is the CPU's");
+    }
+
+    let explicit = Context::with_gpu_options(BackendRequest::Gpu, 2, &opts).unwrap();
+    explicit.gpu().unwrap().devices[0].inject_fault(InjectedFault::Lost);
+    let mut f = Frame::new(40, 30).unwrap();
+    let e = explicit
+        .render(scene.committed().unwrap(), &b.camera, &o, &mut f)
+        .unwrap_err();
+    assert_eq!(e.status, Rt2Status::BackendUnavailable, "{}", e.message);
+    assert!(e.message.contains("was lost"), "{}", e.message);
+}
+
+/// `rt2_context_properties.fallback` and `.auto_choice` of `ctx` as strings (`None`: NULL),
+/// after checking that the backend is the GPU.
+fn c_last_job(ctx: *const rt2::api::rt2_context) -> (Option<String>, Option<String>) {
     use rt2::api::*;
+    let sentinel = c"not written".as_ptr();
     let mut p = rt2_context_properties {
         struct_size: std::mem::size_of::<rt2_context_properties>() as u32,
         backend: 99,
         threads: 0,
         reason: std::ptr::null(),
-        fallback: std::ptr::null(),
+        fallback: sentinel,
+        auto_choice: sentinel,
     };
     assert_eq!(unsafe { rt2_context_info(ctx, &mut p) }, Rt2Status::Ok);
     assert_eq!(p.backend, Rt2Backend::Gpu as u32);
-    (!p.fallback.is_null()).then(|| {
-        unsafe { std::ffi::CStr::from_ptr(p.fallback) }
-            .to_string_lossy()
-            .into_owned()
-    })
+    let text = |s: *const std::ffi::c_char| {
+        (!s.is_null()).then(|| {
+            unsafe { std::ffi::CStr::from_ptr(s) }
+                .to_string_lossy()
+                .into_owned()
+        })
+    };
+    (text(p.fallback), text(p.auto_choice))
+}
+
+/// `rt2_context_properties.fallback` of `ctx` (see [`c_last_job`]).
+fn c_fallback(ctx: *const rt2::api::rt2_context) -> Option<String> {
+    c_last_job(ctx).0
 }
 
 /// An AUTO context on the GPU reports through `rt2_context_info` why one render or query ran
@@ -630,8 +762,12 @@ fn c_api_reports_why_a_job_ran_on_the_cpu() {
             rt2_render(small, scene, camera, null(), frame),
             Rt2Status::Ok
         );
-        let why = c_fallback(small).expect("the render ran on the CPU: a reason");
+        let (why, choice) = c_last_job(small);
+        let why = why.expect("the render ran on the CPU: a reason");
         println!("fallback after the render: {why}");
+        // AUTO's choice is the CPU's traversal: the GPU's never ran.
+        let choice = choice.expect("the traversal was left to AUTO");
+        assert!(choice.starts_with("CPU traversal standard: "), "{choice}");
         assert!(
             why.contains("storage binding") && why.contains("1024 bytes") && why.contains("CPU"),
             "{why}"
@@ -684,7 +820,28 @@ fn c_api_reports_why_a_job_ran_on_the_cpu() {
         // The small context's record is its own.
         assert!(c_fallback(small).is_some_and(|w| w.contains("1024 bytes")));
         let on_gpu = query(roomy, Rt2Intersector::MollerTrumbore);
-        assert_eq!(c_fallback(roomy), None, "the query ran on the GPU");
+        let (why, choice) = c_last_job(roomy);
+        assert_eq!(why, None, "the query ran on the GPU");
+        let choice = choice.expect("the traversal was left to AUTO");
+        println!("auto_choice of a GPU query: {choice}");
+        assert!(
+            choice.starts_with("GPU traversal standard: the tree has no ropes"),
+            "{choice}"
+        );
+        // A device out of memory is reported the same way.
+        let oom = {
+            let opts = GpuOptions {
+                auto_accepts_software: true,
+                ..GpuOptions::default()
+            };
+            let c = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
+            c.gpu().unwrap().devices[0].inject_fault(rt2::gpu::InjectedFault::OutOfMemory);
+            rt2_context::from_context(c)
+        };
+        query(oom, Rt2Intersector::MollerTrumbore);
+        let why = c_fallback(oom).expect("the query ran on the CPU: a reason");
+        assert!(why.contains("ran out of memory"), "{why}");
+        rt2_context_destroy(oom);
         let objects = |h: &[rt2_hit]| h.iter().map(|h| h.object).collect::<Vec<_>>();
         assert_eq!(objects(&on_cpu), objects(&on_gpu));
 
@@ -694,6 +851,113 @@ fn c_api_reports_why_a_job_ran_on_the_cpu() {
         rt2_context_destroy(small);
         rt2_context_destroy(roomy);
     }
+}
+
+/// `Context::last_auto_choice` says what AUTO chose for the last job, and why: the GPU
+/// traversal (ropes++ once the tree has ropes) and render path (wavefront when most
+/// primitives reflect) for a job on the GPU, the CPU traversal for one that fell back, only
+/// what the caller left to AUTO, and nothing when the caller chose everything.
+#[test]
+fn auto_choices_are_reported_for_the_last_job() {
+    if gpu(GpuOptions::default()).is_none() || std::env::var_os("RT2_BACKEND").is_some() {
+        return;
+    }
+    let opts = GpuOptions {
+        auto_accepts_software: true,
+        ..GpuOptions::default()
+    };
+    let auto = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
+    assert_eq!(auto.last_auto_choice(), None, "no job ran yet");
+    // Two mirrors among four spheres: half the primitives spawn secondary rays.
+    let mut s = Scene::new();
+    let matte = s.add_material(Material::default()).unwrap();
+    let mirror = s
+        .add_material(Material {
+            reflectivity: 0.5,
+            ..Material::default()
+        })
+        .unwrap();
+    for i in 0..4 {
+        let shape = Shape::Sphere {
+            center: Vec3::new(3.0 * i as f32 - 4.5, 0.0, -10.0),
+            radius: 1.0,
+        };
+        s.add_object(shape, if i < 2 { mirror } else { matte })
+            .unwrap();
+    }
+    s.add_light(PointLight {
+        position: Vec3::splat(5.0),
+        color: Vec3::ONE,
+        intensity: 1.0,
+    })
+    .unwrap();
+    s.commit().unwrap();
+    let cam = rt2::camera::Camera::default();
+    let draw = |ctx: &Context, s: &Scene, o: &RenderOptions| {
+        let mut f = Frame::new(16, 16).unwrap();
+        ctx.render(s.committed().unwrap(), &cam, o, &mut f).unwrap();
+        ctx.last_auto_choice()
+    };
+    let o = RenderOptions::default();
+    let choice = draw(&auto, &s, &o).expect("AUTO chose the traversal and the path");
+    println!("auto_choice of a GPU render: {choice}");
+    assert!(
+        choice.starts_with("GPU traversal standard: the tree has no ropes")
+            && choice.contains("; GPU render path wavefront: 2 of 4 primitives reflect"),
+        "{choice}"
+    );
+    s.ensure_ropes().unwrap();
+    let choice = draw(&auto, &s, &o).unwrap();
+    assert!(choice.starts_with("GPU traversal ropes++: "), "{choice}");
+    let casting = RenderOptions { max_depth: 1, ..o };
+    let choice = draw(&auto, &s, &casting).unwrap();
+    assert!(
+        choice.contains("GPU render path megakernel: max_depth 1"),
+        "{choice}"
+    );
+
+    // Only what the caller left to AUTO is reported.
+    let traversal_fixed = RenderOptions {
+        traversal: Some(Traversal::KdRestart),
+        ..o
+    };
+    let choice = draw(&auto, &s, &traversal_fixed).unwrap();
+    assert!(
+        choice.starts_with("GPU render path wavefront: ") && !choice.contains("traversal"),
+        "{choice}"
+    );
+    let all_fixed = RenderOptions {
+        gpu_path: GpuPathRequest::Megakernel,
+        ..traversal_fixed
+    };
+    assert_eq!(
+        draw(&auto, &s, &all_fixed),
+        None,
+        "the caller chose everything"
+    );
+
+    // A query reports the traversal only; one that falls back reports the CPU's choice.
+    let c = s.committed().unwrap();
+    let rays = [Ray::new(Vec3::ZERO, -Vec3::Z, 0.0, f32::INFINITY)];
+    let mut hits = [Hit::MISS];
+    auto.intersect(c, &rays, &mut hits, &QueryOptions::default())
+        .unwrap();
+    let choice = auto.last_auto_choice().unwrap();
+    assert!(
+        choice.starts_with("GPU traversal ropes++: ") && !choice.contains(";"),
+        "{choice}"
+    );
+    let watertight = QueryOptions {
+        intersector: rt2::precision::Intersector::Watertight,
+        ..QueryOptions::default()
+    };
+    let mut occ = [false];
+    auto.occluded(c, &rays, &mut occ, &watertight).unwrap();
+    assert!(auto.last_fallback().is_some());
+    let choice = auto.last_auto_choice().unwrap();
+    println!("auto_choice of a query that fell back: {choice}");
+    assert!(choice.starts_with("CPU traversal standard: "), "{choice}");
+    assert!(draw(&cpu(), &s, &o).is_some_and(|c| c.starts_with("CPU traversal standard: ")));
 }
 
 /// A commit re-sends only the arrays whose bytes changed; a render of the same commit

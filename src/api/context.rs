@@ -1,7 +1,7 @@
 //! `rt2_context`: the thread pool and backend choice. Thread-safe: any number of threads may
 //! use one context at once. Scenes keep their context alive, so destroy order is free.
-//! `rt2_context_info` reports the backend, why it was chosen, and why the last job ran on
-//! the CPU after all when an AUTO context's GPU could not take it.
+//! `rt2_context_info` reports the backend, why it was chosen, why the last job ran on the CPU
+//! after all when an AUTO context's GPU could not take it, and what AUTO chose for that job.
 
 use super::ffi::{check_out, check_struct_size, destroy, guard, handle, write_out, Handle};
 use super::options::{backend_from, rt2_context_desc, Rt2Backend};
@@ -13,9 +13,10 @@ use std::ffi::{c_char, CString};
 use std::sync::Arc;
 
 thread_local! {
-    /// This thread's copy of the fallback reason that `rt2_context_info` last returned. A copy,
-    /// because the context's own record changes with every job of any thread.
-    static FALLBACK: RefCell<Option<CString>> = const { RefCell::new(None) };
+    /// This thread's copies of the fallback reason and AUTO's choices that `rt2_context_info`
+    /// last returned. Copies, because the context's own record changes with every job of any
+    /// thread.
+    static LAST_JOB: RefCell<[Option<CString>; 2]> = const { RefCell::new([None, None]) };
 }
 
 /// Opaque context handle. Create with `rt2_context_create`, free with `rt2_context_destroy`.
@@ -49,12 +50,21 @@ pub struct rt2_context_properties {
     pub reason: *const c_char,
     /// Why the context's last render or ray query ran on the CPU although `backend` is GPU:
     /// an AUTO context whose device could not take that job (the scene or the job exceeds a
-    /// device limit such as the largest storage buffer binding, or an option the GPU kernels
-    /// lack, e.g. the watertight intersector). NULL when that job ran on `backend`, when no job
+    /// device limit such as the largest storage buffer binding, the device ran out of memory
+    /// during the job or was lost, or an option the GPU kernels lack, e.g. the watertight
+    /// intersector). NULL when that job ran on `backend`, when no job
     /// ran yet, and always on a CPU context. With several threads using the context, it is
     /// the job that chose its backend last. A copy, valid until the next `rt2_context_info`
     /// on this thread.
     pub fallback: *const c_char,
+    /// What the library chose for the context's last render or ray query where the caller
+    /// left the choice to it (`RT2_TRAVERSAL_AUTO`, `RT2_GPU_PATH_AUTO`), and why, on the
+    /// backend that ran the job, as `"<what> <choice>: <why>"` items joined by `"; "`, e.g.
+    /// `"GPU traversal ropes++: ...; GPU render path megakernel: ..."` or
+    /// `"CPU traversal standard: ..."`. NULL when the caller chose everything or no job ran
+    /// yet. Same job and same lifetime as `fallback`: a copy, valid until the next
+    /// `rt2_context_info` on this thread.
+    pub auto_choice: *const c_char,
 }
 
 /// Creates a context. `desc` may be NULL for the defaults. On failure `*out` is untouched.
@@ -104,8 +114,9 @@ pub unsafe extern "C" fn rt2_context_destroy(ctx: *mut rt2_context) {
     });
 }
 
-/// Reports the backend tracing runs on and why, and why the last job ran on the CPU instead
-/// (`fallback`, NULL when it did not). On failure `*out` is untouched.
+/// Reports the backend tracing runs on and why, why the last job ran on the CPU instead
+/// (`fallback`, NULL when it did not), and what AUTO chose for that job (`auto_choice`). On
+/// failure `*out` is untouched.
 ///
 /// # Safety
 /// `ctx` is a live context; `out` points to an `rt2_context_properties` whose `struct_size` is set.
@@ -122,15 +133,17 @@ pub unsafe extern "C" fn rt2_context_info(
             Backend::Cpu => Rt2Backend::Cpu,
             Backend::Gpu => Rt2Backend::Gpu,
         };
-        let fallback = c
-            .inner
-            .last_fallback()
-            .map(|f| CString::new(f.replace('\0', "")).unwrap_or_default());
-        // Every check passed: only now is the pointer of the previous call replaced.
-        let fallback = FALLBACK.with(|cell| {
-            let mut slot = cell.borrow_mut();
-            *slot = fallback;
-            slot.as_ref().map_or(std::ptr::null(), |f| f.as_ptr())
+        let c_string =
+            |s: Option<String>| s.map(|s| CString::new(s.replace('\0', "")).unwrap_or_default());
+        let (fallback, auto_choice) = c.inner.last_job();
+        let copies = [c_string(fallback), c_string(auto_choice)];
+        // Every check passed: only now are the pointers of the previous call replaced.
+        let [fallback, auto_choice] = LAST_JOB.with(|cell| {
+            let mut slots = cell.borrow_mut();
+            *slots = copies;
+            slots
+                .each_ref()
+                .map(|s| s.as_ref().map_or(std::ptr::null(), |s| s.as_ptr()))
         });
         write_out(
             out,
@@ -141,6 +154,7 @@ pub unsafe extern "C" fn rt2_context_info(
                 threads: c.inner.threads() as u32,
                 reason: c.reason.as_ptr(),
                 fallback,
+                auto_choice,
             },
         )
     })

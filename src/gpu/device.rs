@@ -2,7 +2,8 @@
 //! honoured), adapter choice (discrete first; `RT2_ADAPTER` picks by name), limits read from
 //! the adapter and respected, and the small helpers every job uses (buffers, dispatch sizes,
 //! read-back). wgpu reports errors outside error scopes through a handler that panics by
-//! default; each device records them instead, and every job checks the record.
+//! default; each device records them instead (out of memory apart from the rest, and a lost
+//! device through its own callback), and every job checks the record.
 
 use super::kernels::{self, Program};
 use super::scene::SceneCache;
@@ -11,7 +12,6 @@ use crate::cpu::traverse::Traversal;
 use crate::error::{Error, Result, Rt2Status};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
-use wgpu::util::DeviceExt;
 
 /// How the GPU backend picks and uses adapters.
 #[derive(Clone, Debug, Default)]
@@ -69,11 +69,46 @@ pub struct Device {
     pub(crate) layouts: Layouts,
     pipelines: Mutex<HashMap<(Traversal, Program), Pipelines>>,
     scan: Mutex<Option<Pipelines>>,
-    /// Errors wgpu reported outside error scopes since the last check.
-    errors: Arc<Mutex<Vec<String>>>,
+    /// What wgpu reported outside error scopes since the last check.
+    faults: Arc<Mutex<Faults>>,
     /// The committed scene as uploaded; one job at a time uses a device.
     pub(crate) scene: Mutex<SceneCache>,
     max_binding_override: Option<u64>,
+}
+
+/// What wgpu's callbacks reported about a device since the last [`Device::check`].
+#[derive(Default)]
+struct Faults {
+    /// Error messages, in order.
+    errors: Vec<String>,
+    /// Whether one of them was an out-of-memory error (the rest are often its consequences:
+    /// a bind group of a buffer that was never allocated).
+    out_of_memory: bool,
+    /// Why the device was lost; a lost device stays lost.
+    lost: Option<String>,
+}
+
+impl Faults {
+    fn record(&mut self, e: wgpu::Error) {
+        match e {
+            // Its Display is only "Out of Memory"; the source says which allocation failed.
+            wgpu::Error::OutOfMemory { source } => {
+                self.out_of_memory = true;
+                self.errors.push(source.to_string());
+            }
+            e => self.errors.push(e.to_string()),
+        }
+    }
+}
+
+/// A fault injected by [`Device::inject_fault`], as a driver would report it.
+#[doc(hidden)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InjectedFault {
+    /// An allocation fails: wgpu reports `Error::OutOfMemory` to the device's handler.
+    OutOfMemory,
+    /// The device is lost: `wgpu::Device::destroy`, after which wgpu calls the lost callback.
+    Lost,
 }
 
 /// The devices of a context.
@@ -141,22 +176,51 @@ pub fn open(opts: &GpuOptions, accept_software: bool) -> std::result::Result<Gpu
     } else {
         adapters.iter().collect()
     };
-    let mut devices = Vec::new();
-    for a in chosen {
-        devices.push(open_device(a, opts)?);
+    let results = chosen
+        .into_iter()
+        .map(|a| open_device(a, opts).map(|d| (a.get_info(), d)))
+        .collect();
+    let (opened, failed) = keep_opened(results)?;
+    let info = opened[0].0.clone();
+    let devices: Vec<Device> = opened.into_iter().map(|(_, d)| d).collect();
+    let mut description = format!(
+        "{} x{} ({:?}, {:?})",
+        info.name,
+        devices.len(),
+        info.device_type,
+        info.backend
+    );
+    if !failed.is_empty() {
+        description += &format!("; skipped: {}", failed.join("; "));
     }
-    let info = adapters[0].get_info();
     Ok(Gpu {
-        description: format!(
-            "{} x{} ({:?}, {:?})",
-            info.name,
-            devices.len(),
-            info.device_type,
-            info.backend
-        ),
+        description,
         software: best == wgpu::DeviceType::Cpu,
         devices,
     })
+}
+
+/// Splits the outcome of opening each chosen adapter into the devices that opened and the
+/// reasons of those that did not: one adapter refusing a device (a driver fault, limits too
+/// small) does not keep the others from tracing. `Err`, with every reason, when none opened.
+fn keep_opened<T>(
+    results: Vec<std::result::Result<T, String>>,
+) -> std::result::Result<(Vec<T>, Vec<String>), String> {
+    let (mut opened, mut failed) = (Vec::new(), Vec::new());
+    for r in results {
+        match r {
+            Ok(d) => opened.push(d),
+            Err(why) => failed.push(why),
+        }
+    }
+    if opened.is_empty() {
+        return Err(if failed.is_empty() {
+            "no adapter was left to open".into()
+        } else {
+            format!("no adapter opened a device: {}", failed.join("; "))
+        });
+    }
+    Ok((opened, failed))
 }
 
 fn open_device(adapter: &wgpu::Adapter, opts: &GpuOptions) -> std::result::Result<Device, String> {
@@ -178,13 +242,24 @@ fn open_device(adapter: &wgpu::Adapter, opts: &GpuOptions) -> std::result::Resul
         ..Default::default()
     }))
     .map_err(|e| format!("adapter {} refused a device: {e}", info.name))?;
-    let errors = Arc::new(Mutex::new(Vec::new()));
-    let sink = errors.clone();
+    let faults = Arc::new(Mutex::new(Faults::default()));
+    let sink = faults.clone();
     device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
-        if let Ok(mut v) = sink.lock() {
-            v.push(e.to_string());
+        if let Ok(mut f) = sink.lock() {
+            f.record(e);
         }
     }));
+    // wgpu reports a lost device only here, never to the error handler.
+    let sink = faults.clone();
+    device.set_device_lost_callback(move |reason, msg| {
+        if let Ok(mut f) = sink.lock() {
+            f.lost = Some(match reason {
+                wgpu::DeviceLostReason::Destroyed => "destroyed".to_string(),
+                wgpu::DeviceLostReason::Unknown if msg.is_empty() => "no reason given".into(),
+                wgpu::DeviceLostReason::Unknown => msg,
+            });
+        }
+    });
     let layouts = make_layouts(&device);
     Ok(Device {
         name: info.name,
@@ -194,7 +269,7 @@ fn open_device(adapter: &wgpu::Adapter, opts: &GpuOptions) -> std::result::Resul
         layouts,
         pipelines: Mutex::new(HashMap::new()),
         scan: Mutex::new(None),
-        errors,
+        faults,
         scene: Mutex::new(SceneCache::default()),
         max_binding_override: opts.max_binding_override,
     })
@@ -378,29 +453,32 @@ impl Device {
         bytes: &[u8],
         extra: wgpu::BufferUsages,
     ) -> wgpu::Buffer {
-        let mut padded;
-        let contents = if bytes.len() < 64 {
-            padded = bytes.to_vec();
-            padded.resize(64, 0);
-            &padded[..]
-        } else {
-            bytes
-        };
-        self.device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE | extra,
-            })
+        self.buffer_with(label, bytes, wgpu::BufferUsages::STORAGE | extra)
     }
 
     pub(crate) fn uniform<T: bytemuck::Pod>(&self, v: &T) -> wgpu::Buffer {
-        self.device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("params"),
-                contents: bytemuck::bytes_of(v),
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
+        self.buffer_with("params", bytemuck::bytes_of(v), wgpu::BufferUsages::UNIFORM)
+    }
+
+    /// A buffer filled through the queue (sent before the next submission). Not
+    /// `create_buffer_init`: its mapping panics on a lost device, where this write is an
+    /// error the next check reports.
+    fn buffer_with(&self, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        let size = (bytes.len() as u64).max(64).next_multiple_of(4);
+        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size,
+            usage: usage | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let whole = bytes.len() / 4 * 4;
+        self.queue.write_buffer(&buffer, 0, &bytes[..whole]);
+        if whole < bytes.len() {
+            let mut tail = [0u8; 4];
+            tail[..bytes.len() - whole].copy_from_slice(&bytes[whole..]);
+            self.queue.write_buffer(&buffer, whole as u64, &tail);
+        }
+        buffer
     }
 
     /// An uninitialised storage buffer of `bytes` (rounded up to 64), checked against the
@@ -484,7 +562,7 @@ impl Device {
         src: &wgpu::Buffer,
         offset: u64,
         bytes: u64,
-    ) -> Result<Vec<u8>> {
+    ) -> GpuResult<Vec<u8>> {
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("read back"),
             size: bytes.max(4),
@@ -506,8 +584,8 @@ impl Device {
         self.check()?;
         match rx.recv() {
             Ok(Ok(())) => {}
-            Ok(Err(e)) => return Err(gpu_error(format!("mapping a result buffer: {e}"))),
-            Err(_) => return Err(gpu_error("the result buffer was never mapped".into())),
+            Ok(Err(e)) => return Err(gpu_error(format!("mapping a result buffer: {e}")).into()),
+            Err(_) => return Err(gpu_error("the result buffer was never mapped".into()).into()),
         }
         let view = slice
             .get_mapped_range()
@@ -518,16 +596,64 @@ impl Device {
         Ok(out)
     }
 
-    /// Turns errors wgpu reported outside error scopes (out of memory, a lost device, a
-    /// validation error of a job) into an error status.
-    pub(crate) fn check(&self) -> Result<()> {
-        let mut errs = self.errors.lock().map_err(|_| poisoned())?;
-        if errs.is_empty() {
+    /// Turns what wgpu reported outside error scopes into the job's error: out of memory and
+    /// a lost device are [`GpuError::OutOfMemory`] and [`GpuError::Lost`] (AUTO runs the job
+    /// on the CPU), anything else (a validation error of a job: a bug) an internal error.
+    pub(crate) fn check(&self) -> GpuResult<()> {
+        let pending = self.faults.lock().map_err(|_| poisoned())?.errors.len();
+        if pending > 0 {
+            // wgpu reports a loss from `destroy` (or a driver) only when the device is polled,
+            // and a call on the lost device before that is an error like any other.
+            let _ = self.device.poll(wgpu::PollType::Poll);
+        }
+        let mut f = self.faults.lock().map_err(|_| poisoned())?;
+        let errors = std::mem::take(&mut f.errors).join("; ");
+        let out_of_memory = std::mem::take(&mut f.out_of_memory);
+        if let Some(why) = &f.lost {
+            return Err(GpuError::Lost(format!(
+                "the GPU device {} was lost ({why})",
+                self.name
+            )));
+        }
+        if out_of_memory {
+            return Err(GpuError::OutOfMemory(format!(
+                "the GPU device {} ran out of memory ({errors})",
+                self.name
+            )));
+        }
+        if errors.is_empty() {
             return Ok(());
         }
-        let msg = errs.join("; ");
-        errs.clear();
-        Err(gpu_error(format!("{}: {msg}", self.name)))
+        Err(gpu_error(format!("{}: {errors}", self.name)).into())
+    }
+
+    /// Fails at once on a lost device, before a job records work it cannot run (wgpu ignores
+    /// calls on a lost device rather than reporting them).
+    pub(crate) fn check_alive(&self) -> GpuResult<()> {
+        let f = self.faults.lock().map_err(|_| poisoned())?;
+        match &f.lost {
+            Some(why) => Err(GpuError::Lost(format!(
+                "the GPU device {} was lost ({why})",
+                self.name
+            ))),
+            None => Ok(()),
+        }
+    }
+
+    /// Test hook: makes the device fail the way a driver does, through the same callbacks, so
+    /// that the next check of a job sees it. No real allocation fails on demand, and no test
+    /// may unplug the GPU; `Lost` really loses the device (it cannot be used again).
+    #[doc(hidden)]
+    pub fn inject_fault(&self, fault: InjectedFault) {
+        match fault {
+            InjectedFault::OutOfMemory => {
+                let source = "injected by a test: the allocation failed".into();
+                if let Ok(mut f) = self.faults.lock() {
+                    f.record(wgpu::Error::OutOfMemory { source });
+                }
+            }
+            InjectedFault::Lost => self.device.destroy(),
+        }
     }
 }
 
@@ -540,4 +666,36 @@ fn poisoned() -> Error {
         Rt2Status::Internal,
         "a GPU lock was poisoned by an earlier panic",
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::keep_opened;
+
+    /// Adapters that refuse a device are skipped with their reasons; only when none opens
+    /// does opening fail, with every reason.
+    #[test]
+    fn open_keeps_the_adapters_that_open() {
+        let results = vec![
+            Err("adapter A refused a device: lost".to_string()),
+            Ok(1),
+            Err("adapter C allows 8 storage buffers per shader stage".to_string()),
+            Ok(3),
+        ];
+        let (opened, failed) = keep_opened(results).unwrap();
+        assert_eq!(opened, vec![1, 3]);
+        assert_eq!(failed.len(), 2);
+        assert!(failed[0].contains("adapter A") && failed[1].contains("adapter C"));
+
+        let none: Vec<Result<u32, String>> =
+            vec![Err("adapter A: x".into()), Err("adapter B: y".into())];
+        let why = keep_opened(none).unwrap_err();
+        assert!(
+            why.contains("no adapter opened")
+                && why.contains("adapter A: x")
+                && why.contains("adapter B: y"),
+            "{why}"
+        );
+        assert!(keep_opened::<u32>(Vec::new()).is_err());
+    }
 }

@@ -14,7 +14,7 @@ mod query;
 mod render;
 mod scene;
 
-pub use device::{open, Device, Gpu, GpuOptions};
+pub use device::{open, Device, Gpu, GpuOptions, InjectedFault};
 pub use render::GpuPath;
 
 use crate::camera::Camera;
@@ -82,7 +82,13 @@ pub fn occluded(
 pub enum GpuError {
     /// The scene or job does not fit the device's limits; AUTO falls back to the CPU.
     Limits(String),
-    /// Anything else (device lost, out of memory, kernel error): an error status.
+    /// wgpu reported an out-of-memory error during the job; AUTO falls back to the CPU, an
+    /// explicit GPU context fails with `OUT_OF_MEMORY`.
+    OutOfMemory(String),
+    /// The device was lost (driver reset, unplugged, destroyed); AUTO falls back to the CPU,
+    /// an explicit GPU context fails with `BACKEND_UNAVAILABLE`.
+    Lost(String),
+    /// Anything else (a kernel or validation error: a bug): an error status.
     Other(crate::error::Error),
 }
 
@@ -95,11 +101,19 @@ impl From<crate::error::Error> for GpuError {
 impl GpuError {
     /// The error a caller sees when no fallback applies.
     pub fn into_error(self) -> crate::error::Error {
+        use crate::error::{Error, Rt2Status};
         match self {
-            GpuError::Limits(m) => {
-                crate::error::Error::new(crate::error::Rt2Status::BackendUnavailable, m)
-            }
+            GpuError::Limits(m) | GpuError::Lost(m) => Error::new(Rt2Status::BackendUnavailable, m),
+            GpuError::OutOfMemory(m) => Error::new(Rt2Status::OutOfMemory, m),
             GpuError::Other(e) => e,
+        }
+    }
+
+    /// Why AUTO may run the job on the CPU instead (`None`: it is an error either way).
+    pub fn fallback_reason(&self) -> Option<&str> {
+        match self {
+            GpuError::Limits(m) | GpuError::OutOfMemory(m) | GpuError::Lost(m) => Some(m),
+            GpuError::Other(_) => None,
         }
     }
 }

@@ -26,6 +26,15 @@ pub enum GpuPath {
     Wavefront,
 }
 
+impl GpuPath {
+    pub fn name(self) -> &'static str {
+        match self {
+            GpuPath::Megakernel => "megakernel",
+            GpuPath::Wavefront => "wavefront",
+        }
+    }
+}
+
 /// Items of one chunk's wave queue per pixel: a pixel's ray tree may widen (refraction plus
 /// reflection); wider waves make the chunk fall back to the megakernel.
 const QUEUE_PER_PIXEL: u64 = 2;
@@ -120,6 +129,7 @@ impl Job<'_> {
     /// Rows `[a, b)` as packed RGBA8, in chunks that fit the device.
     fn rows(&self, a: u32, b: u32, path: GpuPath) -> GpuResult<Vec<u32>> {
         let dev = self.dev;
+        dev.check_alive()?;
         let pipelines = dev.pipelines(self.traversal, Program::Render)?;
         let mut cache = dev.scene.lock().map_err(|_| GpuError::Other(panicked()))?;
         cache.sync(dev, self.scene)?;

@@ -144,7 +144,11 @@ impl SceneCache {
         self.bind_group = Some(dev.bind(&dev.layouts.scene, &buffers));
         self.params = scene_params(c);
         self.key = Some(key);
-        dev.check()?;
+        if let Err(e) = dev.check() {
+            // A buffer that failed (out of memory) must not be taken for the scene next time.
+            *self = SceneCache::default();
+            return Err(e);
+        }
         Ok(())
     }
 }
