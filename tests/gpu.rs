@@ -40,6 +40,23 @@ fn cpu() -> Context {
     Context::new(BackendRequest::Cpu, 0).unwrap()
 }
 
+/// An AUTO context that takes the (software) GPU, with storage bindings capped at
+/// `max_binding` bytes if given, and its GPU options; `None` when no GPU or when `RT2_BACKEND`
+/// overrides AUTO.
+fn auto_on_gpu(max_binding: Option<u64>) -> Option<(Context, GpuOptions)> {
+    if gpu(GpuOptions::default()).is_none() || std::env::var_os("RT2_BACKEND").is_some() {
+        return None;
+    }
+    let opts = GpuOptions {
+        auto_accepts_software: true,
+        max_binding_override: max_binding,
+        ..GpuOptions::default()
+    };
+    let c = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
+    assert_eq!(c.decision().backend, Backend::Gpu);
+    Some((c, opts))
+}
+
 fn shared() -> PathBuf {
     std::env::var_os("RT2_SHARED")
         .map(PathBuf::from)
@@ -534,16 +551,9 @@ fn auto_prefers_the_cpu_to_a_software_adapter() {
 /// why, and gives the CPU's image.
 #[test]
 fn auto_falls_back_to_the_cpu_beyond_device_limits() {
-    if gpu(GpuOptions::default()).is_none() || std::env::var_os("RT2_BACKEND").is_some() {
+    let Some((auto, opts)) = auto_on_gpu(Some(1024)) else {
         return;
-    }
-    let opts = GpuOptions {
-        auto_accepts_software: true,
-        max_binding_override: Some(1024),
-        ..GpuOptions::default()
     };
-    let auto = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
-    assert_eq!(auto.decision().backend, Backend::Gpu);
     let mut b = builtin::by_name("spheres3").unwrap();
     let mut scene = std::mem::take(&mut b.scene);
     scene.commit().unwrap();
@@ -573,15 +583,9 @@ fn auto_falls_back_to_the_cpu_beyond_device_limits() {
 #[test]
 fn auto_runs_a_job_on_the_cpu_when_the_device_runs_out_of_memory() {
     use rt2::gpu::InjectedFault;
-    if gpu(GpuOptions::default()).is_none() || std::env::var_os("RT2_BACKEND").is_some() {
+    let Some((auto, opts)) = auto_on_gpu(None) else {
         return;
-    }
-    let opts = GpuOptions {
-        auto_accepts_software: true,
-        ..GpuOptions::default()
     };
-    let auto = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
-    assert_eq!(auto.decision().backend, Backend::Gpu);
     let dev = &auto.gpu().unwrap().devices[0];
     let mut b = builtin::by_name("spheres3").unwrap();
     let mut scene = std::mem::take(&mut b.scene);
@@ -652,14 +656,9 @@ fn auto_runs_a_job_on_the_cpu_when_the_device_runs_out_of_memory() {
 #[test]
 fn auto_runs_jobs_on_the_cpu_once_the_device_is_lost() {
     use rt2::gpu::InjectedFault;
-    if gpu(GpuOptions::default()).is_none() || std::env::var_os("RT2_BACKEND").is_some() {
+    let Some((auto, opts)) = auto_on_gpu(None) else {
         return;
-    }
-    let opts = GpuOptions {
-        auto_accepts_software: true,
-        ..GpuOptions::default()
     };
-    let auto = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
     let mut b = builtin::by_name("spheres3").unwrap();
     let mut scene = std::mem::take(&mut b.scene);
     scene.commit().unwrap();
@@ -859,14 +858,9 @@ fn c_api_reports_why_a_job_ran_on_the_cpu() {
 /// what the caller left to AUTO, and nothing when the caller chose everything.
 #[test]
 fn auto_choices_are_reported_for_the_last_job() {
-    if gpu(GpuOptions::default()).is_none() || std::env::var_os("RT2_BACKEND").is_some() {
+    let Some((auto, _)) = auto_on_gpu(None) else {
         return;
-    }
-    let opts = GpuOptions {
-        auto_accepts_software: true,
-        ..GpuOptions::default()
     };
-    let auto = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
     assert_eq!(auto.last_auto_choice(), None, "no job ran yet");
     // Two mirrors among four spheres: half the primitives spawn secondary rays.
     let mut s = Scene::new();
