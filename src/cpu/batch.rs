@@ -9,7 +9,7 @@
 //!
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
-use super::simd::LeafPrims;
+use super::simd::{prefetch, LeafPrims};
 use super::traverse::{clip, TRay};
 use crate::geometry::{Hit, PrimitiveSet, Ray, RayTest, TraversalStats};
 use crate::kdtree::KdTree;
@@ -30,6 +30,8 @@ pub(crate) trait Answer {
         t_exit: f32,
         stats: &mut TraversalStats,
     ) -> bool;
+    /// Starts loading what [`Answer::leaf`] will touch for ray `i`.
+    fn prefetch(&self, i: usize);
 }
 
 /// Closest hits, one per ray.
@@ -66,6 +68,13 @@ impl Answer for Closest<'_> {
         }
         // Strictly before the exit, as `traverse::common::Closest`.
         hit.t < t_exit
+    }
+
+    #[inline(always)]
+    fn prefetch(&self, i: usize) {
+        if let Some(h) = self.0.get(i) {
+            prefetch(h);
+        }
     }
 }
 
@@ -104,6 +113,9 @@ impl Answer for AnyHit<'_> {
         self.0[i] = found;
         found
     }
+
+    #[inline(always)]
+    fn prefetch(&self, _: usize) {}
 }
 
 /// The batch: rays, their origins and reciprocal directions by axis (structure of arrays, so a
@@ -117,6 +129,8 @@ pub(crate) struct Batch<'a, A> {
     /// Rays whose answer is final: dropped from every later list (the paper's "rayos
     /// terminados").
     pub done: Vec<bool>,
+    /// How many rays are done so far: a list written when it was this value needs no filtering.
+    pub finished: usize,
     pub answer: A,
     pub stats: TraversalStats,
 }
@@ -167,10 +181,21 @@ impl<'a, A: Answer> Batch<'a, A> {
             org,
             inv,
             done: vec![false; n],
+            finished: 0,
             answer,
             stats: TraversalStats::default(),
         };
         (batch, groups)
+    }
+
+    /// Starts loading ray `i` and its answer, a few rays before [`Batch::visit_leaf`] needs them.
+    #[inline(always)]
+    pub fn prefetch_leaf(&self, i: u32) {
+        let i = i as usize;
+        if let Some(r) = self.rays.get(i) {
+            prefetch(r);
+        }
+        self.answer.prefetch(i);
     }
 
     /// Tests ray `i` against a prepared leaf and marks it done when finished.
@@ -182,6 +207,7 @@ impl<'a, A: Answer> Batch<'a, A> {
             .answer
             .leaf(self.prims, leaf, i, &self.rays[i], t_exit, &mut self.stats);
         self.done[i] = done;
+        self.finished += done as usize;
         done
     }
 }

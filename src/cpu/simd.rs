@@ -220,3 +220,153 @@ impl<const N: usize> LeafPrims<N> {
         }
     }
 }
+
+/// Asks the cache for the line holding `x` (a hint: never faults, no effect off x86-64). The
+/// stream touches its rays in index order with gaps, which the hardware prefetchers do not follow.
+#[inline(always)]
+pub fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch reads nothing the program sees and cannot fault; `x` is a live reference.
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>((x as *const T).cast());
+    }
+}
+
+/// Stream compaction (the paper's "compactación" of the near and far lists): writes the lanes of
+/// each `src` column whose bit is set in `keep` to the front of the matching `dst` column, in
+/// lane order; the rest of `dst[..N]` gets unspecified lanes of `src`. Every `dst` has room for
+/// N lanes. AVX2 permutes by a table of the 256 masks, AVX-512 has `vpcompressd` (into a register:
+/// its store form is slow on AMD Zen 4); other widths and CPUs take the portable lane loop.
+#[inline(always)]
+pub fn compress<const N: usize, const K: usize>(
+    keep: u32,
+    src: [&[u32; N]; K],
+    dst: [&mut [u32]; K],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if N == 8 && std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { x86::compress8(keep, src, dst) };
+        }
+        if N == 16 && std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F (checked just above).
+            return unsafe { x86::compress16(keep, src, dst) };
+        }
+    }
+    for (s, d) in src.into_iter().zip(dst) {
+        let d = &mut d[..N];
+        let mut w = 0;
+        for (l, &x) in s.iter().enumerate() {
+            // Branch-free: every lane is written, the position steps by its flag.
+            d[w.min(N - 1)] = x;
+            w += (keep >> l & 1) as usize;
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod x86 {
+    use std::arch::x86_64::*;
+
+    /// For each 8-bit mask, the indices of its set bits in order, one nibble each (lowest first).
+    const PERM8: [u32; 256] = {
+        let mut t = [0u32; 256];
+        let mut m = 0;
+        while m < 256 {
+            let (mut l, mut w, mut packed) = (0, 0, 0u32);
+            while l < 8 {
+                if m >> l & 1 == 1 {
+                    packed |= (l as u32) << (4 * w);
+                    w += 1;
+                }
+                l += 1;
+            }
+            t[m] = packed;
+            m += 1;
+        }
+        t
+    };
+
+    /// [`super::compress`] for 8 lanes: one table look-up per mask, one permute per column.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn compress8<const N: usize, const K: usize>(
+        keep: u32,
+        src: [&[u32; N]; K],
+        dst: [&mut [u32]; K],
+    ) {
+        let packed = _mm256_set1_epi32(PERM8[(keep & 0xff) as usize] as i32);
+        let idx = _mm256_and_si256(
+            _mm256_srlv_epi32(packed, _mm256_setr_epi32(0, 4, 8, 12, 16, 20, 24, 28)),
+            _mm256_set1_epi32(15),
+        );
+        for (s, d) in src.into_iter().zip(dst) {
+            assert!(N == 8 && d.len() >= 8);
+            let v = _mm256_loadu_si256(s.as_ptr().cast());
+            _mm256_storeu_si256(d.as_mut_ptr().cast(), _mm256_permutevar8x32_epi32(v, idx));
+        }
+    }
+
+    /// [`super::compress`] for 16 lanes.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn compress16<const N: usize, const K: usize>(
+        keep: u32,
+        src: [&[u32; N]; K],
+        dst: [&mut [u32]; K],
+    ) {
+        for (s, d) in src.into_iter().zip(dst) {
+            assert!(N == 16 && d.len() >= 16);
+            let v = _mm512_loadu_si512(s.as_ptr().cast());
+            _mm512_storeu_si512(
+                d.as_mut_ptr().cast(),
+                _mm512_maskz_compress_epi32(keep as u16, v),
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every mask of every width, through the width's own path (AVX2 / AVX-512 where the CPU has
+    /// them, the lane loop otherwise), against the plain filter.
+    fn check<const N: usize>() {
+        struct Job;
+        impl Kernel for Job {
+            type Out = ();
+            fn run<const M: usize>(self) {
+                let src: [u32; M] = std::array::from_fn(|l| 100 + l as u32);
+                let twice = src.map(|x| 2 * x);
+                let masks = if M == 16 { 1u32 << 16 } else { 1 << M };
+                for keep in 0..masks {
+                    let (mut a, mut b) = (vec![0; M + 3], vec![0; M + 3]);
+                    compress(keep, [&src, &twice], [&mut a[3..], &mut b[3..]]);
+                    let want: Vec<u32> = (0..M)
+                        .filter(|l| keep >> l & 1 == 1)
+                        .map(|l| src[l])
+                        .collect();
+                    assert_eq!(&a[3..3 + want.len()], &want[..], "{M} lanes, mask {keep:b}");
+                    let twice_want: Vec<u32> = want.iter().map(|x| 2 * x).collect();
+                    assert_eq!(&b[3..3 + want.len()], &twice_want[..]);
+                }
+            }
+        }
+        let w = match N {
+            4 => Width::W4,
+            8 => Width::W8,
+            _ => Width::W16,
+        };
+        dispatch(w, Job);
+    }
+
+    #[test]
+    fn compress_keeps_the_masked_lanes_in_order() {
+        check::<4>();
+        check::<8>();
+        check::<16>();
+    }
+}
