@@ -4,12 +4,13 @@
 //! (SIMD over N lanes), a leaf tests its triangles against every ray of its list (1 ray × N
 //! triangles, triangles gathered once per leaf visit).
 //!
-//! Memory follows the paper's hybrid layout: a list is a run of [`Lanes`] packets (structure of
-//! arrays inside, array of packets outside) on one ray stack, a `Vec` reused for the whole batch
-//! and never shrunk, so no node allocates. Finished rays are left out when a node builds its
-//! children's lists; rays past their `tmax` never get a segment there. When few rays reach a node
-//! (≤ [`SWITCH`]) the lists stop paying and the subtree is finished by the packet traversal (the
-//! paper's future work). The parametric traversal uses the general split distance
+//! Memory: the lists live on one ray stack, reused for the whole batch and never shrunk, so no
+//! node allocates. Each list is a run of slots in columns (ray index, segment start, segment
+//! end), structure of arrays over the whole list rather than the paper's array of 4-ray packets,
+//! so that a compacted group of live lanes is one vector store per column wherever the list ends
+//! ([`simd::compress`]). Rays that finished in a nearer subtree leave a list when it is popped;
+//! rays past their `tmax` never get a segment there. A list that fits one packet (≤ N rays) is
+//! finished by the packet traversal (the paper's future work). The parametric traversal uses the general split distance
 //! `(split - org) * inv_dir` rather than the paper's halving: it serves SAH trees too and is what
 //! makes the hits bit-identical to the single-ray traversals.
 
@@ -18,11 +19,6 @@ use super::packet::{self, Lanes};
 use super::simd::{self, Kernel, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
-
-/// Lists of at most this many rays go on as one packet (the paper's future work suggests 4): a
-/// list that small no longer amortises its compaction, and one packet walks the rest of the
-/// subtree with one node fetch per node. Capped at the lane width.
-pub const SWITCH: usize = 4;
 
 /// How many rays ahead a leaf loads its rays and answers: a leaf test is short, and the rays of
 /// an incoherent list lie far apart in memory.
@@ -145,7 +141,7 @@ fn traverse<const N: usize, A: Answer>(
             continue;
         }
         let n = b.tree.nodes[f.node as usize];
-        if count <= SWITCH.min(N) {
+        if count <= N {
             let (id, t0, t1) = lists.load::<N>(f.start);
             let p = Lanes {
                 id,
