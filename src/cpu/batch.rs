@@ -118,14 +118,15 @@ impl Answer for AnyHit<'_> {
     fn prefetch(&self, _: usize) {}
 }
 
-/// The batch: rays, their origins and reciprocal directions by axis (structure of arrays, so a
-/// node step gathers one float per ray), the finished flags and the answer.
+/// The batch: rays, their origins and reciprocal directions by axis (one array per axis, so a
+/// node step gathers one pair per ray: origin and reciprocal direction share a cache line), the
+/// finished flags and the answer.
 pub(crate) struct Batch<'a, A> {
     pub tree: &'a KdTree,
     pub prims: &'a PrimitiveSet,
     pub rays: &'a [Ray],
-    pub org: [Vec<f32>; 3],
-    pub inv: [Vec<f32>; 3],
+    /// `split[a][i]` = (origin, reciprocal direction) of ray `i` on axis `a`.
+    pub split: [Vec<[f32; 2]>; 3],
     /// Rays whose answer is final: dropped from every later list (the paper's "rayos
     /// terminados").
     pub done: Vec<bool>,
@@ -154,14 +155,12 @@ impl<'a, A: Answer> Batch<'a, A> {
         mut answer: A,
     ) -> (Self, [Vec<Root>; 8]) {
         let n = rays.len();
-        let mut org = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-        let mut inv = org.clone();
+        let mut split = [vec![[0.0; 2]; n], vec![[0.0; 2]; n], vec![[0.0; 2]; n]];
         let mut groups: [Vec<Root>; 8] = Default::default();
         for (i, ray) in rays.iter().enumerate() {
             let r = TRay::new(ray);
-            for a in 0..3 {
-                org[a][i] = ray.org[a];
-                inv[a][i] = r.inv_dir[a];
+            for (a, s) in split.iter_mut().enumerate() {
+                s[i] = [ray.org[a], r.inv_dir[a]];
             }
             if !answer.start(prims, i, ray) || tree.nodes.is_empty() {
                 continue;
@@ -178,8 +177,7 @@ impl<'a, A: Answer> Batch<'a, A> {
             tree,
             prims,
             rays,
-            org,
-            inv,
+            split,
             done: vec![false; n],
             finished: 0,
             answer,

@@ -178,14 +178,13 @@ fn traverse<const N: usize, A: Answer>(
         } else {
             (above, below)
         };
-        let (org, inv) = (&b.org[axis][..=last], &b.inv[axis][..=last]);
+        let split = &b.split[axis][..=last];
         let (mut nc, mut fc) = (near_start, far_start);
         for k in (0..count).step_by(N) {
             if k + N < count {
                 for &i in &lists.id[f.start + k + N..(f.start + k + 2 * N).min(f.start + count)] {
                     let i = (i as usize).min(last);
-                    simd::prefetch(&org[i]);
-                    simd::prefetch(&inv[i]);
+                    simd::prefetch(&split[i]);
                 }
             }
             let (id, t0, t1) = lists.load::<N>(f.start + k);
@@ -193,7 +192,8 @@ fn traverse<const N: usize, A: Answer>(
             for l in 0..N {
                 // Lanes past the list's end hold stale ray indices: clamped, never out of bounds.
                 let i = (id[l] as usize).min(last);
-                let ts = (n.split - org[i]) * inv[i];
+                let [org, inv] = split[i];
+                let ts = (n.split - org) * inv;
                 let (e_near, t1_near, e_far, t0_far) = split_lane(ts, t0[l], t1[l]);
                 (near_t1[l], far_t0[l]) = (t1_near, t0_far);
                 en |= (e_near as u32) << l;
