@@ -9,7 +9,7 @@
 //!
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
-use super::simd::{prefetch, LeafPrims};
+use super::simd::{prefetch, LeafPrims, RayLanes};
 use super::traverse::{clip, TRay};
 use crate::geometry::{Hit, PrimitiveSet, Ray, RayTest, TraversalStats};
 use crate::kdtree::KdTree;
@@ -30,6 +30,18 @@ pub(crate) trait Answer {
         t_exit: f32,
         stats: &mut TraversalStats,
     ) -> bool;
+    /// Tests the rays `ids` (lanes `live`) against a leaf's primitives `leaf`, N rays per
+    /// triangle, primitives in leaf order as the single-ray test; `t_exit` is where each ray
+    /// leaves the leaf. Returns the lanes that are finished.
+    fn leaf_rays<const N: usize>(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &[u32],
+        rays: &[Ray],
+        ids: &[u32; N],
+        live: u32,
+        t_exit: &[f32; N],
+    ) -> u32;
     /// Starts loading what [`Answer::leaf`] will touch for ray `i`.
     fn prefetch(&self, i: usize);
 }
@@ -68,6 +80,51 @@ impl Answer for Closest<'_> {
         }
         // Strictly before the exit, as `traverse::common::Closest`.
         hit.t < t_exit
+    }
+
+    #[inline(always)]
+    fn leaf_rays<const N: usize>(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &[u32],
+        rays: &[Ray],
+        ids: &[u32; N],
+        live: u32,
+        t_exit: &[f32; N],
+    ) -> u32 {
+        let lanes = RayLanes::gather(rays, ids);
+        // Each lane's closest `t` so far, kept beside the hits for the bound of the next test.
+        let mut hit_t = [f32::INFINITY; N];
+        for_lanes(live, |l| hit_t[l] = self.0[ids[l] as usize].t);
+        for &p in leaf {
+            if let Some(tri) = prims.triangles.get(p as usize) {
+                let mut bound = [0.0; N];
+                for l in 0..N {
+                    // `Hit::bound`, per lane.
+                    let tmax = lanes.tmax[l];
+                    bound[l] = if hit_t[l] < tmax {
+                        hit_t[l].next_up()
+                    } else {
+                        tmax
+                    };
+                }
+                let (t, u, v) = lanes.triangle(tri, &bound);
+                let hits = (0..N).fold(0u32, |m, l| m | ((t[l] < f32::INFINITY) as u32) << l);
+                for_lanes(live & hits, |l| {
+                    let hit = &mut self.0[ids[l] as usize];
+                    hit.offer(t[l], u[l], v[l], p);
+                    hit_t[l] = hit.t;
+                });
+            } else {
+                for_lanes(live, |l| {
+                    let hit = &mut self.0[ids[l] as usize];
+                    prims.intersect(p, &rays[ids[l] as usize], &RayTest::PLAIN, hit);
+                    hit_t[l] = hit.t;
+                });
+            }
+        }
+        // Strictly before the exit, as `traverse::common::Closest`.
+        live & (0..N).fold(0u32, |m, l| m | ((hit_t[l] < t_exit[l]) as u32) << l)
     }
 
     #[inline(always)]
@@ -111,6 +168,36 @@ impl Answer for AnyHit<'_> {
                 prims.intersect(p, ray, &RayTest::PLAIN, &mut hit)
             });
         self.0[i] = found;
+        found
+    }
+
+    #[inline(always)]
+    fn leaf_rays<const N: usize>(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &[u32],
+        rays: &[Ray],
+        ids: &[u32; N],
+        live: u32,
+        _t_exit: &[f32; N],
+    ) -> u32 {
+        let lanes = RayLanes::gather(rays, ids);
+        let mut found = 0u32;
+        for &p in leaf {
+            if let Some(tri) = prims.triangles.get(p as usize) {
+                let (t, _, _) = lanes.triangle(tri, &lanes.tmax);
+                found |= (0..N).fold(0u32, |m, l| m | ((t[l] < f32::INFINITY) as u32) << l);
+            } else {
+                for_lanes(live & !found, |l| {
+                    let mut hit = Hit::MISS;
+                    if prims.intersect(p, &rays[ids[l] as usize], &RayTest::PLAIN, &mut hit) {
+                        found |= 1 << l;
+                    }
+                });
+            }
+        }
+        let found = found & live;
+        for_lanes(live, |l| self.0[ids[l] as usize] = found >> l & 1 == 1);
         found
     }
 
@@ -196,6 +283,26 @@ impl<'a, A: Answer> Batch<'a, A> {
         self.answer.prefetch(i);
     }
 
+    /// Tests the rays `ids` (lanes `live`, segments ending at `t_exit`) against leaf `leaf`, N
+    /// rays per triangle, and marks the finished ones done.
+    #[inline(always)]
+    pub fn visit_leaf_rays<const N: usize>(
+        &mut self,
+        leaf: &[u32],
+        ids: &[u32; N],
+        live: u32,
+        t_exit: &[f32; N],
+    ) {
+        let n = live.count_ones() as u64;
+        self.stats.leaves_visited += n;
+        self.stats.prim_tests += n * leaf.len() as u64;
+        let done = self
+            .answer
+            .leaf_rays(self.prims, leaf, self.rays, ids, live, t_exit);
+        for_lanes(live, |l| self.done[ids[l] as usize] = done >> l & 1 == 1);
+        self.finished += done.count_ones() as usize;
+    }
+
     /// Tests ray `i` against a prepared leaf and marks it done when finished.
     #[inline(always)]
     pub fn visit_leaf<const N: usize>(&mut self, leaf: &LeafPrims<N>, i: u32, t_exit: f32) -> bool {
@@ -207,6 +314,15 @@ impl<'a, A: Answer> Batch<'a, A> {
         self.done[i] = done;
         self.finished += done as usize;
         done
+    }
+}
+
+/// Calls `f` with each lane set in `mask`, lowest first.
+#[inline(always)]
+pub(crate) fn for_lanes(mut mask: u32, mut f: impl FnMut(usize)) {
+    while mask != 0 {
+        f(mask.trailing_zeros() as usize);
+        mask &= mask - 1;
     }
 }
 

@@ -135,36 +135,99 @@ impl<const N: usize> TriBlock<N> {
     /// Möller–Trumbore on every lane; `t = inf` marks a miss.
     #[inline(always)]
     fn lanes(&self, ray: &Ray, tmax: f32) -> ([f32; N], [f32; N], [f32; N]) {
-        let (o, d) = (ray.org, ray.dir);
+        let (o, d) = (ray.org.to_array(), ray.dir.to_array());
         let (mut t_out, mut u_out, mut v_out) = ([0.0; N], [0.0; N], [0.0; N]);
         for l in 0..N {
-            let [e1x, e1y, e1z] = [self.e1[0][l], self.e1[1][l], self.e1[2][l]];
-            let [e2x, e2y, e2z] = [self.e2[0][l], self.e2[1][l], self.e2[2][l]];
-            // p = dir × e2 (glam's Vec3::cross order), det = e1 · p.
-            let px = d.y * e2z - e2y * d.z;
-            let py = d.z * e2x - e2z * d.x;
-            let pz = d.x * e2y - e2x * d.y;
-            let det = (e1x * px) + (e1y * py) + (e1z * pz);
-            let inv = 1.0 / det;
-            let sx = o.x - self.v0[0][l];
-            let sy = o.y - self.v0[1][l];
-            let sz = o.z - self.v0[2][l];
-            let u = ((sx * px) + (sy * py) + (sz * pz)) * inv;
-            // q = s × e1
-            let qx = sy * e1z - e1y * sz;
-            let qy = sz * e1x - e1z * sx;
-            let qz = sx * e1y - e1x * sy;
-            let v = ((d.x * qx) + (d.y * qy) + (d.z * qz)) * inv;
-            let t = ((e2x * qx) + (e2y * qy) + (e2z * qz)) * inv;
-            // The scalar test's rejections, as masks rather than early returns.
-            let ok = (det != 0.0 && det.is_finite())
-                & (0.0..=1.0).contains(&u)
-                & !(v < 0.0 || u + v > 1.0)
-                & (t >= ray.tmin)
-                & (t < tmax);
-            t_out[l] = if ok { t } else { f32::INFINITY };
-            u_out[l] = u;
-            v_out[l] = v;
+            let tri = Triangle {
+                v0: [self.v0[0][l], self.v0[1][l], self.v0[2][l]],
+                e1: [self.e1[0][l], self.e1[1][l], self.e1[2][l]],
+                e2: [self.e2[0][l], self.e2[1][l], self.e2[2][l]],
+            };
+            (t_out[l], u_out[l], v_out[l]) = moller_trumbore(&tri, o, d, ray.tmin, tmax);
+        }
+        (t_out, u_out, v_out)
+    }
+}
+
+/// One ray against one triangle with the scalar [`Triangle::intersect`]'s operations in the
+/// same order (no fused multiply-add), its rejections as masks rather than early returns, so
+/// `t`, `u`, `v` are bit-identical to the single-ray path; `t = inf` marks a miss. Both lane
+/// orders ([`TriBlock`]: 1 ray × N triangles, [`RayLanes`]: N rays × 1 triangle) run it per lane.
+#[inline(always)]
+fn moller_trumbore(
+    tri: &Triangle,
+    o: [f32; 3],
+    d: [f32; 3],
+    tmin: f32,
+    tmax: f32,
+) -> (f32, f32, f32) {
+    let ([e1x, e1y, e1z], [e2x, e2y, e2z]) = (tri.e1, tri.e2);
+    // p = dir × e2 (glam's Vec3::cross order), det = e1 · p.
+    let px = d[1] * e2z - e2y * d[2];
+    let py = d[2] * e2x - e2z * d[0];
+    let pz = d[0] * e2y - e2x * d[1];
+    let det = (e1x * px) + (e1y * py) + (e1z * pz);
+    let inv = 1.0 / det;
+    let sx = o[0] - tri.v0[0];
+    let sy = o[1] - tri.v0[1];
+    let sz = o[2] - tri.v0[2];
+    let u = ((sx * px) + (sy * py) + (sz * pz)) * inv;
+    // q = s × e1
+    let qx = sy * e1z - e1y * sz;
+    let qy = sz * e1x - e1z * sx;
+    let qz = sx * e1y - e1x * sy;
+    let v = ((d[0] * qx) + (d[1] * qy) + (d[2] * qz)) * inv;
+    let t = ((e2x * qx) + (e2y * qy) + (e2z * qz)) * inv;
+    let ok = (det != 0.0 && det.is_finite())
+        & (0.0..=1.0).contains(&u)
+        & !(v < 0.0 || u + v > 1.0)
+        & (t >= tmin)
+        & (t < tmax);
+    (if ok { t } else { f32::INFINITY }, u, v)
+}
+
+/// N rays in structure-of-arrays form, for the leaves of a stream: every ray of a list that
+/// reaches a leaf is tested N at a time against each triangle in turn (broadcast, not gathered).
+/// SAH leaves hold ~2 triangles per visit, so a [`TriBlock`] of N lanes is mostly padding.
+pub struct RayLanes<const N: usize> {
+    pub org: [[f32; N]; 3],
+    pub dir: [[f32; N]; 3],
+    pub tmin: [f32; N],
+    pub tmax: [f32; N],
+}
+
+impl<const N: usize> RayLanes<N> {
+    /// The rays `rays[ids[l]]` (an index past the end reads the last ray: lanes past a list's
+    /// end hold stale indices).
+    #[inline(always)]
+    pub fn gather(rays: &[Ray], ids: &[u32; N]) -> Self {
+        let last = rays.len() - 1;
+        let mut r = RayLanes {
+            org: [[0.0; N]; 3],
+            dir: [[0.0; N]; 3],
+            tmin: [0.0; N],
+            tmax: [0.0; N],
+        };
+        for l in 0..N {
+            let ray = &rays[(ids[l] as usize).min(last)];
+            for a in 0..3 {
+                r.org[a][l] = ray.org[a];
+                r.dir[a][l] = ray.dir[a];
+            }
+            r.tmin[l] = ray.tmin;
+            r.tmax[l] = ray.tmax;
+        }
+        r
+    }
+
+    /// Möller–Trumbore of every lane against `tri`, candidates below `tmax` per lane.
+    #[inline(always)]
+    pub fn triangle(&self, tri: &Triangle, tmax: &[f32; N]) -> ([f32; N], [f32; N], [f32; N]) {
+        let (mut t_out, mut u_out, mut v_out) = ([0.0; N], [0.0; N], [0.0; N]);
+        for l in 0..N {
+            let o = [self.org[0][l], self.org[1][l], self.org[2][l]];
+            let d = [self.dir[0][l], self.dir[1][l], self.dir[2][l]];
+            (t_out[l], u_out[l], v_out[l]) = moller_trumbore(tri, o, d, self.tmin[l], tmax[l]);
         }
         (t_out, u_out, v_out)
     }

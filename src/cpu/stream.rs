@@ -20,10 +20,6 @@ use super::simd::{self, Kernel, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
 
-/// How many rays ahead a leaf loads its rays and answers: a leaf test is short, and the rays of
-/// an incoherent list lie far apart in memory.
-const LOOKAHEAD: usize = 4;
-
 /// A node still to visit and its list: `count` rays from `start` on the ray stack, written when
 /// `finished` rays were done. A popped frame's list is always the highest live one on the ray
 /// stack (children's lists are written above their parent's, and the near child is walked
@@ -154,15 +150,16 @@ fn traverse<const N: usize, A: Answer>(
         }
         b.stats.nodes_visited += count as u64;
         if n.is_leaf() {
-            scratch
-                .leaf
-                .gather(&b.prims.triangles, b.tree.leaf_prims(n.index()), count);
-            let end = f.start + count;
-            for k in f.start..end {
-                if k + LOOKAHEAD < end {
-                    b.prefetch_leaf(lists.id[k + LOOKAHEAD]);
+            let leaf = b.tree.leaf_prims(n.index());
+            for k in (0..count).step_by(N) {
+                let at = f.start + k;
+                for &i in
+                    &lists.id[(at + N).min(f.start + count)..(at + 2 * N).min(f.start + count)]
+                {
+                    b.prefetch_leaf(i);
                 }
-                b.visit_leaf(&scratch.leaf, lists.id[k], f32::from_bits(lists.t1[k]));
+                let (id, _, t1) = lists.load::<N>(at);
+                b.visit_leaf_rays(leaf, &id, first::<N>(count - k), &t1);
             }
             continue;
         }
