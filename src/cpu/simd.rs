@@ -1,8 +1,9 @@
-//! SIMD lane width and the 1 ray × N triangles Möller–Trumbore test of the vectorised-traversal
-//! paper (Noguera & Ureña, seeds/000, "intersección rayo–triángulo": the precomputed 1×4 variant).
+//! SIMD lane width, the Möller–Trumbore tests of the vectorised-traversal paper (Noguera & Ureña,
+//! seeds/000, "intersección rayo–triángulo": the precomputed 1 ray × 4 triangles variant, and N
+//! rays × 1 triangle for stream leaves) and the stream compaction.
 //!
 //! The code is portable: fixed-size `[f32; N]` lanes written as straight-line loops that LLVM
-//! turns into vector instructions. [`dispatch`] picks `N` at run time from the CPU's features and
+//! turns into vector instructions; only the compaction has x86 intrinsics (with a portable loop). [`dispatch`] picks `N` at run time from the CPU's features and
 //! runs the whole kernel (traversal included, inlined) inside a `#[target_feature]` function, so
 //! the same source becomes SSE (4 lanes), AVX2 (8) or AVX-512 (16) code.
 
@@ -45,8 +46,8 @@ impl Width {
 
     /// The width used by default: 8 lanes where AVX2 exists, else 4. AVX-512's 16 lanes are
     /// available ([`Width::W16`]) but measured no faster than 8 (`rt2 bench streams`, width
-    /// columns of BENCHMARKS.md): the SAH leaves hold ~3 triangles, so a 16-triangle block is
-    /// mostly padding, and the list compaction stays one lane at a time.
+    /// columns of BENCHMARKS.md, and again after the SIMD compaction of the stream lists): the
+    /// SAH leaves hold ~3 triangles, so a packet's 16-triangle block is mostly padding.
     pub fn best() -> Width {
         if Width::W8.supported() {
             Width::W8

@@ -1,8 +1,8 @@
 //! The n-ray traversal of Noguera & Ureña (seeds/000, "recorrido vectorial"): the tree is walked
 //! once per octant group with all the group's rays at once. Every node receives a list of the
 //! rays that enter it; an inner node splits its list into the near and far children's lists
-//! (SIMD over N lanes), a leaf tests its triangles against every ray of its list (1 ray × N
-//! triangles, triangles gathered once per leaf visit).
+//! (SIMD over N lanes), a leaf tests its triangles against every ray of its list (N rays × 1
+//! triangle: SAH leaves hold ~2 triangles per visit, too few to fill a block of N triangles).
 //!
 //! Memory: the lists live on one ray stack, reused for the whole batch and never shrunk, so no
 //! node allocates. Each list is a run of slots in columns (ray index, segment start, segment
