@@ -9,7 +9,7 @@
 //!
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
-use super::simd::LeafPrims;
+use super::simd::{prefetch, LeafPrims, RayLanes};
 use super::traverse::{clip, TRay};
 use crate::geometry::{Hit, PrimitiveSet, Ray, RayTest, TraversalStats};
 use crate::kdtree::KdTree;
@@ -30,6 +30,20 @@ pub(crate) trait Answer {
         t_exit: f32,
         stats: &mut TraversalStats,
     ) -> bool;
+    /// Tests the rays `ids` (lanes `live`) against a leaf's primitives `leaf`, N rays per
+    /// triangle, primitives in leaf order as the single-ray test; `t_exit` is where each ray
+    /// leaves the leaf. Returns the lanes that are finished.
+    fn leaf_rays<const N: usize>(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &[u32],
+        rays: &[Ray],
+        ids: &[u32; N],
+        live: u32,
+        t_exit: &[f32; N],
+    ) -> u32;
+    /// Starts loading what [`Answer::leaf`] will touch for ray `i`.
+    fn prefetch(&self, i: usize);
 }
 
 /// Closest hits, one per ray.
@@ -66,6 +80,58 @@ impl Answer for Closest<'_> {
         }
         // Strictly before the exit, as `traverse::common::Closest`.
         hit.t < t_exit
+    }
+
+    #[inline(always)]
+    fn leaf_rays<const N: usize>(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &[u32],
+        rays: &[Ray],
+        ids: &[u32; N],
+        live: u32,
+        t_exit: &[f32; N],
+    ) -> u32 {
+        let lanes = RayLanes::gather(rays, ids);
+        // Each lane's closest `t` so far, kept beside the hits for the bound of the next test.
+        let mut hit_t = [f32::INFINITY; N];
+        for_lanes(live, |l| hit_t[l] = self.0[ids[l] as usize].t);
+        for &p in leaf {
+            if let Some(tri) = prims.triangles.get(p as usize) {
+                let mut bound = [0.0; N];
+                for l in 0..N {
+                    // `Hit::bound`, per lane.
+                    let tmax = lanes.tmax[l];
+                    bound[l] = if hit_t[l] < tmax {
+                        hit_t[l].next_up()
+                    } else {
+                        tmax
+                    };
+                }
+                let (t, u, v) = lanes.triangle(tri, &bound);
+                let hits = (0..N).fold(0u32, |m, l| m | ((t[l] < f32::INFINITY) as u32) << l);
+                for_lanes(live & hits, |l| {
+                    let hit = &mut self.0[ids[l] as usize];
+                    hit.offer(t[l], u[l], v[l], p);
+                    hit_t[l] = hit.t;
+                });
+            } else {
+                for_lanes(live, |l| {
+                    let hit = &mut self.0[ids[l] as usize];
+                    prims.intersect(p, &rays[ids[l] as usize], &RayTest::PLAIN, hit);
+                    hit_t[l] = hit.t;
+                });
+            }
+        }
+        // Strictly before the exit, as `traverse::common::Closest`.
+        live & (0..N).fold(0u32, |m, l| m | ((hit_t[l] < t_exit[l]) as u32) << l)
+    }
+
+    #[inline(always)]
+    fn prefetch(&self, i: usize) {
+        if let Some(h) = self.0.get(i) {
+            prefetch(h);
+        }
     }
 }
 
@@ -104,19 +170,55 @@ impl Answer for AnyHit<'_> {
         self.0[i] = found;
         found
     }
+
+    #[inline(always)]
+    fn leaf_rays<const N: usize>(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &[u32],
+        rays: &[Ray],
+        ids: &[u32; N],
+        live: u32,
+        _t_exit: &[f32; N],
+    ) -> u32 {
+        let lanes = RayLanes::gather(rays, ids);
+        let mut found = 0u32;
+        for &p in leaf {
+            if let Some(tri) = prims.triangles.get(p as usize) {
+                let (t, _, _) = lanes.triangle(tri, &lanes.tmax);
+                found |= (0..N).fold(0u32, |m, l| m | ((t[l] < f32::INFINITY) as u32) << l);
+            } else {
+                for_lanes(live & !found, |l| {
+                    let mut hit = Hit::MISS;
+                    if prims.intersect(p, &rays[ids[l] as usize], &RayTest::PLAIN, &mut hit) {
+                        found |= 1 << l;
+                    }
+                });
+            }
+        }
+        let found = found & live;
+        for_lanes(live, |l| self.0[ids[l] as usize] = found >> l & 1 == 1);
+        found
+    }
+
+    #[inline(always)]
+    fn prefetch(&self, _: usize) {}
 }
 
-/// The batch: rays, their origins and reciprocal directions by axis (structure of arrays, so a
-/// node step gathers one float per ray), the finished flags and the answer.
+/// The batch: rays, their origins and reciprocal directions by axis (one array per axis, so a
+/// node step gathers one pair per ray: origin and reciprocal direction share a cache line), the
+/// finished flags and the answer.
 pub(crate) struct Batch<'a, A> {
     pub tree: &'a KdTree,
     pub prims: &'a PrimitiveSet,
     pub rays: &'a [Ray],
-    pub org: [Vec<f32>; 3],
-    pub inv: [Vec<f32>; 3],
+    /// `split[a][i]` = (origin, reciprocal direction) of ray `i` on axis `a`.
+    pub split: [Vec<[f32; 2]>; 3],
     /// Rays whose answer is final: dropped from every later list (the paper's "rayos
     /// terminados").
     pub done: Vec<bool>,
+    /// How many rays are done so far: a list written when it was this value needs no filtering.
+    pub finished: usize,
     pub answer: A,
     pub stats: TraversalStats,
 }
@@ -140,14 +242,12 @@ impl<'a, A: Answer> Batch<'a, A> {
         mut answer: A,
     ) -> (Self, [Vec<Root>; 8]) {
         let n = rays.len();
-        let mut org = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-        let mut inv = org.clone();
+        let mut split = [vec![[0.0; 2]; n], vec![[0.0; 2]; n], vec![[0.0; 2]; n]];
         let mut groups: [Vec<Root>; 8] = Default::default();
         for (i, ray) in rays.iter().enumerate() {
             let r = TRay::new(ray);
-            for a in 0..3 {
-                org[a][i] = ray.org[a];
-                inv[a][i] = r.inv_dir[a];
+            for (a, s) in split.iter_mut().enumerate() {
+                s[i] = [ray.org[a], r.inv_dir[a]];
             }
             if !answer.start(prims, i, ray) || tree.nodes.is_empty() {
                 continue;
@@ -164,13 +264,43 @@ impl<'a, A: Answer> Batch<'a, A> {
             tree,
             prims,
             rays,
-            org,
-            inv,
+            split,
             done: vec![false; n],
+            finished: 0,
             answer,
             stats: TraversalStats::default(),
         };
         (batch, groups)
+    }
+
+    /// Starts loading ray `i` and its answer, a few rays before [`Batch::visit_leaf`] needs them.
+    #[inline(always)]
+    pub fn prefetch_leaf(&self, i: u32) {
+        let i = i as usize;
+        if let Some(r) = self.rays.get(i) {
+            prefetch(r);
+        }
+        self.answer.prefetch(i);
+    }
+
+    /// Tests the rays `ids` (lanes `live`, segments ending at `t_exit`) against leaf `leaf`, N
+    /// rays per triangle, and marks the finished ones done.
+    #[inline(always)]
+    pub fn visit_leaf_rays<const N: usize>(
+        &mut self,
+        leaf: &[u32],
+        ids: &[u32; N],
+        live: u32,
+        t_exit: &[f32; N],
+    ) {
+        let n = live.count_ones() as u64;
+        self.stats.leaves_visited += n;
+        self.stats.prim_tests += n * leaf.len() as u64;
+        let done = self
+            .answer
+            .leaf_rays(self.prims, leaf, self.rays, ids, live, t_exit);
+        for_lanes(live, |l| self.done[ids[l] as usize] = done >> l & 1 == 1);
+        self.finished += done.count_ones() as usize;
     }
 
     /// Tests ray `i` against a prepared leaf and marks it done when finished.
@@ -182,7 +312,17 @@ impl<'a, A: Answer> Batch<'a, A> {
             .answer
             .leaf(self.prims, leaf, i, &self.rays[i], t_exit, &mut self.stats);
         self.done[i] = done;
+        self.finished += done as usize;
         done
+    }
+}
+
+/// Calls `f` with each lane set in `mask`, lowest first.
+#[inline(always)]
+pub(crate) fn for_lanes(mut mask: u32, mut f: impl FnMut(usize)) {
+    while mask != 0 {
+        f(mask.trailing_zeros() as usize);
+        mask &= mask - 1;
     }
 }
 

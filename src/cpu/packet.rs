@@ -68,8 +68,7 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
     let (mut org, mut inv) = ([[0.0f32; N]; 3], [[0.0f32; N]; 3]);
     for a in 0..3 {
         for l in 0..N {
-            org[a][l] = b.org[a][p.id[l] as usize];
-            inv[a][l] = b.inv[a][p.id[l] as usize];
+            [org[a][l], inv[a][l]] = b.split[a][p.id[l] as usize];
         }
     }
     let tree = b.tree;

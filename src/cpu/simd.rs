@@ -1,8 +1,9 @@
-//! SIMD lane width and the 1 ray × N triangles Möller–Trumbore test of the vectorised-traversal
-//! paper (Noguera & Ureña, seeds/000, "intersección rayo–triángulo": the precomputed 1×4 variant).
+//! SIMD lane width, the Möller–Trumbore tests of the vectorised-traversal paper (Noguera & Ureña,
+//! seeds/000, "intersección rayo–triángulo": the precomputed 1 ray × 4 triangles variant, and N
+//! rays × 1 triangle for stream leaves) and the stream compaction.
 //!
 //! The code is portable: fixed-size `[f32; N]` lanes written as straight-line loops that LLVM
-//! turns into vector instructions. [`dispatch`] picks `N` at run time from the CPU's features and
+//! turns into vector instructions; only the compaction has x86 intrinsics (with a portable loop). [`dispatch`] picks `N` at run time from the CPU's features and
 //! runs the whole kernel (traversal included, inlined) inside a `#[target_feature]` function, so
 //! the same source becomes SSE (4 lanes), AVX2 (8) or AVX-512 (16) code.
 
@@ -45,8 +46,8 @@ impl Width {
 
     /// The width used by default: 8 lanes where AVX2 exists, else 4. AVX-512's 16 lanes are
     /// available ([`Width::W16`]) but measured no faster than 8 (`rt2 bench streams`, width
-    /// columns of BENCHMARKS.md): the SAH leaves hold ~3 triangles, so a 16-triangle block is
-    /// mostly padding, and the list compaction stays one lane at a time.
+    /// columns of BENCHMARKS.md, and again after the SIMD compaction of the stream lists): the
+    /// SAH leaves hold ~3 triangles, so a packet's 16-triangle block is mostly padding.
     pub fn best() -> Width {
         if Width::W8.supported() {
             Width::W8
@@ -135,36 +136,99 @@ impl<const N: usize> TriBlock<N> {
     /// Möller–Trumbore on every lane; `t = inf` marks a miss.
     #[inline(always)]
     fn lanes(&self, ray: &Ray, tmax: f32) -> ([f32; N], [f32; N], [f32; N]) {
-        let (o, d) = (ray.org, ray.dir);
+        let (o, d) = (ray.org.to_array(), ray.dir.to_array());
         let (mut t_out, mut u_out, mut v_out) = ([0.0; N], [0.0; N], [0.0; N]);
         for l in 0..N {
-            let [e1x, e1y, e1z] = [self.e1[0][l], self.e1[1][l], self.e1[2][l]];
-            let [e2x, e2y, e2z] = [self.e2[0][l], self.e2[1][l], self.e2[2][l]];
-            // p = dir × e2 (glam's Vec3::cross order), det = e1 · p.
-            let px = d.y * e2z - e2y * d.z;
-            let py = d.z * e2x - e2z * d.x;
-            let pz = d.x * e2y - e2x * d.y;
-            let det = (e1x * px) + (e1y * py) + (e1z * pz);
-            let inv = 1.0 / det;
-            let sx = o.x - self.v0[0][l];
-            let sy = o.y - self.v0[1][l];
-            let sz = o.z - self.v0[2][l];
-            let u = ((sx * px) + (sy * py) + (sz * pz)) * inv;
-            // q = s × e1
-            let qx = sy * e1z - e1y * sz;
-            let qy = sz * e1x - e1z * sx;
-            let qz = sx * e1y - e1x * sy;
-            let v = ((d.x * qx) + (d.y * qy) + (d.z * qz)) * inv;
-            let t = ((e2x * qx) + (e2y * qy) + (e2z * qz)) * inv;
-            // The scalar test's rejections, as masks rather than early returns.
-            let ok = (det != 0.0 && det.is_finite())
-                & (0.0..=1.0).contains(&u)
-                & !(v < 0.0 || u + v > 1.0)
-                & (t >= ray.tmin)
-                & (t < tmax);
-            t_out[l] = if ok { t } else { f32::INFINITY };
-            u_out[l] = u;
-            v_out[l] = v;
+            let tri = Triangle {
+                v0: [self.v0[0][l], self.v0[1][l], self.v0[2][l]],
+                e1: [self.e1[0][l], self.e1[1][l], self.e1[2][l]],
+                e2: [self.e2[0][l], self.e2[1][l], self.e2[2][l]],
+            };
+            (t_out[l], u_out[l], v_out[l]) = moller_trumbore(&tri, o, d, ray.tmin, tmax);
+        }
+        (t_out, u_out, v_out)
+    }
+}
+
+/// One ray against one triangle with the scalar [`Triangle::intersect`]'s operations in the
+/// same order (no fused multiply-add), its rejections as masks rather than early returns, so
+/// `t`, `u`, `v` are bit-identical to the single-ray path; `t = inf` marks a miss. Both lane
+/// orders ([`TriBlock`]: 1 ray × N triangles, [`RayLanes`]: N rays × 1 triangle) run it per lane.
+#[inline(always)]
+fn moller_trumbore(
+    tri: &Triangle,
+    o: [f32; 3],
+    d: [f32; 3],
+    tmin: f32,
+    tmax: f32,
+) -> (f32, f32, f32) {
+    let ([e1x, e1y, e1z], [e2x, e2y, e2z]) = (tri.e1, tri.e2);
+    // p = dir × e2 (glam's Vec3::cross order), det = e1 · p.
+    let px = d[1] * e2z - e2y * d[2];
+    let py = d[2] * e2x - e2z * d[0];
+    let pz = d[0] * e2y - e2x * d[1];
+    let det = (e1x * px) + (e1y * py) + (e1z * pz);
+    let inv = 1.0 / det;
+    let sx = o[0] - tri.v0[0];
+    let sy = o[1] - tri.v0[1];
+    let sz = o[2] - tri.v0[2];
+    let u = ((sx * px) + (sy * py) + (sz * pz)) * inv;
+    // q = s × e1
+    let qx = sy * e1z - e1y * sz;
+    let qy = sz * e1x - e1z * sx;
+    let qz = sx * e1y - e1x * sy;
+    let v = ((d[0] * qx) + (d[1] * qy) + (d[2] * qz)) * inv;
+    let t = ((e2x * qx) + (e2y * qy) + (e2z * qz)) * inv;
+    let ok = (det != 0.0 && det.is_finite())
+        & (0.0..=1.0).contains(&u)
+        & !(v < 0.0 || u + v > 1.0)
+        & (t >= tmin)
+        & (t < tmax);
+    (if ok { t } else { f32::INFINITY }, u, v)
+}
+
+/// N rays in structure-of-arrays form, for the leaves of a stream: every ray of a list that
+/// reaches a leaf is tested N at a time against each triangle in turn (broadcast, not gathered).
+/// SAH leaves hold ~2 triangles per visit, so a [`TriBlock`] of N lanes is mostly padding.
+pub struct RayLanes<const N: usize> {
+    pub org: [[f32; N]; 3],
+    pub dir: [[f32; N]; 3],
+    pub tmin: [f32; N],
+    pub tmax: [f32; N],
+}
+
+impl<const N: usize> RayLanes<N> {
+    /// The rays `rays[ids[l]]` (an index past the end reads the last ray: lanes past a list's
+    /// end hold stale indices).
+    #[inline(always)]
+    pub fn gather(rays: &[Ray], ids: &[u32; N]) -> Self {
+        let last = rays.len() - 1;
+        let mut r = RayLanes {
+            org: [[0.0; N]; 3],
+            dir: [[0.0; N]; 3],
+            tmin: [0.0; N],
+            tmax: [0.0; N],
+        };
+        for l in 0..N {
+            let ray = &rays[(ids[l] as usize).min(last)];
+            for a in 0..3 {
+                r.org[a][l] = ray.org[a];
+                r.dir[a][l] = ray.dir[a];
+            }
+            r.tmin[l] = ray.tmin;
+            r.tmax[l] = ray.tmax;
+        }
+        r
+    }
+
+    /// Möller–Trumbore of every lane against `tri`, candidates below `tmax` per lane.
+    #[inline(always)]
+    pub fn triangle(&self, tri: &Triangle, tmax: &[f32; N]) -> ([f32; N], [f32; N], [f32; N]) {
+        let (mut t_out, mut u_out, mut v_out) = ([0.0; N], [0.0; N], [0.0; N]);
+        for l in 0..N {
+            let o = [self.org[0][l], self.org[1][l], self.org[2][l]];
+            let d = [self.dir[0][l], self.dir[1][l], self.dir[2][l]];
+            (t_out[l], u_out[l], v_out[l]) = moller_trumbore(tri, o, d, self.tmin[l], tmax[l]);
         }
         (t_out, u_out, v_out)
     }
@@ -218,5 +282,155 @@ impl<const N: usize> LeafPrims<N> {
             b.prim[lane] = p;
             lane += 1;
         }
+    }
+}
+
+/// Asks the cache for the line holding `x` (a hint: never faults, no effect off x86-64). The
+/// stream touches its rays in index order with gaps, which the hardware prefetchers do not follow.
+#[inline(always)]
+pub fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch reads nothing the program sees and cannot fault; `x` is a live reference.
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>((x as *const T).cast());
+    }
+}
+
+/// Stream compaction (the paper's "compactación" of the near and far lists): writes the lanes of
+/// each `src` column whose bit is set in `keep` to the front of the matching `dst` column, in
+/// lane order; the rest of `dst[..N]` gets unspecified lanes of `src`. Every `dst` has room for
+/// N lanes. AVX2 permutes by a table of the 256 masks, AVX-512 has `vpcompressd` (into a register:
+/// its store form is slow on AMD Zen 4); other widths and CPUs take the portable lane loop.
+#[inline(always)]
+pub fn compress<const N: usize, const K: usize>(
+    keep: u32,
+    src: [&[u32; N]; K],
+    dst: [&mut [u32]; K],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if N == 8 && std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { x86::compress8(keep, src, dst) };
+        }
+        if N == 16 && std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F (checked just above).
+            return unsafe { x86::compress16(keep, src, dst) };
+        }
+    }
+    for (s, d) in src.into_iter().zip(dst) {
+        let d = &mut d[..N];
+        let mut w = 0;
+        for (l, &x) in s.iter().enumerate() {
+            // Branch-free: every lane is written, the position steps by its flag.
+            d[w.min(N - 1)] = x;
+            w += (keep >> l & 1) as usize;
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod x86 {
+    use std::arch::x86_64::*;
+
+    /// For each 8-bit mask, the indices of its set bits in order, one nibble each (lowest first).
+    const PERM8: [u32; 256] = {
+        let mut t = [0u32; 256];
+        let mut m = 0;
+        while m < 256 {
+            let (mut l, mut w, mut packed) = (0, 0, 0u32);
+            while l < 8 {
+                if m >> l & 1 == 1 {
+                    packed |= (l as u32) << (4 * w);
+                    w += 1;
+                }
+                l += 1;
+            }
+            t[m] = packed;
+            m += 1;
+        }
+        t
+    };
+
+    /// [`super::compress`] for 8 lanes: one table look-up per mask, one permute per column.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn compress8<const N: usize, const K: usize>(
+        keep: u32,
+        src: [&[u32; N]; K],
+        dst: [&mut [u32]; K],
+    ) {
+        let packed = _mm256_set1_epi32(PERM8[(keep & 0xff) as usize] as i32);
+        let idx = _mm256_and_si256(
+            _mm256_srlv_epi32(packed, _mm256_setr_epi32(0, 4, 8, 12, 16, 20, 24, 28)),
+            _mm256_set1_epi32(15),
+        );
+        for (s, d) in src.into_iter().zip(dst) {
+            assert!(N == 8 && d.len() >= 8);
+            let v = _mm256_loadu_si256(s.as_ptr().cast());
+            _mm256_storeu_si256(d.as_mut_ptr().cast(), _mm256_permutevar8x32_epi32(v, idx));
+        }
+    }
+
+    /// [`super::compress`] for 16 lanes.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn compress16<const N: usize, const K: usize>(
+        keep: u32,
+        src: [&[u32; N]; K],
+        dst: [&mut [u32]; K],
+    ) {
+        for (s, d) in src.into_iter().zip(dst) {
+            assert!(N == 16 && d.len() >= 16);
+            let v = _mm512_loadu_si512(s.as_ptr().cast());
+            _mm512_storeu_si512(
+                d.as_mut_ptr().cast(),
+                _mm512_maskz_compress_epi32(keep as u16, v),
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every mask of every width, through the width's own path (AVX2 / AVX-512 where the CPU has
+    /// them, the lane loop otherwise), against the plain filter.
+    fn check<const N: usize>() {
+        struct Job;
+        impl Kernel for Job {
+            type Out = ();
+            fn run<const M: usize>(self) {
+                let src: [u32; M] = std::array::from_fn(|l| 100 + l as u32);
+                let twice = src.map(|x| 2 * x);
+                let masks = if M == 16 { 1u32 << 16 } else { 1 << M };
+                for keep in 0..masks {
+                    let (mut a, mut b) = (vec![0; M + 3], vec![0; M + 3]);
+                    compress(keep, [&src, &twice], [&mut a[3..], &mut b[3..]]);
+                    let want: Vec<u32> = (0..M)
+                        .filter(|l| keep >> l & 1 == 1)
+                        .map(|l| src[l])
+                        .collect();
+                    assert_eq!(&a[3..3 + want.len()], &want[..], "{M} lanes, mask {keep:b}");
+                    let twice_want: Vec<u32> = want.iter().map(|x| 2 * x).collect();
+                    assert_eq!(&b[3..3 + want.len()], &twice_want[..]);
+                }
+            }
+        }
+        let w = match N {
+            4 => Width::W4,
+            8 => Width::W8,
+            _ => Width::W16,
+        };
+        dispatch(w, Job);
+    }
+
+    #[test]
+    fn compress_keeps_the_masked_lanes_in_order() {
+        check::<4>();
+        check::<8>();
+        check::<16>();
     }
 }

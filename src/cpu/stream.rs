@@ -1,15 +1,16 @@
 //! The n-ray traversal of Noguera & Ureña (seeds/000, "recorrido vectorial"): the tree is walked
 //! once per octant group with all the group's rays at once. Every node receives a list of the
 //! rays that enter it; an inner node splits its list into the near and far children's lists
-//! (SIMD over N lanes), a leaf tests its triangles against every ray of its list (1 ray × N
-//! triangles, triangles gathered once per leaf visit).
+//! (SIMD over N lanes), a leaf tests its triangles against every ray of its list (N rays × 1
+//! triangle: SAH leaves hold ~2 triangles per visit, too few to fill a block of N triangles).
 //!
-//! Memory follows the paper's hybrid layout: a list is a run of [`Lanes`] packets (structure of
-//! arrays inside, array of packets outside) on one ray stack, a `Vec` reused for the whole batch
-//! and never shrunk, so no node allocates. Finished rays are left out when a node builds its
-//! children's lists; rays past their `tmax` never get a segment there. When few rays reach a node
-//! (≤ [`SWITCH`]) the lists stop paying and the subtree is finished by the packet traversal (the
-//! paper's future work). The parametric traversal uses the general split distance
+//! Memory: the lists live on one ray stack, reused for the whole batch and never shrunk, so no
+//! node allocates. Each list is a run of slots in columns (ray index, segment start, segment
+//! end), structure of arrays over the whole list rather than the paper's array of 4-ray packets,
+//! so that a compacted group of live lanes is one vector store per column wherever the list ends
+//! ([`simd::compress`]). Rays that finished in a nearer subtree leave a list when it is popped;
+//! rays past their `tmax` never get a segment there. A list that fits one packet (≤ N rays) is
+//! finished by the packet traversal (the paper's future work). The parametric traversal uses the general split distance
 //! `(split - org) * inv_dir` rather than the paper's halving: it serves SAH trees too and is what
 //! makes the hits bit-identical to the single-ray traversals.
 
@@ -19,19 +20,69 @@ use super::simd::{self, Kernel, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
 
-/// Lists of at most this many rays go on as one packet (the paper's future work suggests 4): a
-/// list that small no longer amortises its compaction, and one packet walks the rest of the
-/// subtree with one node fetch per node. Capped at the lane width.
-pub const SWITCH: usize = 4;
-
-/// A node still to visit and its list: `count` rays in packets from `start`. A popped frame's
-/// list is always the highest live one on the ray stack (children's lists are written above their
-/// parent's, and the near child is walked first), so its children go right above it.
+/// A node still to visit and its list: `count` rays from `start` on the ray stack, written when
+/// `finished` rays were done. A popped frame's list is always the highest live one on the ray
+/// stack (children's lists are written above their parent's, and the near child is walked
+/// first), so its children go right above it.
 #[derive(Clone, Copy, Debug)]
 struct Frame {
     node: u32,
     start: usize,
     count: usize,
+    finished: usize,
+}
+
+/// The ray stack: every list is a run of slots in three columns (ray index, segment start and
+/// end), so a compacted run of N lanes is stored at any slot with one vector store per column.
+/// Reused for the whole batch and never shrunk: no node allocates.
+#[derive(Default)]
+struct Lists {
+    id: Vec<u32>,
+    t0: Vec<u32>,
+    t1: Vec<u32>,
+}
+
+impl Lists {
+    /// Makes room for slots up to `end` (exclusive).
+    #[inline(always)]
+    fn reserve(&mut self, end: usize) {
+        if self.id.len() < end {
+            for c in [&mut self.id, &mut self.t0, &mut self.t1] {
+                c.resize(end, 0);
+            }
+        }
+    }
+
+    /// The N slots from `at`: ray indices and segments.
+    #[inline(always)]
+    fn load<const N: usize>(&self, at: usize) -> ([u32; N], [f32; N], [f32; N]) {
+        let col = |c: &Vec<u32>| -> [u32; N] { c[at..at + N].try_into().expect("N slots") };
+        (
+            col(&self.id),
+            col(&self.t0).map(f32::from_bits),
+            col(&self.t1).map(f32::from_bits),
+        )
+    }
+
+    /// Appends the lanes of `keep` to the list whose end is `*at`, and moves the end past them.
+    #[inline(always)]
+    fn push<const N: usize>(
+        &mut self,
+        at: &mut usize,
+        keep: u32,
+        id: &[u32; N],
+        t0: &[f32; N],
+        t1: &[f32; N],
+    ) {
+        let (t0, t1) = (t0.map(f32::to_bits), t1.map(f32::to_bits));
+        let a = *at;
+        simd::compress(
+            keep,
+            [id, &t0, &t1],
+            [&mut self.id[a..], &mut self.t0[a..], &mut self.t1[a..]],
+        );
+        *at += keep.count_ones() as usize;
+    }
 }
 
 /// What a stream query used, for the memory report of `rt2 bench streams`.
@@ -43,61 +94,80 @@ pub struct StreamMemory {
     pub ray_array_bytes: usize,
 }
 
+/// Lane mask of the first `count` lanes of N (N ≤ 16).
+#[inline(always)]
+fn first<const N: usize>(count: usize) -> u32 {
+    (1u32 << count.min(N)) - 1
+}
+
 /// Walks the tree once with all the rays of one octant group.
 #[inline(always)]
 fn traverse<const N: usize, A: Answer>(
     b: &mut Batch<A>,
-    list: &mut Vec<Lanes<N>>,
+    lists: &mut Lists,
     frames: &mut Vec<Frame>,
     scratch: &mut packet::Scratch<N>,
     roots: &[super::batch::Root],
     positive: [bool; 3],
 ) {
-    let packets = |count: usize| count.div_ceil(N);
-    let need = packets(roots.len());
-    if list.len() < need {
-        list.resize(need, Lanes::new());
-    }
-    for (k, chunk) in roots.chunks(N).enumerate() {
-        list[k] = packet::lanes_of(chunk);
+    lists.reserve(roots.len() + N);
+    for (k, r) in roots.iter().enumerate() {
+        (lists.id[k], lists.t0[k], lists.t1[k]) = (r.id, r.t0.to_bits(), r.t1.to_bits());
     }
     frames.push(Frame {
         node: 0,
         start: 0,
         count: roots.len(),
+        finished: b.finished,
     });
+    let last = b.rays.len() - 1;
     while let Some(f) = frames.pop() {
+        let mut count = f.count;
+        if f.finished != b.finished {
+            // Rays finished since the list was written (in a nearer subtree) leave it, in place.
+            let mut end = f.start;
+            for k in (0..count).step_by(N) {
+                let (id, t0, t1) = lists.load::<N>(f.start + k);
+                let live = (0..N).fold(0u32, |m, l| m | (!b.done[id[l] as usize] as u32) << l);
+                lists.push(&mut end, live & first::<N>(count - k), &id, &t0, &t1);
+            }
+            count = end - f.start;
+        }
+        if count == 0 {
+            continue;
+        }
         let n = b.tree.nodes[f.node as usize];
-        if f.count <= SWITCH.min(N) {
-            let mut p = list[f.start];
-            p.mask &= !(0..N).fold(0u32, |m, l| m | (b.done[p.id[l] as usize] as u32) << l);
-            if p.mask != 0 {
-                packet::traverse(b, scratch, f.node, p, positive);
-            }
+        if count <= N {
+            let (id, t0, t1) = lists.load::<N>(f.start);
+            let p = Lanes {
+                id,
+                t0,
+                t1,
+                mask: first::<N>(count),
+            };
+            packet::traverse(b, scratch, f.node, p, positive);
             continue;
         }
-        let lists = &list[f.start..f.start + packets(f.count)];
+        b.stats.nodes_visited += count as u64;
         if n.is_leaf() {
-            scratch
-                .leaf
-                .gather(&b.prims.triangles, b.tree.leaf_prims(n.index()), f.count);
-            for (k, p) in lists.iter().enumerate() {
-                for l in 0..N.min(f.count - k * N) {
-                    if !b.done[p.id[l] as usize] {
-                        b.stats.nodes_visited += 1;
-                        b.visit_leaf(&scratch.leaf, p.id[l], p.t1[l]);
-                    }
+            let leaf = b.tree.leaf_prims(n.index());
+            for k in (0..count).step_by(N) {
+                let at = f.start + k;
+                for &i in
+                    &lists.id[(at + N).min(f.start + count)..(at + 2 * N).min(f.start + count)]
+                {
+                    b.prefetch_leaf(i);
                 }
+                let (id, _, t1) = lists.load::<N>(at);
+                b.visit_leaf_rays(leaf, &id, first::<N>(count - k), &t1);
             }
             continue;
         }
-        // Children's lists: far at `top`, near one parent-size further (both fit).
-        let cap = packets(f.count);
-        let top = f.start + cap;
-        let (far_start, near_start) = (top, top + cap);
-        if list.len() < near_start + cap {
-            list.resize(near_start + cap, Lanes::new());
-        }
+        // Children's lists: far right above the parent's, near above the far one's room (a
+        // compacted store may run N slots past a list's end).
+        let far_start = f.start + count;
+        let near_start = far_start + count + N;
+        lists.reserve(near_start + count + N);
         let axis = n.axis();
         let (below, above) = (n.index(), n.index() + 1);
         let (near, far) = if positive[axis] {
@@ -105,45 +175,41 @@ fn traverse<const N: usize, A: Answer>(
         } else {
             (above, below)
         };
-        let (mut nc, mut fc) = (0usize, 0usize);
-        for k in 0..cap {
-            let p = list[f.start + k];
-            let (mut near_t1, mut far_t0, mut en, mut ef) =
-                ([0.0; N], [0.0; N], [false; N], [false; N]);
-            for l in 0..N {
-                let i = p.id[l] as usize;
-                let ts = (n.split - b.org[axis][i]) * b.inv[axis][i];
-                (en[l], near_t1[l], ef[l], far_t0[l]) = split_lane(ts, p.t0[l], p.t1[l]);
-            }
-            // Compaction, branch-free: every live ray is written, the counts step by its flags.
-            for l in 0..N.min(f.count - k * N) {
-                let id = p.id[l];
-                if b.done[id as usize] {
-                    continue;
+        let split = &b.split[axis][..=last];
+        let (mut nc, mut fc) = (near_start, far_start);
+        for k in (0..count).step_by(N) {
+            if k + N < count {
+                for &i in &lists.id[f.start + k + N..(f.start + k + 2 * N).min(f.start + count)] {
+                    let i = (i as usize).min(last);
+                    simd::prefetch(&split[i]);
                 }
-                b.stats.nodes_visited += 1;
-                let d = &mut list[far_start + fc / N];
-                d.id[fc % N] = id;
-                d.t0[fc % N] = far_t0[l];
-                d.t1[fc % N] = p.t1[l];
-                fc += ef[l] as usize;
-                let d = &mut list[near_start + nc / N];
-                d.id[nc % N] = id;
-                d.t0[nc % N] = p.t0[l];
-                d.t1[nc % N] = near_t1[l];
-                nc += en[l] as usize;
             }
+            let (id, t0, t1) = lists.load::<N>(f.start + k);
+            let (mut near_t1, mut far_t0, mut en, mut ef) = ([0.0; N], [0.0; N], 0u32, 0u32);
+            for l in 0..N {
+                // Lanes past the list's end hold stale ray indices: clamped, never out of bounds.
+                let i = (id[l] as usize).min(last);
+                let [org, inv] = split[i];
+                let ts = (n.split - org) * inv;
+                let (e_near, t1_near, e_far, t0_far) = split_lane(ts, t0[l], t1[l]);
+                (near_t1[l], far_t0[l]) = (t1_near, t0_far);
+                en |= (e_near as u32) << l;
+                ef |= (e_far as u32) << l;
+            }
+            let live = first::<N>(count - k);
+            lists.push(&mut fc, ef & live, &id, &far_t0, &t1);
+            lists.push(&mut nc, en & live, &id, &t0, &near_t1);
         }
         // Far first on the frame stack, so that near is walked first (front to back).
-        for (node, start, count) in [(far, far_start, fc), (near, near_start, nc)] {
-            if count == 0 {
-                continue;
+        for (node, start, end) in [(far, far_start, fc), (near, near_start, nc)] {
+            if end > start {
+                frames.push(Frame {
+                    node,
+                    start,
+                    count: end - start,
+                    finished: b.finished,
+                });
             }
-            if count <= SWITCH.min(N) {
-                // The live lanes of a list that goes on as one packet.
-                list[start].mask = (1u32 << count) - 1;
-            }
-            frames.push(Frame { node, start, count });
         }
     }
 }
@@ -167,14 +233,14 @@ pub(crate) fn run<A: Answer>(
         #[inline(always)]
         fn run<const N: usize>(self) -> Self::Out {
             let (mut b, groups) = Batch::new(self.tree, self.prims, self.rays, self.answer);
-            let mut list: Vec<Lanes<N>> = Vec::new();
+            let mut lists = Lists::default();
             let mut frames = Vec::with_capacity(128);
             let mut scratch = packet::Scratch::<N>::new();
             for (o, group) in groups.iter().enumerate() {
                 if !group.is_empty() {
                     traverse(
                         &mut b,
-                        &mut list,
+                        &mut lists,
                         &mut frames,
                         &mut scratch,
                         group,
@@ -184,7 +250,7 @@ pub(crate) fn run<A: Answer>(
             }
             let n = self.rays.len();
             let mem = StreamMemory {
-                ray_stack_bytes: list.capacity() * std::mem::size_of::<Lanes<N>>(),
+                ray_stack_bytes: 3 * 4 * lists.id.capacity(),
                 ray_array_bytes: n * (6 * 4 + 1),
             };
             (b.stats, mem)
