@@ -51,8 +51,8 @@ impl Engine {
     }
 
     /// The traversals × intersectors measured with this engine. One ray at a time: all of
-    /// them. Packets and streams: their one combination. The GPU: the standard traversal and
-    /// ropes++ (its AUTO choice), Möller–Trumbore.
+    /// them. Packets and streams: their one combination. The GPU: every traversal kernel,
+    /// Möller–Trumbore.
     fn methods(self) -> Vec<(Traversal, Intersector)> {
         let mt = Intersector::MollerTrumbore;
         match self {
@@ -61,7 +61,7 @@ impl Engine {
                 .flat_map(|t| Intersector::ALL.map(|i| (t, i)))
                 .collect(),
             Engine::Cpu(_) => vec![(Traversal::Standard, mt)],
-            Engine::Gpu => vec![(Traversal::Standard, mt), (Traversal::RopesPlusPlus, mt)],
+            Engine::Gpu => Traversal::ALL.map(|t| (t, mt)).to_vec(),
         }
     }
 
@@ -888,12 +888,10 @@ pub(super) fn chart(a: &Args) -> Result<String> {
          at a time, every traversal × intersector (circles); **packet** = `QueryMode::Packet` \
          (triangles) and **stream** = `QueryMode::Stream` (squares), which follow the standard \
          traversal's order and test triangles with Möller–Trumbore only (the library refuses \
-         the watertight test there); **gpu** = the GPU backend (diamonds), standard and ropes++ \
-         (its AUTO traversal), Möller–Trumbore and the epsilon offset only (all its kernels \
-         have). GPU: {}. Colour: the ray set; filled: watertight test. \
-         Mrays/s with all cores (median of the runs) on a shared 2-core machine where other \
-         builds and benchmarks ran at the same time: speeds are noisy (compare points \
-         measured in the same run), the error counts are exact. Measured in {secs:.0} s.\n\n\
+         the watertight test there); **gpu** = the GPU backend (diamonds), every traversal \
+         kernel, Möller–Trumbore and the epsilon offset only (all its kernels have). GPU: {}. Colour: the ray set; filled: watertight test. \
+         Mrays/s with all cores (median of the runs) on a shared 2-core machine: speeds are \
+         noisy (compare points measured in the same run), the error counts are exact. Measured in {secs:.0} s.\n\n\
          Errors against an f64 brute force over the exact triangle corners (a watertight test in f64, \
          closed edges; a neighbour hit at the same distance is a tie, not an error). Failures = false misses (leaks) + false hits + wrong \
          primitive, per million rays; leaks are rays from inside a closed mesh whose first hit is \
