@@ -4,7 +4,8 @@
 //! operation runs (layer 2); [`cpu`] is the CPU backend (layer 3a), [`gpu`] the GPU backend
 //! (layer 3b). Shared by all: the
 //! [`geometry`] vocabulary, the [`scene`] model, the [`kdtree`], [`camera`], [`frame`] and
-//! [`shading`], and the [`precision`] modes. [`context::Context`] ties a thread pool to a dispatch decision.
+//! [`shading`], and the [`precision`] modes. [`context::Context`] ties a thread pool to a
+//! dispatch decision.
 
 pub mod api;
 pub mod camera;

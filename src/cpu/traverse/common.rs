@@ -82,8 +82,8 @@ pub(super) enum Crossing {
 
 /// One inner-node step for the segment `[t0, t1]`. Ties go to the far child when the split is at
 /// `t0` (the segment starts on the plane and moves into `far`) and to the near child when it is at
-/// `t1`. A NaN `t_split` (the ray lies in the split plane) also goes to `far`: for `+0.0` that is the
-/// child above, for `-0.0` the child below — the side the direction sign points to, the same rule
+/// `t1`. A NaN `t_split` (the ray lies in the split plane) also goes to `far`: for `+0.0` that is
+/// the child above, for `-0.0` the child below — the side the direction sign points to, the same rule
 /// point location uses for a point on the plane. The child left out holds nothing the ray needs:
 /// the builders list every primitive touching or lying in a split plane on both sides of it.
 #[inline]
