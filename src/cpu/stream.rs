@@ -11,8 +11,8 @@
 //! ([`simd::compress`]). Rays that finished in a nearer subtree leave a list when it is popped;
 //! rays past their `tmax` never get a segment there. A list that fits one packet (≤ N rays) is
 //! finished by the packet traversal (the paper's future work). The parametric traversal uses
-//! the general split distance `(split - org) * inv_dir` rather than the paper's halving: it serves SAH trees too and is what
-//! makes the hits bit-identical to the single-ray traversals.
+//! the general split distance `(split - org) * inv_dir` rather than the paper's halving: it
+//! serves SAH trees too and is what makes the hits bit-identical to the single-ray traversals.
 
 use super::batch::{positive, split_lane, Answer, AnyHit, Batch, Closest};
 use super::packet::{self, Lanes};
