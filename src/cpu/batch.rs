@@ -9,7 +9,7 @@
 //!
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
-use super::simd::{prefetch, LeafPrims, RayLanes};
+use super::simd::{self, prefetch, Kernel, LeafPrims, RayLanes, Width};
 use super::traverse::{clip, TRay};
 use crate::geometry::{Hit, PrimitiveSet, Ray, RayTest, TraversalStats};
 use crate::kdtree::KdTree;
@@ -332,6 +332,49 @@ pub(crate) fn octant(ray: &Ray) -> usize {
     (0..3)
         .filter(|&a| ray.dir[a].is_sign_negative())
         .fold(0, |o, a| o | 1 << a)
+}
+
+/// A way of tracing a whole batch N lanes at a time (packets, streams): what it does with the
+/// octant groups of a prepared [`Batch`].
+pub(crate) trait Mode {
+    type Out;
+    fn trace<const N: usize, A: Answer>(b: &mut Batch<A>, groups: &[Vec<Root>; 8]) -> Self::Out;
+}
+
+/// Traces `rays` with mode `M` at the lane width `width` asks for (compiled for its instruction
+/// set by [`simd::dispatch`]).
+pub(crate) fn run<M: Mode, A: Answer>(
+    tree: &KdTree,
+    prims: &PrimitiveSet,
+    rays: &[Ray],
+    answer: A,
+    width: Width,
+) -> M::Out {
+    struct Job<'a, A, M> {
+        tree: &'a KdTree,
+        prims: &'a PrimitiveSet,
+        rays: &'a [Ray],
+        answer: A,
+        mode: std::marker::PhantomData<M>,
+    }
+    impl<A: Answer, M: Mode> Kernel for Job<'_, A, M> {
+        type Out = M::Out;
+        #[inline(always)]
+        fn run<const N: usize>(self) -> M::Out {
+            let (mut b, groups) = Batch::new(self.tree, self.prims, self.rays, self.answer);
+            M::trace::<N, A>(&mut b, &groups)
+        }
+    }
+    simd::dispatch(
+        width,
+        Job::<A, M> {
+            tree,
+            prims,
+            rays,
+            answer,
+            mode: std::marker::PhantomData,
+        },
+    )
 }
 
 /// Whether the direction is positive on each axis, for the rays of octant `o`.

@@ -6,8 +6,8 @@
 //! The same function finishes a stream traversal when few rays reach a node (the paper's future
 //! work: stop paying for lists when the rays no longer share nodes).
 
-use super::batch::{split_lane, Answer, Batch, Root};
-use super::simd::{self, Kernel, LeafPrims, Width};
+use super::batch::{positive, run, split_lane, Answer, Batch, Mode, Root};
+use super::simd::{LeafPrims, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
 
@@ -157,48 +157,20 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
 
 /// The packet mode of a batch: rays grouped by octant, each group cut into packets of N
 /// consecutive rays (consecutive rays of an image are coherent), each packet traversed at once.
-pub(crate) fn run<A: Answer>(
-    tree: &KdTree,
-    prims: &PrimitiveSet,
-    rays: &[Ray],
-    answer: A,
-    width: Width,
-) -> TraversalStats {
-    struct Job<'a, A> {
-        tree: &'a KdTree,
-        prims: &'a PrimitiveSet,
-        rays: &'a [Ray],
-        answer: A,
-    }
-    impl<A: Answer> Kernel for Job<'_, A> {
-        type Out = TraversalStats;
-        #[inline(always)]
-        fn run<const N: usize>(self) -> TraversalStats {
-            let (mut b, groups) = Batch::new(self.tree, self.prims, self.rays, self.answer);
-            let mut s = Scratch::<N>::new();
-            for (o, group) in groups.iter().enumerate() {
-                for chunk in group.chunks(N) {
-                    traverse(
-                        &mut b,
-                        &mut s,
-                        0,
-                        lanes_of(chunk),
-                        super::batch::positive(o),
-                    );
-                }
+struct PacketMode;
+
+impl Mode for PacketMode {
+    type Out = TraversalStats;
+    #[inline(always)]
+    fn trace<const N: usize, A: Answer>(b: &mut Batch<A>, groups: &[Vec<Root>; 8]) -> Self::Out {
+        let mut s = Scratch::<N>::new();
+        for (o, group) in groups.iter().enumerate() {
+            for chunk in group.chunks(N) {
+                traverse(b, &mut s, 0, lanes_of(chunk), positive(o));
             }
-            b.stats
         }
+        b.stats
     }
-    simd::dispatch(
-        width,
-        Job {
-            tree,
-            prims,
-            rays,
-            answer,
-        },
-    )
 }
 
 /// Packs up to N rays into lanes.
@@ -222,7 +194,7 @@ pub fn intersect(
     hits: &mut [Hit],
     width: Width,
 ) -> TraversalStats {
-    run(tree, prims, rays, super::batch::Closest(hits), width)
+    run::<PacketMode, _>(tree, prims, rays, super::batch::Closest(hits), width)
 }
 
 /// Any-hit queries of `rays` with N-ray packets (one thread).
@@ -233,5 +205,5 @@ pub fn occluded(
     found: &mut [bool],
     width: Width,
 ) -> TraversalStats {
-    run(tree, prims, rays, super::batch::AnyHit(found), width)
+    run::<PacketMode, _>(tree, prims, rays, super::batch::AnyHit(found), width)
 }

@@ -14,9 +14,9 @@
 //! the general split distance `(split - org) * inv_dir` rather than the paper's halving: it
 //! serves SAH trees too and is what makes the hits bit-identical to the single-ray traversals.
 
-use super::batch::{positive, split_lane, Answer, AnyHit, Batch, Closest};
+use super::batch::{positive, run, split_lane, Answer, AnyHit, Batch, Closest, Mode, Root};
 use super::packet::{self, Lanes};
-use super::simd::{self, Kernel, Width};
+use super::simd::{self, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
 
@@ -215,56 +215,26 @@ fn traverse<const N: usize, A: Answer>(
 }
 
 /// The stream mode of a batch (one thread): every octant group traversed once with all its rays.
-pub(crate) fn run<A: Answer>(
-    tree: &KdTree,
-    prims: &PrimitiveSet,
-    rays: &[Ray],
-    answer: A,
-    width: Width,
-) -> (TraversalStats, StreamMemory) {
-    struct Job<'a, A> {
-        tree: &'a KdTree,
-        prims: &'a PrimitiveSet,
-        rays: &'a [Ray],
-        answer: A,
-    }
-    impl<A: Answer> Kernel for Job<'_, A> {
-        type Out = (TraversalStats, StreamMemory);
-        #[inline(always)]
-        fn run<const N: usize>(self) -> Self::Out {
-            let (mut b, groups) = Batch::new(self.tree, self.prims, self.rays, self.answer);
-            let mut lists = Lists::default();
-            let mut frames = Vec::with_capacity(128);
-            let mut scratch = packet::Scratch::<N>::new();
-            for (o, group) in groups.iter().enumerate() {
-                if !group.is_empty() {
-                    traverse(
-                        &mut b,
-                        &mut lists,
-                        &mut frames,
-                        &mut scratch,
-                        group,
-                        positive(o),
-                    );
-                }
+struct StreamMode;
+
+impl Mode for StreamMode {
+    type Out = (TraversalStats, StreamMemory);
+    #[inline(always)]
+    fn trace<const N: usize, A: Answer>(b: &mut Batch<A>, groups: &[Vec<Root>; 8]) -> Self::Out {
+        let mut lists = Lists::default();
+        let mut frames = Vec::with_capacity(128);
+        let mut scratch = packet::Scratch::<N>::new();
+        for (o, group) in groups.iter().enumerate() {
+            if !group.is_empty() {
+                traverse(b, &mut lists, &mut frames, &mut scratch, group, positive(o));
             }
-            let n = self.rays.len();
-            let mem = StreamMemory {
-                ray_stack_bytes: 3 * 4 * lists.id.capacity(),
-                ray_array_bytes: n * (6 * 4 + 1),
-            };
-            (b.stats, mem)
         }
+        let mem = StreamMemory {
+            ray_stack_bytes: 3 * 4 * lists.id.capacity(),
+            ray_array_bytes: b.rays.len() * (6 * 4 + 1),
+        };
+        (b.stats, mem)
     }
-    simd::dispatch(
-        width,
-        Job {
-            tree,
-            prims,
-            rays,
-            answer,
-        },
-    )
 }
 
 /// Closest hits of `rays` with the n-ray traversal (one thread).
@@ -275,7 +245,7 @@ pub fn intersect(
     hits: &mut [Hit],
     width: Width,
 ) -> (TraversalStats, StreamMemory) {
-    run(tree, prims, rays, Closest(hits), width)
+    run::<StreamMode, _>(tree, prims, rays, Closest(hits), width)
 }
 
 /// Any-hit queries of `rays` with the n-ray traversal (one thread).
@@ -286,5 +256,5 @@ pub fn occluded(
     found: &mut [bool],
     width: Width,
 ) -> (TraversalStats, StreamMemory) {
-    run(tree, prims, rays, AnyHit(found), width)
+    run::<StreamMode, _>(tree, prims, rays, AnyHit(found), width)
 }
