@@ -72,8 +72,16 @@ pub fn intersect_width(
     mode: QueryMode,
     width: Width,
 ) -> TraversalStats {
+    let (tree, prims) = (&scene.tree, &scene.prims);
     chunked(rays, hits, mode.chunk(rays.len()), |r, h| {
-        intersect_serial(scene, r, h, how, opts, mode, width)
+        serial(
+            r,
+            h,
+            mode,
+            |ray, stats| traverse::intersect(tree, prims, ray, how, opts, stats),
+            |r, h| packet::intersect(tree, prims, r, h, width),
+            |r, h| stream::intersect(tree, prims, r, h, width).0,
+        )
     })
 }
 
@@ -86,8 +94,16 @@ pub fn occluded(
     opts: &TraverseOptions,
     mode: QueryMode,
 ) -> TraversalStats {
+    let (tree, prims, width) = (&scene.tree, &scene.prims, Width::best());
     chunked(rays, occluded, mode.chunk(rays.len()), |r, o| {
-        occluded_serial(scene, r, o, how, opts, mode)
+        serial(
+            r,
+            o,
+            mode,
+            |ray, stats| traverse::occluded(tree, prims, ray, how, opts, stats),
+            |r, o| packet::occluded(tree, prims, r, o, width),
+            |r, o| stream::occluded(tree, prims, r, o, width).0,
+        )
     })
 }
 
@@ -108,49 +124,25 @@ fn chunked<T: Send>(
         })
 }
 
-/// One chunk of [`intersect`], on the calling thread.
-fn intersect_serial(
-    scene: &Committed,
+/// One chunk of a query on the calling thread: `single` answers one ray at a time, `packet`
+/// and `stream` a whole chunk in their mode.
+fn serial<T>(
     rays: &[Ray],
-    hits: &mut [Hit],
-    how: Traversal,
-    opts: &TraverseOptions,
+    out: &mut [T],
     mode: QueryMode,
-    width: Width,
+    single: impl Fn(&Ray, &mut TraversalStats) -> T,
+    packet: impl FnOnce(&[Ray], &mut [T]) -> TraversalStats,
+    stream: impl FnOnce(&[Ray], &mut [T]) -> TraversalStats,
 ) -> TraversalStats {
-    let (tree, prims) = (&scene.tree, &scene.prims);
-    match mode {
-        QueryMode::Single => {
-            let mut stats = TraversalStats::default();
-            for (ray, hit) in rays.iter().zip(hits) {
-                *hit = traverse::intersect(tree, prims, ray, how, opts, &mut stats);
-            }
-            stats
-        }
-        QueryMode::Packet => packet::intersect(tree, prims, rays, hits, width),
-        QueryMode::Stream => stream::intersect(tree, prims, rays, hits, width).0,
-    }
-}
-
-/// One chunk of [`occluded`], on the calling thread.
-fn occluded_serial(
-    scene: &Committed,
-    rays: &[Ray],
-    out: &mut [bool],
-    how: Traversal,
-    opts: &TraverseOptions,
-    mode: QueryMode,
-) -> TraversalStats {
-    let (tree, prims) = (&scene.tree, &scene.prims);
     match mode {
         QueryMode::Single => {
             let mut stats = TraversalStats::default();
             for (ray, o) in rays.iter().zip(out) {
-                *o = traverse::occluded(tree, prims, ray, how, opts, &mut stats);
+                *o = single(ray, &mut stats);
             }
             stats
         }
-        QueryMode::Packet => packet::occluded(tree, prims, rays, out, Width::best()),
-        QueryMode::Stream => stream::occluded(tree, prims, rays, out, Width::best()).0,
+        QueryMode::Packet => packet(rays, out),
+        QueryMode::Stream => stream(rays, out),
     }
 }
