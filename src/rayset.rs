@@ -4,6 +4,7 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::{Hit, Ray};
+use crate::scene::Committed;
 use glam::Vec3;
 use std::path::Path;
 
@@ -19,11 +20,17 @@ pub struct HitRecord {
     pub v: f32,
 }
 
-impl From<&Hit> for HitRecord {
-    fn from(h: &Hit) -> Self {
+impl HitRecord {
+    /// The record of `h` in a committed single-mesh scene: `prim` is the triangle's index in
+    /// the mesh, as in the ray-set files (the committed scene numbers its primitives for
+    /// locality; their origins give the mesh's numbers back).
+    pub fn of(h: &Hit, scene: &Committed) -> Self {
         HitRecord {
             t: h.t,
-            prim: h.prim,
+            prim: match scene.origins.get(h.prim as usize) {
+                Some(o) if h.is_hit() => o.prim,
+                _ => u32::MAX,
+            },
             u: h.u,
             v: h.v,
         }

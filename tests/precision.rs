@@ -195,7 +195,10 @@ fn edge_form_loses_shared_vertices_and_exact_corners_keep_them() {
     let scene = commit(m.positions.clone(), m.triangles.clone());
     let c = scene.committed().unwrap();
     assert_eq!(c.prims.vertices.len(), c.prims.triangles.len());
-    for (corners, tri) in c.prims.vertices.iter().zip(&m.triangles) {
+    // The committed triangles are renumbered for locality: each one's origin names its mesh
+    // triangle.
+    for (corners, origin) in c.prims.vertices.iter().zip(&c.origins) {
+        let tri = m.triangles[origin.prim as usize];
         assert_eq!(*corners, tri.map(|i| m.positions[i as usize].to_array()));
     }
 }
@@ -245,7 +248,8 @@ fn degenerate_duplicate_and_sliver_triangles() {
                     &opts,
                     &mut TraversalStats::default(),
                 );
-                let got = h.is_hit().then_some(h.prim);
+                // The mesh's index of the triangle hit (the scene renumbers its primitives).
+                let got = h.is_hit().then(|| c.origins[h.prim as usize].prim);
                 // Through (1, 0): the sliver's edge and the duplicates' edge meet there; a hit
                 // on either is allowed, the degenerate ones never.
                 if want.is_none() && org.x == 1.0 {

@@ -83,7 +83,7 @@ fn every_traversal_and_mode_agrees_with_embree_on_the_bunny_ray_sets() {
                     how.name()
                 ),
             }
-            let mine: Vec<HitRecord> = hits.iter().map(HitRecord::from).collect();
+            let mine: Vec<HitRecord> = hits.iter().map(|h| HitRecord::of(h, c)).collect();
             let g = rayset::compare(&mine, &reference, diag, 1e-4);
             println!(
                 "{set} {:<7} {:<22} rays {} disagreements {} (a-only {}, b-only {}, mismatches {}), ties {}",

@@ -6,6 +6,7 @@
 
 pub mod builtin;
 pub mod loaders;
+mod locality;
 mod material;
 mod object;
 pub mod tessellate;
@@ -315,8 +316,9 @@ impl Scene {
         for (id, obj) in self.objects.iter().enumerate() {
             object::place(obj, id as u32, &mut prims, &mut by_kind);
         }
-        let origins: Vec<PrimOrigin> = by_kind.concat();
-        let tree = kdtree::build(&prims, &self.build);
+        let mut origins: Vec<PrimOrigin> = by_kind.concat();
+        let mut tree = kdtree::build(&prims, &self.build);
+        locality::renumber(&mut prims, &mut origins, &mut tree);
         self.committed = Some(Committed {
             bounds: prims.scene_bounds(),
             prims,
@@ -349,7 +351,22 @@ impl Scene {
         self.committed()?;
         if let Some(c) = &mut self.committed {
             if c.prims.vertices.len() != c.prims.triangles.len() {
-                c.prims.vertices = object::triangle_corners(&self.objects);
+                // The corners come in placement order (object by object, file order); the
+                // committed triangles are renumbered (`locality`): their origins say where
+                // each one was placed.
+                let corners = object::triangle_corners(&self.objects);
+                let mut first = Vec::with_capacity(self.objects.len());
+                let mut placed = 0;
+                for obj in &self.objects {
+                    first.push(placed);
+                    if let Shape::Mesh { triangles, .. } = &obj.shape {
+                        placed += triangles.len();
+                    }
+                }
+                c.prims.vertices = c.origins[..c.prims.triangles.len()]
+                    .iter()
+                    .map(|o| corners[first[o.object as usize] + o.prim as usize])
+                    .collect();
             }
         }
         Ok(())

@@ -559,7 +559,7 @@ fn rays(a: &Args) -> Result<String> {
                     });
                     mrays[k] = rays.len() as f64 / ms / 1e3;
                 }
-                let mine: Vec<HitRecord> = hits.iter().map(HitRecord::from).collect();
+                let mine: Vec<HitRecord> = hits.iter().map(|h| HitRecord::of(h, c)).collect();
                 let agree = reference.as_ref().map_or("no reference".into(), |r| {
                     let g = rayset::compare(&mine, r, diag, 1e-4);
                     format!("{} of {} ({} ties)", g.disagreements(), g.rays, g.ties)
