@@ -109,7 +109,7 @@ impl Answer for Closest<'_> {
                     };
                 }
                 let (t, u, v) = lanes.triangle(tri, &bound);
-                let hits = (0..N).fold(0u32, |m, l| m | ((t[l] < f32::INFINITY) as u32) << l);
+                let hits = lanes_where::<N>(|l| t[l] < f32::INFINITY);
                 for_lanes(live & hits, |l| {
                     let hit = &mut self.0[ids[l] as usize];
                     hit.offer(t[l], u[l], v[l], p);
@@ -124,7 +124,7 @@ impl Answer for Closest<'_> {
             }
         }
         // Strictly before the exit, as `traverse::common::Closest`.
-        live & (0..N).fold(0u32, |m, l| m | ((hit_t[l] < t_exit[l]) as u32) << l)
+        live & lanes_where::<N>(|l| hit_t[l] < t_exit[l])
     }
 
     #[inline(always)]
@@ -186,7 +186,7 @@ impl Answer for AnyHit<'_> {
         for &p in leaf {
             if let Some(tri) = prims.triangles.get(p as usize) {
                 let (t, _, _) = lanes.triangle(tri, &lanes.tmax);
-                found |= (0..N).fold(0u32, |m, l| m | ((t[l] < f32::INFINITY) as u32) << l);
+                found |= lanes_where::<N>(|l| t[l] < f32::INFINITY);
             } else {
                 for_lanes(live & !found, |l| {
                     let mut hit = Hit::MISS;
@@ -324,6 +324,12 @@ pub(crate) fn for_lanes(mut mask: u32, mut f: impl FnMut(usize)) {
         f(mask.trailing_zeros() as usize);
         mask &= mask - 1;
     }
+}
+
+/// The mask of the N lanes for which `f` holds.
+#[inline(always)]
+pub(crate) fn lanes_where<const N: usize>(f: impl Fn(usize) -> bool) -> u32 {
+    (0..N).fold(0u32, |m, l| m | (f(l) as u32) << l)
 }
 
 /// Octant index of a ray: bit `a` set when the direction is negative on axis `a`.

@@ -14,7 +14,9 @@
 //! the general split distance `(split - org) * inv_dir` rather than the paper's halving: it
 //! serves SAH trees too and is what makes the hits bit-identical to the single-ray traversals.
 
-use super::batch::{positive, run, split_lane, Answer, AnyHit, Batch, Closest, Mode, Root};
+use super::batch::{
+    lanes_where, positive, run, split_lane, Answer, AnyHit, Batch, Closest, Mode, Root,
+};
 use super::packet::{self, Lanes};
 use super::simd::{self, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
@@ -128,7 +130,7 @@ fn traverse<const N: usize, A: Answer>(
             let mut end = f.start;
             for k in (0..count).step_by(N) {
                 let (id, t0, t1) = lists.load::<N>(f.start + k);
-                let live = (0..N).fold(0u32, |m, l| m | (!b.done[id[l] as usize] as u32) << l);
+                let live = lanes_where::<N>(|l| !b.done[id[l] as usize]);
                 lists.push(&mut end, live & first::<N>(count - k), &id, &t0, &t1);
             }
             count = end - f.start;
