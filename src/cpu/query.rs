@@ -13,9 +13,18 @@ use rayon::prelude::*;
 const CHUNK: usize = 4096;
 
 /// Fewest rays per stream. A stream gains from more rays per node (the paper traces all rays
-/// at once): the batch is cut into one stream per thread, but not below this size. On the
-/// bunny's incoherent set one 262,144-ray stream is 1.2× faster than 16,384-ray ones.
+/// at once): the batch is cut into one stream per thread, but not below this size.
 pub const STREAM_CHUNK: usize = 16384;
+
+/// Most rays per stream. Past this the lists of rays pending at the far children of the upper
+/// nodes no longer fit the caches: coherent rays cross both children of most upper nodes, so
+/// the ray stack holds about one copy of the stream per level. Measured with one thread on
+/// 1376×768 orbit frames (the `rt2 bench streams` workload), one 1 M-ray stream ran at
+/// 0.55–0.65× the speed of 32 K-ray streams on the bunny and the Snowden bust, and 64 K-ray
+/// streams already lost 25% on the bust. Incoherent rays would take longer streams (on the
+/// bunny's incoherent set 131 K-ray streams are about 12% faster than 32 K-ray ones), but their
+/// loss is the smaller one.
+pub const STREAM_MAX: usize = 32768;
 
 /// How a batch is traced. Every mode returns the same closest hits, bit for bit (the packet and
 /// stream traversals take the standard traversal's decisions for every ray).
@@ -43,7 +52,9 @@ impl QueryMode {
     /// Rays per parallel task in this mode for a batch of `n` rays.
     pub fn chunk(self, n: usize) -> usize {
         match self {
-            QueryMode::Stream => n.div_ceil(rayon::current_num_threads()).max(STREAM_CHUNK),
+            QueryMode::Stream => n
+                .div_ceil(rayon::current_num_threads())
+                .clamp(STREAM_CHUNK, STREAM_MAX),
             _ => CHUNK,
         }
     }
