@@ -9,7 +9,7 @@
 // neither exists. So NaN tests and sign tests read the bits, never `x != x` or `sign(x)`.
 
 struct KdNode { split: f32, bits: u32 }
-struct LeafRange { first: u32, count: u32 }
+struct RankWord { leaf_bits: u32, before: u32 }
 struct Triangle { v0: array<f32, 3>, e1: array<f32, 3>, e2: array<f32, 3> }
 struct Sphere { center: array<f32, 3>, radius: f32 }
 struct Ellipsoid { center: array<f32, 3>, inv: array<f32, 9>, half: array<f32, 3> }
@@ -39,7 +39,7 @@ struct Params {
 // Group 0: the committed scene, uploaded once per commit (src/gpu/scene.rs). Empty arrays
 // are padded to one element (wgpu rejects zero-sized bindings); the counts live in Params.
 @group(0) @binding(0) var<storage, read> nodes: array<KdNode>;          // kd-tree nodes
-@group(0) @binding(1) var<storage, read> leaves: array<LeafRange>;      // leaf -> prim_indices range
+@group(0) @binding(1) var<storage, read> leaf_rank: array<RankWord>;   // leaf numbers (rope traversals)
 @group(0) @binding(2) var<storage, read> prim_indices: array<u32>;      // leaf primitive lists
 @group(0) @binding(3) var<storage, read> triangles: array<Triangle>;    // v0, e1, e2
 @group(0) @binding(4) var<storage, read> spheres: array<Sphere>;        // centre, radius
@@ -268,6 +268,12 @@ fn clip_scene(r: TRay) -> Seg {
 
 fn is_leaf(n: KdNode) -> bool { return (n.bits & 3u) == 3u; }
 fn node_index(n: KdNode) -> u32 { return n.bits >> 2u; }
+// A leaf's number (`Ropes::leaf_number`): the leaves before leaf node `node`.
+fn leaf_number(node: u32) -> u32 {
+    let w = leaf_rank[node / 32u];
+    let below = w.leaf_bits & ((1u << (node % 32u)) - 1u);
+    return w.before + countOneBits(below);
+}
 
 // `kd_step` (`step` on the CPU): what the segment [t0, t1] does at an inner node. both == false: only `child`
 // (the far child when the split is at or before t0 or the ray lies in the plane, else the
@@ -287,11 +293,13 @@ fn kd_step(n: KdNode, r: TRay, t0: f32, t1: f32) -> Crossing {
 }
 
 // The leaf visit of both queries (`Closest` / `AnyHit`): true when the traversal can stop.
-fn visit_leaf(leaf: u32, t_exit: f32, r: Ray, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, Stats>) -> bool {
+// A leaf node lists prim_indices[first..first + count]: first in the bits of `split`, count
+// in `bits >> 2` (`KdNode` in src/kdtree/mod.rs).
+fn visit_leaf(leaf: KdNode, t_exit: f32, r: Ray, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, Stats>) -> bool {
     (*st).leaves += 1u;
-    let range = leaves[leaf];
-    for (var j = 0u; j < range.count; j++) {
-        let p = prim_indices[range.first + j];
+    let first = bitcast<u32>(leaf.split);
+    for (var j = 0u; j < node_index(leaf); j++) {
+        let p = prim_indices[first + j];
         (*st).prims += 1u;
         if (any_hit) {
             var fresh = miss();

@@ -45,7 +45,7 @@ fn restart_traverse(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<funct
             }
             node = c.child;
         }
-        if (visit_leaf(node_index(nodes[node]), t1, r.ray, h, any_hit, st) || t1 >= scene.t1) { return; }
+        if (visit_leaf(nodes[node], t1, r.ray, h, any_hit, st) || t1 >= scene.t1) { return; }
         t_max = t1;
     }
 }

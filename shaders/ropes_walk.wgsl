@@ -72,12 +72,12 @@ fn rope_walk(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, St
             if (c.both) { t1 = c.t_split; }
             node = c.child;
         }
-        let leaf = node_index(nodes[node]);
+        let leaf = leaf_number(node);
         var ex: Exit;
         if (three_faces) { ex = exit_three_faces(leaf_boxes[leaf], r); } else { ex = exit_six_faces(leaf_boxes[leaf], r); }
         if (miss_test && ex.t < t_entry) { return; }
         miss_test = false;
-        if (visit_leaf(leaf, ex.t, r.ray, h, any_hit, st) || ex.t >= t_end) { return; }
+        if (visit_leaf(nodes[node], ex.t, r.ray, h, any_hit, st) || ex.t >= t_end) { return; }
         node = ropes[leaf].links[ex.face];
         if (node == INVALID) {
             node = tied_exit(leaf, r, ex);

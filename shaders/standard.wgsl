@@ -24,6 +24,6 @@ fn traverse(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, Sta
             }
             node = c.child;
         }
-        if (visit_leaf(node_index(nodes[node]), t1, r.ray, h, any_hit, st)) { return; }
+        if (visit_leaf(nodes[node], t1, r.ray, h, any_hit, st)) { return; }
     }
 }

@@ -123,13 +123,13 @@ fn node_voxels(tree: &KdTree) -> Vec<Option<(Aabb, u32)>> {
     voxels
 }
 
-/// `(leaf index, voxel)` of every leaf node.
-fn leaves_of(tree: &KdTree, voxels: &[Option<(Aabb, u32)>]) -> Vec<(u32, Aabb)> {
+/// `(leaf node, voxel)` of every leaf node.
+fn leaves_of(tree: &KdTree, voxels: &[Option<(Aabb, u32)>]) -> Vec<(KdNode, Aabb)> {
     tree.nodes
         .iter()
         .zip(voxels)
         .filter(|(n, _)| n.is_leaf())
-        .map(|(n, v)| (n.index(), v.expect("unreachable node").0))
+        .map(|(n, v)| (*n, v.expect("unreachable node").0))
         .collect()
 }
 
@@ -155,19 +155,16 @@ fn check_tree(set: &PrimitiveSet, tree: &KdTree, what: &str) {
         "{what}: unreachable nodes"
     );
     let leaves = leaves_of(tree, &voxels);
-    assert_eq!(leaves.len(), tree.leaves.len(), "{what}: leaf count");
-    let mut seen = vec![false; tree.leaves.len()];
-    for &(leaf, _) in &leaves {
-        assert!(
-            !std::mem::replace(&mut seen[leaf as usize], true),
-            "{what}: leaf shared"
-        );
-        let r = tree.leaves[leaf as usize];
-        assert!(
-            (r.first + r.count) as usize <= tree.prim_indices.len(),
-            "{what}: leaf range"
-        );
+    assert_eq!(leaves.len(), tree.leaf_count(), "{what}: leaf count");
+    // The leaves' ranges tile `prim_indices`: none shared, none out of range, no stray entry.
+    let mut ranges: Vec<_> = leaves.iter().map(|(n, _)| n.prim_range()).collect();
+    ranges.sort_by_key(|r| (r.start, r.end));
+    let mut end = 0;
+    for r in &ranges {
+        assert_eq!(r.start, end, "{what}: leaf ranges overlap or leave a gap");
+        end = r.end;
     }
+    assert_eq!(end, tree.prim_indices.len(), "{what}: leaf ranges");
     assert!(
         tree.prim_indices.iter().all(|&p| (p as usize) < n),
         "{what}: prim index"
@@ -186,7 +183,7 @@ fn check_tree(set: &PrimitiveSet, tree: &KdTree, what: &str) {
             let c = set.clipped_bounds(p as usize, &voxel);
             assert!(
                 !c.is_empty(),
-                "{what}: prim {p} listed in leaf {leaf} {voxel:?} it misses"
+                "{what}: prim {p} listed in leaf {leaf:?} {voxel:?} it misses"
             );
             in_leaf[p as usize] = true;
             found[p as usize] = true;
@@ -199,7 +196,7 @@ fn check_tree(set: &PrimitiveSet, tree: &KdTree, what: &str) {
             let c = set.clipped_bounds(p, &voxel);
             assert!(
                 c.is_empty() || !reaches_interior(&c, &voxel),
-                "{what}: prim {p} {c:?} missing from leaf {leaf} {voxel:?}"
+                "{what}: prim {p} {c:?} missing from leaf {leaf:?} {voxel:?}"
             );
         }
     }
@@ -207,16 +204,29 @@ fn check_tree(set: &PrimitiveSet, tree: &KdTree, what: &str) {
     for (p, &f) in found.iter().enumerate() {
         assert!(f || set.bounds(p).is_empty(), "{what}: prim {p} in no leaf");
     }
-    check_ropes(tree, &voxels, &leaves, what);
+    check_ropes(tree, &voxels, what);
 }
 
 /// (d) each rope leads to the deepest node covering the face, `INVALID` exactly on the root box.
-fn check_ropes(tree: &KdTree, voxels: &[Option<(Aabb, u32)>], leaves: &[(u32, Aabb)], what: &str) {
+fn check_ropes(tree: &KdTree, voxels: &[Option<(Aabb, u32)>], what: &str) {
     let Some(ropes) = &tree.ropes else { return };
-    assert_eq!(ropes.links.len(), tree.leaves.len());
-    for &(leaf, voxel) in leaves {
-        assert_eq!(ropes.leaf_bounds[leaf as usize], voxel, "{what}: leaf box");
-        for (face, &rope) in ropes.links[leaf as usize].iter().enumerate() {
+    assert_eq!(ropes.links.len(), tree.leaf_count());
+    // Leaf numbers: each leaf node its own, 0..leaf_count, in node order.
+    let numbered: Vec<(u32, usize)> = (0..tree.nodes.len() as u32)
+        .filter(|&n| tree.nodes[n as usize].is_leaf())
+        .map(|n| (n, ropes.leaf_number(n)))
+        .collect();
+    assert!(
+        numbered
+            .iter()
+            .enumerate()
+            .all(|(k, &(_, number))| k == number),
+        "{what}: leaf numbers"
+    );
+    for (node, leaf) in numbered {
+        let voxel = voxels[node as usize].unwrap().0;
+        assert_eq!(ropes.leaf_bounds[leaf], voxel, "{what}: leaf box");
+        for (face, &rope) in ropes.links[leaf].iter().enumerate() {
             let (axis, positive) = (face / 2, face % 2 == 1);
             let plane = if positive {
                 voxel.max[axis]
@@ -369,8 +379,8 @@ fn degenerate_scenes_give_valid_trees() {
 #[test]
 fn empty_scene_is_one_empty_leaf() {
     let tree = build(&PrimitiveSet::default(), &BuildOptions::default());
-    assert_eq!(tree.nodes, vec![KdNode::leaf(0)]);
-    assert_eq!(tree.leaves.len(), 1);
+    assert_eq!(tree.nodes, vec![KdNode::leaf(0, 0)]);
+    assert_eq!(tree.leaf_count(), 1);
     assert!(tree.prim_indices.is_empty());
     assert!(tree.bounds.is_empty());
     assert_eq!(tree.stats.empty_leaf_count, 1);
@@ -383,7 +393,7 @@ fn one_primitive_is_one_leaf() {
         .push(Triangle::from_vertices(Vec3::ZERO, Vec3::X, Vec3::Y));
     for builder in [Builder::Sah, Builder::Midpoint] {
         let tree = build(&set, &options(builder, Layout::DepthFirst));
-        assert_eq!(tree.nodes, vec![KdNode::leaf(0)], "{builder:?}");
+        assert_eq!(tree.nodes, vec![KdNode::leaf(0, 1)], "{builder:?}");
         assert_eq!(tree.prim_indices, vec![0]);
         assert_eq!(tree.bounds, set.triangles[0].bounds());
         assert_eq!(tree.ropes.unwrap().links, vec![[INVALID; 6]]);
@@ -414,7 +424,12 @@ fn layouts_differ_only_in_node_order() {
     for builder in [Builder::Sah, Builder::Midpoint] {
         let df = build(&set, &options(builder, Layout::DepthFirst));
         let veb = build(&set, &options(builder, Layout::VanEmdeBoas));
-        assert_eq!(df.leaves, veb.leaves);
+        // The same leaves (primitive ranges) in depth-first order.
+        let leaves = |t: &KdTree| -> Vec<KdNode> {
+            let voxels = t.leaf_voxels();
+            voxels.iter().map(|v| t.nodes[v.0 as usize]).collect()
+        };
+        assert_eq!(leaves(&df), leaves(&veb));
         assert_eq!(df.prim_indices, veb.prim_indices);
         assert_eq!(df.nodes.len(), veb.nodes.len());
         assert_ne!(
@@ -462,7 +477,6 @@ fn builds_do_not_depend_on_thread_count() {
                 opts.builder,
                 opts.layout
             );
-            assert_eq!(t.leaves, trees[0].leaves);
             assert_eq!(t.prim_indices, trees[0].prim_indices);
             assert_eq!(
                 t.ropes.as_ref().unwrap().links,
@@ -493,22 +507,22 @@ fn stats_match_the_tree() {
         let s = tree.stats;
         let voxels = tree.leaf_voxels();
         assert_eq!(s.node_count as usize, tree.nodes.len());
-        assert_eq!(s.leaf_count as usize, tree.leaves.len());
-        assert_eq!(voxels.len(), tree.leaves.len());
-        let empty = tree.leaves.iter().filter(|l| l.count == 0).count();
+        assert_eq!(s.leaf_count as usize, tree.leaf_count());
+        assert_eq!(voxels.len(), tree.leaf_count());
+        let count = |v: &(u32, Aabb, u32)| tree.nodes[v.0 as usize].prim_range().len();
+        let empty = voxels.iter().filter(|v| count(v) == 0).count();
         assert_eq!(s.empty_leaf_count as usize, empty);
         assert_eq!(s.max_depth, voxels.iter().map(|v| v.2).max().unwrap());
         assert!(s.max_depth <= opts.depth_limit(set.len()));
         let mean = voxels.iter().map(|v| v.2 as f32).sum::<f32>() / voxels.len() as f32;
         assert!((s.avg_leaf_depth - mean).abs() < 1e-3);
-        let refs = tree.prim_indices.len() as f32 / (tree.leaves.len() - empty) as f32;
+        let refs = tree.prim_indices.len() as f32 / (voxels.len() - empty) as f32;
         assert!((s.avg_prims_per_leaf - refs).abs() < 1e-3);
         assert!(s.sah_cost > 0.0 && s.build_ms >= 0.0);
         // A midpoint tree stops at leaf_size unless the depth limit stopped it first.
         if opts.builder == Builder::Midpoint {
-            for (leaf, _, depth) in &voxels {
-                let r = tree.leaves[*leaf as usize];
-                assert!(r.count <= opts.leaf_size || *depth == s.max_depth);
+            for v in &voxels {
+                assert!(count(v) <= opts.leaf_size as usize || v.2 == s.max_depth);
             }
         }
     }
@@ -598,7 +612,7 @@ fn shared_models_keep_every_triangle_in_its_leaves() {
                 for &p in listed {
                     assert!(
                         set.bounds(p as usize).overlaps(&voxel),
-                        "{what}: {p} listed in leaf {leaf} {voxel:?} its box misses"
+                        "{what}: {p} listed in leaf {leaf:?} {voxel:?} its box misses"
                     );
                     loose += set.clipped_bounds(p as usize, &voxel).is_empty() as usize;
                     refs += 1;
@@ -614,7 +628,7 @@ fn shared_models_keep_every_triangle_in_its_leaves() {
                     let c = set.clipped_bounds(p, &voxel);
                     assert!(
                         c.is_empty() || !reaches_interior(&c, &voxel),
-                        "{what}: {p} missing from leaf {leaf}"
+                        "{what}: {p} missing from leaf {leaf:?}"
                     );
                 }
             }

@@ -82,7 +82,7 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
         let next = if n.is_leaf() {
             s.leaf.gather(
                 &b.prims.triangles,
-                tree.leaf_prims(n.index()),
+                tree.leaf_prims(n),
                 live.count_ones() as usize,
             );
             let mut m = live;

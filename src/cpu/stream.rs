@@ -152,7 +152,7 @@ fn traverse<const N: usize, A: Answer>(
         }
         b.stats.nodes_visited += count as u64;
         if n.is_leaf() {
-            let leaf = b.tree.leaf_prims(n.index());
+            let leaf = b.tree.leaf_prims(n);
             for k in (0..count).step_by(N) {
                 let at = f.start + k;
                 for &i in

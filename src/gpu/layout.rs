@@ -1,5 +1,5 @@
 //! Every structure the GPU reads or writes, as `#[repr(C)]` Pod types (CONVENTIONS.md: one
-//! layout module). The kd-tree arrays (`KdNode`, `LeafRange`, `prim_indices`, ropes) and the
+//! layout module). The kd-tree arrays (`KdNode`, `prim_indices`, ropes and their `RankWord`s) and the
 //! primitive arrays (`Triangle`, `Sphere`, `Ellipsoid`, `Plane`) are uploaded byte-for-byte as
 //! the CPU holds them (DESIGN.md §2, "one tree format, two backends"); only boxes (glam `Vec3`
 //! inside `Aabb`), materials and lights need a GPU form. The tests at the end parse the WGSL
@@ -10,7 +10,7 @@ use crate::scene::{Material, PointLight};
 use bytemuck::{Pod, Zeroable};
 
 pub use crate::geometry::{Ellipsoid, Plane, Sphere, Triangle};
-pub use crate::kdtree::{KdNode, LeafRange};
+pub use crate::kdtree::{KdNode, RankWord};
 
 /// A box as six floats (`Aabb` holds glam vectors, whose layout is not a GPU contract).
 #[repr(C)]
@@ -239,7 +239,7 @@ mod tests {
     #[test]
     fn host_structs_match_wgsl() {
         layout!("KdNode", KdNode, [split, bits]);
-        layout!("LeafRange", LeafRange, [first, count]);
+        layout!("RankWord", RankWord, [leaf_bits, before]);
         layout!("Triangle", Triangle, [v0, e1, e2]);
         layout!("Sphere", Sphere, [center, radius]);
         layout!("Ellipsoid", Ellipsoid, [center, inv, half]);

@@ -12,7 +12,7 @@ use std::hash::{DefaultHasher, Hasher};
 /// Scene arrays in binding order (common.wgsl, group 0).
 const NAMES: [&str; 13] = [
     "nodes",
-    "leaves",
+    "leaf_rank",
     "prim_indices",
     "triangles",
     "spheres",
@@ -57,12 +57,13 @@ fn arrays(c: &Committed) -> Vec<Vec<u8>> {
     let p = &c.prims;
     let bytes = |s: &[u8]| s.to_vec();
     let boxes: Vec<GpuAabb> = p.boxes.iter().map(GpuAabb::from).collect();
-    let (links, leaf_boxes): (Vec<u8>, Vec<GpuAabb>) = match &t.ropes {
+    let (rank, links, leaf_boxes): (Vec<u8>, Vec<u8>, Vec<GpuAabb>) = match &t.ropes {
         Some(r) => (
+            bytemuck::cast_slice(&r.rank).to_vec(),
             bytemuck::cast_slice(&r.links).to_vec(),
             r.leaf_bounds.iter().map(GpuAabb::from).collect(),
         ),
-        None => (Vec::new(), Vec::new()),
+        None => (Vec::new(), Vec::new(), Vec::new()),
     };
     let prim_material: Vec<u32> = c
         .origins
@@ -73,7 +74,7 @@ fn arrays(c: &Committed) -> Vec<Vec<u8>> {
     let lights: Vec<GpuLight> = c.lights.iter().map(GpuLight::from).collect();
     vec![
         bytes(bytemuck::cast_slice(&t.nodes)),
-        bytes(bytemuck::cast_slice(&t.leaves)),
+        rank,
         bytes(bytemuck::cast_slice(&t.prim_indices)),
         bytes(bytemuck::cast_slice(&p.triangles)),
         bytes(bytemuck::cast_slice(&p.spheres)),
@@ -164,7 +165,7 @@ fn scene_params(c: &Committed) -> GpuParams {
         n_ell: p.ellipsoids.len() as u32,
         n_box: p.boxes.len() as u32,
         n_planes: p.planes.len() as u32,
-        n_leaves: c.tree.leaves.len() as u32,
+        n_leaves: c.tree.leaf_count() as u32,
         n_lights: c.lights.len() as u32,
         ..GpuParams::default()
     }

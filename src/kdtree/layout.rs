@@ -6,14 +6,13 @@
 //! differ only in layout have identical `leaves` and `prim_indices`.
 
 use super::split::BuildNode;
-use super::{KdNode, KdTree, Layout, LeafRange, TreeStats};
+use super::{KdNode, KdTree, Layout, TreeStats};
 use crate::geometry::Aabb;
 
 /// Flattens the builder's node tree into the flat arrays.
 pub(super) fn flatten(root: &BuildNode, bounds: Aabb, layout: Layout) -> KdTree {
     let mut tree = KdTree {
-        nodes: vec![KdNode::leaf(0)],
-        leaves: Vec::new(),
+        nodes: vec![KdNode::leaf(0, 0)],
         prim_indices: Vec::new(),
         bounds,
         ropes: None,
@@ -31,13 +30,8 @@ pub(super) fn flatten(root: &BuildNode, bounds: Aabb, layout: Layout) -> KdTree 
 fn depth_first(node: &BuildNode, at: usize, tree: &mut KdTree) {
     match node {
         BuildNode::Leaf(prims) => {
-            let leaf = tree.leaves.len() as u32;
-            tree.leaves.push(LeafRange {
-                first: tree.prim_indices.len() as u32,
-                count: prims.len() as u32,
-            });
+            tree.nodes[at] = KdNode::leaf(tree.prim_indices.len() as u32, prims.len() as u32);
             tree.prim_indices.extend_from_slice(prims);
-            tree.nodes[at] = KdNode::leaf(leaf);
         }
         BuildNode::Inner {
             axis,
@@ -46,7 +40,7 @@ fn depth_first(node: &BuildNode, at: usize, tree: &mut KdTree) {
         } => {
             let child = tree.nodes.len();
             tree.nodes[at] = KdNode::inner(*axis, *split, child as u32);
-            tree.nodes.extend([KdNode::leaf(0); 2]);
+            tree.nodes.extend([KdNode::leaf(0, 0); 2]);
             depth_first(&children[0], child, tree);
             depth_first(&children[1], child + 1, tree);
         }

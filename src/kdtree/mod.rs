@@ -4,8 +4,8 @@
 //!
 //! Format: `nodes[0]` is the root. An inner node's two children sit side by side at
 //! `child` (below the split) and `child + 1` (above). A voxel is split into
-//! `[min, split]` (below) and `[split, max]` (above) along `axis`. A leaf points into
-//! `leaves`, whose range selects primitive indices in `prim_indices`.
+//! `[min, split]` (below) and `[split, max]` (above) along `axis`. A leaf holds its range of
+//! primitive indices in `prim_indices` itself (see [`KdNode`]).
 //!
 //! Building: `build.rs` (entry point, options), `midpoint.rs` and `sah.rs` (the builders),
 //! `split.rs` (what they share: the side of a primitive, the parallel recursion), `layout.rs`
@@ -25,8 +25,14 @@ pub use build::{build, BuildInput, BuildOptions, Builder, Layout, MAX_DEPTH_LIMI
 
 use crate::geometry::{Aabb, PrimitiveSet};
 
-/// 8-byte node: split position and `bits`. `bits & 3` is the split axis (0–2) of an inner node
-/// or 3 for a leaf; `bits >> 2` is the index of the first child, or the leaf index.
+/// 8-byte node. `bits & 3` is the split axis (0–2) of an inner node or 3 for a leaf.
+///
+/// Inner node: `split` is the split position, `bits >> 2` the index of the first child.
+/// Leaf: `bits >> 2` is the number of primitives and `split` holds, as its bit pattern, the index
+/// of the first of them in `prim_indices`. The leaf's range lives in the node rather than in a
+/// table of ranges: 8 bytes less per leaf, and a leaf visit goes from the node straight to its
+/// list instead of through one more dependent load. (The pattern is never a NaN: it would take
+/// over two billion references.)
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct KdNode {
@@ -45,10 +51,12 @@ impl KdNode {
         }
     }
 
-    pub fn leaf(leaf_index: u32) -> Self {
+    /// A leaf listing `prim_indices[first..first + count]`.
+    pub fn leaf(first: u32, count: u32) -> Self {
+        debug_assert!(count < (1 << 30));
         KdNode {
-            split: 0.0,
-            bits: (leaf_index << 2) | Self::LEAF,
+            split: f32::from_bits(first),
+            bits: (count << 2) | Self::LEAF,
         }
     }
 
@@ -63,19 +71,27 @@ impl KdNode {
         (self.bits & 3) as usize
     }
 
-    /// First child (inner) or leaf index (leaf).
+    /// First child of an inner node.
     #[inline]
     pub fn index(&self) -> u32 {
         self.bits >> 2
     }
+
+    /// A leaf's range in `prim_indices`.
+    #[inline]
+    pub fn prim_range(&self) -> std::ops::Range<usize> {
+        let first = self.split.to_bits() as usize;
+        first..first + (self.bits >> 2) as usize
+    }
 }
 
-/// A leaf's slice of `prim_indices`.
+/// One word of [`Ropes::rank`]: which of 32 consecutive nodes are leaves, and how many leaves
+/// come before them.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct LeafRange {
-    pub first: u32,
-    pub count: u32,
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct RankWord {
+    pub leaf_bits: u32,
+    pub before: u32,
 }
 
 /// Rope faces in the order `-x, +x, -y, +y, -z, +z`: face `2*axis + (positive as usize)`.
@@ -84,10 +100,25 @@ pub const ROPE_FACES: usize = 6;
 /// Ropes (Popov et al. 2007): per leaf, the node across each face of its box (`INVALID` where
 /// the face lies on the scene boundary) and the leaf's box. Built only when a rope traversal
 /// asks for them ("model no more than a scene needs").
+///
+/// Leaves are numbered by node index order, and a leaf node finds its number through `rank`
+/// (2 bits per node: a rank directory, as in succinct data structures) rather than carrying it:
+/// the plain tree's leaf nodes hold their primitive range, and only rope trees pay for numbers.
 #[derive(Clone, Debug, Default)]
 pub struct Ropes {
     pub links: Vec<[u32; ROPE_FACES]>,
     pub leaf_bounds: Vec<Aabb>,
+    pub rank: Vec<RankWord>,
+}
+
+impl Ropes {
+    /// The number of leaf node `node`: its index into `links` and `leaf_bounds`.
+    #[inline]
+    pub fn leaf_number(&self, node: u32) -> usize {
+        let w = self.rank[node as usize / 32];
+        let below = w.leaf_bits & ((1u32 << (node % 32)) - 1);
+        (w.before + below.count_ones()) as usize
+    }
 }
 
 /// Build statistics and memory, reported through `rt2_scene_stats`.
@@ -109,7 +140,6 @@ pub struct TreeStats {
 #[derive(Clone, Debug)]
 pub struct KdTree {
     pub nodes: Vec<KdNode>,
-    pub leaves: Vec<LeafRange>,
     pub prim_indices: Vec<u32>,
     /// The root voxel: the union of the primitive bounds, `Aabb::EMPTY` (never NaN) when the
     /// tree holds no primitive.
@@ -119,11 +149,15 @@ pub struct KdTree {
 }
 
 impl KdTree {
-    /// Primitive indices of leaf `leaf`.
+    /// Primitive indices of the leaf node `leaf`.
     #[inline]
-    pub fn leaf_prims(&self, leaf: u32) -> &[u32] {
-        let r = self.leaves[leaf as usize];
-        &self.prim_indices[r.first as usize..(r.first + r.count) as usize]
+    pub fn leaf_prims(&self, leaf: KdNode) -> &[u32] {
+        &self.prim_indices[leaf.prim_range()]
+    }
+
+    /// Number of leaves: every inner node has two children, so `(nodes + 1) / 2`.
+    pub fn leaf_count(&self) -> usize {
+        self.nodes.len().div_ceil(2)
     }
 
     /// Adds ropes (and leaf boxes) if they are not there yet.
@@ -143,14 +177,14 @@ impl KdTree {
     }
 
     pub fn leaf_list_bytes(&self) -> usize {
-        std::mem::size_of_val(self.leaves.as_slice())
-            + std::mem::size_of_val(self.prim_indices.as_slice())
+        std::mem::size_of_val(self.prim_indices.as_slice())
     }
 
+    /// Ropes and the rank words that number the leaves for them.
     pub fn rope_bytes(&self) -> usize {
-        self.ropes
-            .as_ref()
-            .map_or(0, |r| std::mem::size_of_val(r.links.as_slice()))
+        self.ropes.as_ref().map_or(0, |r| {
+            std::mem::size_of_val(r.links.as_slice()) + std::mem::size_of_val(r.rank.as_slice())
+        })
     }
 
     pub fn leaf_box_bytes(&self) -> usize {

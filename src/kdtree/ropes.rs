@@ -8,16 +8,35 @@
 //! `INVALID`.
 
 use super::split::child_voxels;
-use super::{KdTree, Ropes, ROPE_FACES};
+use super::{KdNode, KdTree, RankWord, Ropes, ROPE_FACES};
 use crate::geometry::{Aabb, INVALID};
 
 pub(super) fn build_ropes(tree: &KdTree) -> Ropes {
     let mut ropes = Ropes {
-        links: vec![[INVALID; ROPE_FACES]; tree.leaves.len()],
-        leaf_bounds: vec![Aabb::EMPTY; tree.leaves.len()],
+        links: vec![[INVALID; ROPE_FACES]; tree.leaf_count()],
+        leaf_bounds: vec![Aabb::EMPTY; tree.leaf_count()],
+        rank: rank(&tree.nodes),
     };
     descend(tree, 0, tree.bounds, [INVALID; ROPE_FACES], &mut ropes);
     ropes
+}
+
+/// The rank words of `nodes`: leaf bits per 32 nodes, with the count of leaves before them.
+fn rank(nodes: &[KdNode]) -> Vec<RankWord> {
+    let mut before = 0;
+    nodes
+        .chunks(32)
+        .map(|chunk| {
+            let leaf_bits = chunk
+                .iter()
+                .enumerate()
+                .filter(|(_, n)| n.is_leaf())
+                .fold(0u32, |bits, (i, _)| bits | 1 << i);
+            let word = RankWord { leaf_bits, before };
+            before += leaf_bits.count_ones();
+            word
+        })
+        .collect()
 }
 
 fn descend(tree: &KdTree, node: u32, voxel: Aabb, mut links: [u32; ROPE_FACES], out: &mut Ropes) {
@@ -26,8 +45,9 @@ fn descend(tree: &KdTree, node: u32, voxel: Aabb, mut links: [u32; ROPE_FACES], 
     }
     let n = tree.nodes[node as usize];
     if n.is_leaf() {
-        out.links[n.index() as usize] = links;
-        out.leaf_bounds[n.index() as usize] = voxel;
+        let leaf = out.leaf_number(node);
+        out.links[leaf] = links;
+        out.leaf_bounds[leaf] = voxel;
         return;
     }
     let axis = n.axis();

@@ -13,7 +13,7 @@ pub(super) fn tree_stats(tree: &KdTree, traversal_cost: f32) -> TreeStats {
     let probability = |a: f32| if root_area > 0.0 { a / root_area } else { 1.0 };
     let mut s = TreeStats {
         node_count: tree.nodes.len() as u32,
-        leaf_count: tree.leaves.len() as u32,
+        leaf_count: tree.leaf_count() as u32,
         ..TreeStats::default()
     };
     let (mut depth_sum, mut refs, mut cost) = (0u64, 0u64, 0f64);
@@ -21,7 +21,7 @@ pub(super) fn tree_stats(tree: &KdTree, traversal_cost: f32) -> TreeStats {
         let n = tree.nodes[node as usize];
         let p = f64::from(probability(voxel.surface_area()));
         if n.is_leaf() {
-            let count = tree.leaves[n.index() as usize].count;
+            let count = n.prim_range().len() as u32;
             s.max_depth = s.max_depth.max(depth);
             s.empty_leaf_count += u32::from(count == 0);
             depth_sum += u64::from(depth);

@@ -22,14 +22,12 @@ impl KdTree {
         }
     }
 
-    /// `(leaf index, voxel, depth)` of every leaf, in depth-first order (which is also leaf
-    /// index order).
+    /// `(leaf node, voxel, depth)` of every leaf, in depth-first order.
     pub fn leaf_voxels(&self) -> Vec<(u32, Aabb, u32)> {
-        let mut out = Vec::with_capacity(self.leaves.len());
+        let mut out = Vec::with_capacity(self.leaf_count());
         self.visit_nodes(|node, voxel, depth| {
-            let n = self.nodes[node as usize];
-            if n.is_leaf() {
-                out.push((n.index(), *voxel, depth));
+            if self.nodes[node as usize].is_leaf() {
+                out.push((node, *voxel, depth));
             }
         });
         out

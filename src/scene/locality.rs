@@ -51,8 +51,8 @@ pub(super) fn renumber(prims: &mut PrimitiveSet, origins: &mut [PrimOrigin], tre
     for p in &mut tree.prim_indices {
         *p = new_of[*p as usize];
     }
-    for r in &tree.leaves {
-        tree.prim_indices[r.first as usize..(r.first + r.count) as usize].sort_unstable();
+    for n in tree.nodes.iter().filter(|n| n.is_leaf()) {
+        tree.prim_indices[n.prim_range()].sort_unstable();
     }
 }
 
@@ -147,7 +147,7 @@ mod tests {
             (0..nt as u32).collect::<Vec<_>>(),
             "the scrambled file order was kept: nothing was renumbered"
         );
-        for leaf in 0..c.tree.leaves.len() as u32 {
+        for &leaf in c.tree.nodes.iter().filter(|n| n.is_leaf()) {
             assert!(c.tree.leaf_prims(leaf).windows(2).all(|w| w[0] < w[1]));
         }
     }

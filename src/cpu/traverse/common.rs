@@ -121,8 +121,8 @@ fn next(c: Crossing) -> u32 {
 
 /// Descends from `node` to the leaf holding the start of the segment `[t0, t1]`, telling `seen`
 /// about every crossing (the stack-based traversals push there, push-down moves its root there).
-/// Counts every node fetched, the leaf included. Returns the leaf's node and its exit distance
-/// (`t1` shrunk to the near part at every two-child crossing).
+/// Counts every node fetched, the leaf included. Returns the leaf's index and node and its exit
+/// distance (`t1` shrunk to the near part at every two-child crossing).
 #[inline]
 pub(super) fn descend(
     tree: &KdTree,
@@ -132,12 +132,12 @@ pub(super) fn descend(
     mut t1: f32,
     stats: &mut TraversalStats,
     mut seen: impl FnMut(Crossing),
-) -> (KdNode, f32) {
+) -> (u32, KdNode, f32) {
     loop {
         let n = tree.nodes[node as usize];
         stats.nodes_visited += 1;
         if n.is_leaf() {
-            return (n, t1);
+            return (node, n, t1);
         }
         let c = step(n, ray, t0, t1);
         if let Crossing::Both { t_split, .. } = c {
@@ -211,7 +211,7 @@ pub(super) fn visit_leaf(
     stats: &mut TraversalStats,
 ) -> bool {
     stats.leaves_visited += 1;
-    query.visit(tree.leaf_prims(leaf.index()), t_exit, stats)
+    query.visit(tree.leaf_prims(leaf), t_exit, stats)
 }
 
 /// A subtree still to traverse for the segment `[t0, t1]`.

@@ -35,13 +35,13 @@ pub(super) fn traverse(
     let mut root = 0;
     let mut t_max = scene_min;
     // One leaf per pass and no leaf twice: more passes than leaves would be a bug.
-    for _ in 0..tree.leaves.len() {
+    for _ in 0..tree.leaf_count() {
         let (node, t0, t1, mut push_down) = match stack.pop() {
             Some(e) => (e.node, e.t0, e.t1, false),
             // The restart event.
             None => (root, t_max, scene_max, how.push_down),
         };
-        let (leaf, t_exit) = descend(tree, ray, node, t0, t1, stats, |c| match c {
+        let (_, leaf, t_exit) = descend(tree, ray, node, t0, t1, stats, |c| match c {
             Crossing::One { child } if push_down => root = child,
             Crossing::One { .. } => {}
             Crossing::Both {

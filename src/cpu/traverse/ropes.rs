@@ -106,9 +106,9 @@ fn walk(
 ) {
     let (mut node, mut t_entry, mut miss_test) = (w.node, w.t_entry, w.miss_test);
     // Leaves are crossed in a strict front-to-back order: more steps than leaves would be a bug.
-    for _ in 0..tree.leaves.len() {
-        let (leaf, _) = descend(tree, ray, node, t_entry, f32::INFINITY, stats, |_| {});
-        let leaf_index = leaf.index() as usize;
+    for _ in 0..tree.leaf_count() {
+        let (at, leaf, _) = descend(tree, ray, node, t_entry, f32::INFINITY, stats, |_| {});
+        let leaf_index = ropes.leaf_number(at);
         let (t_exit, face) = (w.exit)(&ropes.leaf_bounds[leaf_index], ray);
         if miss_test && t_exit < t_entry {
             return;
@@ -176,10 +176,10 @@ pub(super) fn ropes_plus_plus(
     let origin = ray.ray.at(ray.ray.tmin);
     let holds_origin = |node: u32| {
         let n = tree.nodes.get(node as usize);
-        n.filter(|n| n.is_leaf()).is_some_and(|n| {
-            let b = &ropes.leaf_bounds[n.index() as usize];
+        n.is_some_and(|n| n.is_leaf()) && {
+            let b = &ropes.leaf_bounds[ropes.leaf_number(node)];
             b.min.cmplt(origin).all() && origin.cmplt(b.max).all()
-        })
+        }
     };
     let (node, t_entry, miss_test) = match start {
         Some(s) if holds_origin(s) => (s, ray.ray.tmin, false),

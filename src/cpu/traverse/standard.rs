@@ -20,7 +20,7 @@ pub(super) fn traverse(
         t1: scene_max,
     });
     while let Some(Entry { node, t0, t1 }) = stack.pop() {
-        let (leaf, t_exit) = descend(tree, ray, node, t0, t1, stats, |c| {
+        let (_, leaf, t_exit) = descend(tree, ray, node, t0, t1, stats, |c| {
             if let Crossing::Both {
                 far, t_split, t1, ..
             } = c
