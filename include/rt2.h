@@ -421,8 +421,9 @@ typedef struct rt2_build_options {
    */
   uint32_t leaf_size;
   /**
-   * SAH cost of a traversal step relative to a primitive test (> 0, default 2): larger values
-   * give a smaller tree, built faster, with fewer and fuller leaves.
+   * SAH cost of a traversal step relative to a primitive test (> 0, default 3): larger values
+   * give a smaller tree, built faster, with fewer and fuller leaves; smaller ones (down to
+   * about 1.5) trade memory for a few per cent more coherent single rays.
    */
   float traversal_cost;
   /**
@@ -589,8 +590,18 @@ typedef struct rt2_scene_statistics {
    * Time of the whole commit (world-space placement + build).
    */
   float commit_ms;
+  /**
+   * 8 bytes per node; a leaf node holds its primitive range.
+   */
   uint64_t bytes_nodes;
+  /**
+   * The leaves' primitive indices, 4 bytes each.
+   */
   uint64_t bytes_leaf_lists;
+  /**
+   * Ropes (24 bytes per leaf) and the rank words that number the leaves for them (2 bits
+   * per node); 0 until a rope traversal needs them.
+   */
   uint64_t bytes_ropes;
   uint64_t bytes_leaf_boxes;
   uint64_t bytes_primitives;

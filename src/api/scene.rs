@@ -343,8 +343,12 @@ pub struct rt2_scene_statistics {
     pub build_ms: f32,
     /// Time of the whole commit (world-space placement + build).
     pub commit_ms: f32,
+    /// 8 bytes per node; a leaf node holds its primitive range.
     pub bytes_nodes: u64,
+    /// The leaves' primitive indices, 4 bytes each.
     pub bytes_leaf_lists: u64,
+    /// Ropes (24 bytes per leaf) and the rank words that number the leaves for them (2 bits
+    /// per node); 0 until a rope traversal needs them.
     pub bytes_ropes: u64,
     pub bytes_leaf_boxes: u64,
     pub bytes_primitives: u64,

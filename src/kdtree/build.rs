@@ -49,9 +49,11 @@ pub struct BuildOptions {
     /// Midpoint trees stop splitting at this many primitives.
     pub leaf_size: u32,
     /// SAH cost of one traversal step, relative to one primitive test (1.0). Larger values make
-    /// fewer, fuller leaves: a smaller tree built faster, slower coherent rays. The default 2 is
-    /// where single rays are fastest on the bunny and dragon within measurement noise, with a
-    /// 20% smaller tree than 1.5 (`rt2 bench build`, "Effect of the SAH traversal cost").
+    /// fewer, fuller leaves: a smaller tree built faster, slower coherent single rays. The
+    /// default 3 keeps the dragon's tree (15 MiB) under the RT² thesis' 17.2 MB and builds about
+    /// 20% faster than 2, for 3–6% fewer single rays per second on the bunny; the dragon's single
+    /// rays, packets and streams are as fast or faster (`rt2 bench build`, "Effect of the SAH
+    /// traversal cost").
     pub traversal_cost: f32,
     /// Factor λ applied to the SAH cost of a split that leaves one side empty (Wald & Havran
     /// 2006, §4.3 use 0.8): below 1 it favours cutting off empty space.
@@ -66,7 +68,7 @@ impl Default for BuildOptions {
             layout: Layout::DepthFirst,
             max_depth: None,
             leaf_size: 4,
-            traversal_cost: 2.0,
+            traversal_cost: 3.0,
             empty_bonus: 0.8,
             ropes: false,
         }

@@ -400,7 +400,7 @@ fn traversal_cost_effect(a: &Args) -> Result<String> {
             .filter_map(|kind| find_set(model, kind))
             .filter_map(|path| rayset::read_rays(&path).ok())
             .collect();
-        for traversal_cost in [1.0, 1.5, 2.0, 3.0, 4.0] {
+        for traversal_cost in [1.0, 1.5, 2.0, 2.5, 3.0, 4.0] {
             let options = BuildOptions {
                 traversal_cost,
                 ..BuildOptions::default()
