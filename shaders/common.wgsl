@@ -15,7 +15,6 @@ struct Sphere { center: array<f32, 3>, radius: f32 }
 struct Ellipsoid { center: array<f32, 3>, inv: array<f32, 9>, half: array<f32, 3> }
 struct Aabb { min: array<f32, 3>, max: array<f32, 3> }
 struct Plane { normal: array<f32, 3>, offset: f32 }
-struct Rope { links: array<u32, 6> }
 struct Material {
     color: array<f32, 3>, ambient: f32, diffuse: f32, specular: f32, shininess: f32,
     reflectivity: f32, transparency: f32, ior: f32, checker: u32, color2: array<f32, 3>,
@@ -33,7 +32,7 @@ struct Params {
     n_planes: u32, n_leaves: u32, n_lights: u32, short_stack: u32,
     count: u32, width: u32, height: u32, row0: u32,
     samples: u32, sample: u32, max_depth: u32, refract: u32,
-    has_mask: u32, pad0: u32, pad1: u32, pad2: u32,
+    has_mask: u32, rope_bits: u32, pad1: u32, pad2: u32,
 }
 
 // Group 0: the committed scene, uploaded once per commit (src/gpu/scene.rs). Empty arrays
@@ -46,7 +45,7 @@ struct Params {
 @group(0) @binding(5) var<storage, read> ellipsoids: array<Ellipsoid>;  // centre, M^-1, half box
 @group(0) @binding(6) var<storage, read> boxes: array<Aabb>;            // solid boxes
 @group(0) @binding(7) var<storage, read> planes: array<Plane>;          // unbounded, outside the tree
-@group(0) @binding(8) var<storage, read> ropes: array<Rope>;            // per leaf (rope traversals)
+@group(0) @binding(8) var<storage, read> ropes: array<u32>;             // packed, 6 per leaf (rope traversals)
 @group(0) @binding(9) var<storage, read> leaf_boxes: array<Aabb>;      // per leaf (rope traversals)
 @group(0) @binding(10) var<storage, read> prim_material: array<u32>;    // global prim -> material
 @group(0) @binding(11) var<storage, read> materials: array<Material>;   // Phong/Whitted terms

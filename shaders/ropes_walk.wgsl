@@ -5,6 +5,20 @@
 
 struct Exit { t: f32, face: u32 }
 
+// Rope `face` of leaf `leaf` (`RopeLinks::get`): `params.rope_bits` bits at bit
+// (6 leaf + face) rope_bits of the word stream, the all-ones value for INVALID.
+fn rope(leaf: u32, face: u32) -> u32 {
+    let bits = params.rope_bits;
+    let at = (6u * leaf + face) * bits;
+    let w = at / 32u;
+    let shift = at % 32u;
+    var value = ropes[w] >> shift;
+    if (shift + bits > 32u) { value |= ropes[w + 1u] << (32u - shift); }
+    let mask = select((1u << bits) - 1u, 0xffffffffu, bits >= 32u);
+    value &= mask;
+    return select(value, INVALID, value == mask);
+}
+
 // Popov's exit: both planes of every slab, the farther one is where the ray leaves it.
 fn exit_six_faces(b: Aabb, r: TRay) -> Exit {
     var best = Exit(inf(), 0u);
@@ -50,7 +64,7 @@ fn tied_exit(leaf: u32, r: TRay, ex: Exit) -> u32 {
         let pos = positive(r, a);
         let other = 2u * a + select(0u, 1u, pos);
         let t = dist(r, a, select(b.min[a], b.max[a], pos));
-        let link = ropes[leaf].links[other];
+        let link = rope(leaf, other);
         if (other != ex.face && abs(t - ex.t) <= tol && link != INVALID) { return link; }
     }
     return INVALID;
@@ -78,7 +92,7 @@ fn rope_walk(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, St
         if (miss_test && ex.t < t_entry) { return; }
         miss_test = false;
         if (visit_leaf(nodes[node], ex.t, r.ray, h, any_hit, st) || ex.t >= t_end) { return; }
-        node = ropes[leaf].links[ex.face];
+        node = rope(leaf, ex.face);
         if (node == INVALID) {
             node = tied_exit(leaf, r, ex);
             if (node == INVALID) { return; }

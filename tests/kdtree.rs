@@ -210,7 +210,7 @@ fn check_tree(set: &PrimitiveSet, tree: &KdTree, what: &str) {
 /// (d) each rope leads to the deepest node covering the face, `INVALID` exactly on the root box.
 fn check_ropes(tree: &KdTree, voxels: &[Option<(Aabb, u32)>], what: &str) {
     let Some(ropes) = &tree.ropes else { return };
-    assert_eq!(ropes.links.len(), tree.leaf_count());
+    assert_eq!(ropes.leaf_bounds.len(), tree.leaf_count());
     // Leaf numbers: each leaf node its own, 0..leaf_count, in node order.
     let numbered: Vec<(u32, usize)> = (0..tree.nodes.len() as u32)
         .filter(|&n| tree.nodes[n as usize].is_leaf())
@@ -226,7 +226,7 @@ fn check_ropes(tree: &KdTree, voxels: &[Option<(Aabb, u32)>], what: &str) {
     for (node, leaf) in numbered {
         let voxel = voxels[node as usize].unwrap().0;
         assert_eq!(ropes.leaf_bounds[leaf], voxel, "{what}: leaf box");
-        for (face, &rope) in ropes.links[leaf].iter().enumerate() {
+        for (face, rope) in ropes.links.leaf(leaf).into_iter().enumerate() {
             let (axis, positive) = (face / 2, face % 2 == 1);
             let plane = if positive {
                 voxel.max[axis]
@@ -396,7 +396,7 @@ fn one_primitive_is_one_leaf() {
         assert_eq!(tree.nodes, vec![KdNode::leaf(0, 1)], "{builder:?}");
         assert_eq!(tree.prim_indices, vec![0]);
         assert_eq!(tree.bounds, set.triangles[0].bounds());
-        assert_eq!(tree.ropes.unwrap().links, vec![[INVALID; 6]]);
+        assert_eq!(tree.ropes.unwrap().links.leaf(0), [INVALID; 6]);
     }
 }
 

@@ -1,5 +1,5 @@
 //! Every structure the GPU reads or writes, as `#[repr(C)]` Pod types (CONVENTIONS.md: one
-//! layout module). The kd-tree arrays (`KdNode`, `prim_indices`, ropes and their `RankWord`s) and the
+//! layout module). The kd-tree arrays (`KdNode`, `prim_indices`, the packed rope words and their `RankWord`s) and the
 //! primitive arrays (`Triangle`, `Sphere`, `Ellipsoid`, `Plane`) are uploaded byte-for-byte as
 //! the CPU holds them (DESIGN.md §2, "one tree format, two backends"); only boxes (glam `Vec3`
 //! inside `Aabb`), materials and lights need a GPU form. The tests at the end parse the WGSL
@@ -28,9 +28,6 @@ impl From<&Aabb> for GpuAabb {
         }
     }
 }
-
-/// One leaf's six ropes (`KdTree::ropes.links`), face order `-x, +x, -y, +y, -z, +z`.
-pub type GpuRopes = [u32; 6];
 
 /// A material with the checker folded in (`checker == 0`: plain colour).
 #[repr(C)]
@@ -177,8 +174,9 @@ pub struct GpuParams {
     /// 0 straight transparency, 1 refraction.
     pub refract: u32,
     pub has_mask: u32,
+    /// Bits per rope in the packed rope words (`RopeLinks::bits`; 0 without ropes).
+    pub rope_bits: u32,
     // Scalars, not an array: uniform arrays need a 16-byte stride.
-    pub pad0: u32,
     pub pad1: u32,
     pub pad2: u32,
 }
@@ -296,19 +294,11 @@ mod tests {
                 max_depth,
                 refract,
                 has_mask,
-                pad0,
+                rope_bits,
                 pad1,
                 pad2
             ]
         );
-        assert_eq!(size_of::<GpuRopes>(), 24);
-        layout!("Rope", RopeWgsl, [links]);
-    }
-
-    /// Host view of the WGSL `Rope` struct (the host uploads `[u32; 6]` per leaf).
-    #[repr(C)]
-    struct RopeWgsl {
-        links: GpuRopes,
     }
 
     #[test]

@@ -60,7 +60,7 @@ fn arrays(c: &Committed) -> Vec<Vec<u8>> {
     let (rank, links, leaf_boxes): (Vec<u8>, Vec<u8>, Vec<GpuAabb>) = match &t.ropes {
         Some(r) => (
             bytemuck::cast_slice(&r.rank).to_vec(),
-            bytemuck::cast_slice(&r.links).to_vec(),
+            bytemuck::cast_slice(&r.links.words).to_vec(),
             r.leaf_bounds.iter().map(GpuAabb::from).collect(),
         ),
         None => (Vec::new(), Vec::new(), Vec::new()),
@@ -103,6 +103,7 @@ impl SceneCache {
             n_planes: s.n_planes,
             n_leaves: s.n_leaves,
             n_lights: s.n_lights,
+            rope_bits: s.rope_bits,
             ..job
         }
     }
@@ -166,6 +167,7 @@ fn scene_params(c: &Committed) -> GpuParams {
         n_box: p.boxes.len() as u32,
         n_planes: p.planes.len() as u32,
         n_leaves: c.tree.leaf_count() as u32,
+        rope_bits: c.tree.ropes.as_ref().map_or(0, |r| r.links.bits),
         n_lights: c.lights.len() as u32,
         ..GpuParams::default()
     }

@@ -8,17 +8,28 @@
 //! `INVALID`.
 
 use super::split::child_voxels;
-use super::{KdNode, KdTree, RankWord, Ropes, ROPE_FACES};
+use super::{KdNode, KdTree, RankWord, RopeLinks, Ropes, ROPE_FACES};
 use crate::geometry::{Aabb, INVALID};
 
 pub(super) fn build_ropes(tree: &KdTree) -> Ropes {
-    let mut ropes = Ropes {
+    let mut out = Unpacked {
+        rank: rank(&tree.nodes),
         links: vec![[INVALID; ROPE_FACES]; tree.leaf_count()],
         leaf_bounds: vec![Aabb::EMPTY; tree.leaf_count()],
-        rank: rank(&tree.nodes),
     };
-    descend(tree, 0, tree.bounds, [INVALID; ROPE_FACES], &mut ropes);
-    ropes
+    descend(tree, 0, tree.bounds, [INVALID; ROPE_FACES], &mut out);
+    Ropes {
+        links: RopeLinks::pack(&out.links, tree.nodes.len()),
+        leaf_bounds: out.leaf_bounds,
+        rank: out.rank,
+    }
+}
+
+/// The ropes while they are built, one `u32` per rope.
+struct Unpacked {
+    rank: Vec<RankWord>,
+    links: Vec<[u32; ROPE_FACES]>,
+    leaf_bounds: Vec<Aabb>,
 }
 
 /// The rank words of `nodes`: leaf bits per 32 nodes, with the count of leaves before them.
@@ -39,13 +50,19 @@ fn rank(nodes: &[KdNode]) -> Vec<RankWord> {
         .collect()
 }
 
-fn descend(tree: &KdTree, node: u32, voxel: Aabb, mut links: [u32; ROPE_FACES], out: &mut Ropes) {
+fn descend(
+    tree: &KdTree,
+    node: u32,
+    voxel: Aabb,
+    mut links: [u32; ROPE_FACES],
+    out: &mut Unpacked,
+) {
     for (face, link) in links.iter_mut().enumerate() {
         *link = push_down(tree, *link, face, &voxel);
     }
     let n = tree.nodes[node as usize];
     if n.is_leaf() {
-        let leaf = out.leaf_number(node);
+        let leaf = RankWord::leaf_number(&out.rank, node);
         out.links[leaf] = links;
         out.leaf_bounds[leaf] = voxel;
         return;

@@ -117,14 +117,14 @@ fn walk(
         if visit_leaf(tree, leaf, t_exit, query, stats) || t_exit >= w.t_end {
             return;
         }
-        node = ropes.links[leaf_index][face];
+        node = ropes.links.get(leaf_index, face);
         if node == INVALID {
             // Leaving the scene through an edge or a corner of the leaf: the faces meeting there
             // tie up to rounding, and the neighbour across another of them may hold a hit at
             // that very point. Go on through such a face rather than stop.
             match tied_exit(
                 &ropes.leaf_bounds[leaf_index],
-                &ropes.links[leaf_index],
+                &ropes.links.leaf(leaf_index),
                 ray,
                 face,
                 t_exit,
