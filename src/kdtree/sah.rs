@@ -73,8 +73,13 @@ impl Event {
         })
     }
 
+    /// The kind as its numeric value.
+    fn kind_bits(self) -> u32 {
+        (self.0 as u32) >> PRIM_BITS
+    }
+
     fn kind(self) -> Kind {
-        match (self.0 as u32) >> PRIM_BITS {
+        match self.kind_bits() {
             0 => Kind::End,
             1 => Kind::Planar,
             _ => Kind::Start,
@@ -106,20 +111,16 @@ fn push_events(b: &Aabb, prim: u32, events: &mut Events) {
     }
 }
 
-/// Merges the sorted `extra` into the sorted `list` in place, from the back, so that no list is
-/// allocated anew.
-fn merge_into(list: &mut Vec<Event>, extra: &[Event]) {
-    let (mut i, mut j) = (list.len(), extra.len());
-    list.resize(i + j, Event(0));
-    while j > 0 {
-        if i > 0 && list[i - 1] > extra[j - 1] {
-            list[i + j - 1] = list[i - 1];
-            i -= 1;
-        } else {
-            list[i + j - 1] = extra[j - 1];
-            j -= 1;
-        }
+/// One step of merging the sorted `extra` into the sorted list being written to `out`: appends
+/// the events of `extra[*next..]` that sort before `e`, then `e`. The rest of `extra` is
+/// appended once the other list has run out.
+#[inline]
+fn push_merged(out: &mut Vec<Event>, e: Event, extra: &[Event], next: &mut usize) {
+    while let Some(&x) = extra.get(*next).filter(|&&x| x < e) {
+        out.push(x);
+        *next += 1;
     }
+    out.push(e);
 }
 
 /// `prims` are (index, bounds) pairs inside `voxel`.
@@ -232,18 +233,26 @@ impl Sah<'_> {
         let (face, side) = (u * v, u + v);
         let scale = 2.0 / area;
         let (lo, hi) = (voxel.min[axis], voxel.max[axis]);
-        let mut best: Option<Plane> = None;
+        // The best plane so far, updated by selects rather than a branch: which candidate
+        // improves on the best is data the branch predictor cannot learn.
+        let (mut best_cost, mut best_pos) = (f32::INFINITY, 0.0);
         // Primitives that start before the current plane, and that do not end before it.
         let (mut below, mut above) = (0usize, n);
         let mut i = 0;
         while i < list.len() {
             let key = list[i].pos_key();
-            let mut count = [0usize; 3];
-            while i < list.len() && list[i].pos_key() == key {
-                count[list[i].kind() as usize] += 1;
+            let (mut ends, mut planar, mut starts) = (0usize, 0usize, 0usize);
+            loop {
+                // The kind's raw bits: integer compares, no branch per event.
+                let kind = list[i].kind_bits();
+                ends += usize::from(kind == Kind::End as u32);
+                planar += usize::from(kind == Kind::Planar as u32);
+                starts += usize::from(kind == Kind::Start as u32);
                 i += 1;
+                if i == list.len() || list[i].pos_key() != key {
+                    break;
+                }
             }
-            let [ends, planar, starts] = count;
             let pos = list[i - 1].pos();
             if pos > lo && pos < hi {
                 // `split::classify` sends every primitive touching the plane (ending, lying or
@@ -254,14 +263,18 @@ impl Sah<'_> {
                     scale * (face + side * (hi - pos)),
                 ];
                 let cost = self.split_cost(probability, [below + planar + starts, above]);
-                if best.as_ref().is_none_or(|b| cost < b.cost) {
-                    best = Some(Plane { axis, pos, cost });
-                }
+                let better = cost < best_cost;
+                best_cost = if better { cost } else { best_cost };
+                best_pos = if better { pos } else { best_pos };
             }
             above -= ends + planar;
             below += starts + planar;
         }
-        best
+        (best_cost < f32::INFINITY).then_some(Plane {
+            axis,
+            pos: best_pos,
+            cost: best_cost,
+        })
     }
 
     /// Cost of a split whose children are hit with probabilities `p` and hold `n` primitives
@@ -273,8 +286,9 @@ impl Sah<'_> {
         } else {
             1.0
         };
-        lambda
-            * (self.traversal_cost + INTERSECTION_COST * (p[0] * n[0] as f32 + p[1] * n[1] as f32))
+        // Counts fit `u32` (`MAX_PRIMS`), whose conversion to `f32` needs no branch.
+        let [below, above] = n.map(|k| k as u32 as f32);
+        lambda * (self.traversal_cost + INTERSECTION_COST * (p[0] * below + p[1] * above))
     }
 
     /// Splits the primitives and their events between the two children (Wald & Havran §5.2):
@@ -324,27 +338,34 @@ impl Sah<'_> {
             list.push(prim);
         }
         for (axis, list) in events.iter().enumerate() {
-            // Each child gets about its share of the parent's events.
+            let extra: [&mut [Event]; 2] = straddling.each_mut().map(|s| &mut s[axis][..]);
             for (child, (prims, events)) in children.iter_mut().enumerate() {
-                let extra = straddling[child][axis].len();
-                events[axis].reserve(list.len() * prims.len() / n.max(1) + extra);
+                extra[child].sort_unstable();
+                // About its share of the parent's events, and its straddlers' new ones.
+                events[axis].reserve(list.len() * prims.len() / n.max(1) + extra[child].len());
             }
+            // One pass: the parent's one-sided events go to their child in order, each child's
+            // sorted straddler events merged in as they fall due.
+            let mut next = [0usize; 2];
             for &e in list {
                 let child = match side[e.prim()] {
                     Side::Below => 0,
                     Side::Above => 1,
                     Side::Both => continue,
                 };
-                children[child].1[axis].push(e.renumbered(moved[e.prim()]));
+                let e = e.renumbered(moved[e.prim()]);
+                push_merged(
+                    &mut children[child].1[axis],
+                    e,
+                    extra[child],
+                    &mut next[child],
+                );
+            }
+            for (child, (_, events)) in children.iter_mut().enumerate() {
+                events[axis].extend_from_slice(&extra[child][next[child]..]);
             }
         }
         drop(events);
-        for ((_, events), mut extra) in children.iter_mut().zip(straddling) {
-            for (list, extra) in events.iter_mut().zip(&mut extra) {
-                extra.sort_unstable();
-                merge_into(list, extra);
-            }
-        }
         children
     }
 }
@@ -395,7 +416,7 @@ mod tests {
     }
 
     #[test]
-    fn merge_into_gives_the_sorted_union() {
+    fn push_merged_gives_the_sorted_union() {
         let events = |positions: &[f32]| -> Vec<Event> {
             let mut v: Vec<Event> = positions
                 .iter()
@@ -411,11 +432,15 @@ mod tests {
             (&POSITIONS[..], &[]),
             (&[1.0, 1.0], &[1.0]),
         ] {
-            let (mut list, extra) = (events(a), events(b));
+            let (list, extra) = (events(a), events(b));
             let mut expected = [list.clone(), extra.clone()].concat();
             expected.sort_unstable();
-            merge_into(&mut list, &extra);
-            assert_eq!(list, expected);
+            let (mut out, mut next) = (Vec::new(), 0);
+            for &e in &list {
+                push_merged(&mut out, e, &extra, &mut next);
+            }
+            out.extend_from_slice(&extra[next..]);
+            assert_eq!(out, expected);
         }
     }
 }
