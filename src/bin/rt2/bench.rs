@@ -304,12 +304,14 @@ fn build(a: &Args) -> Result<String> {
          |---|---|---|---|---|---|---|---|---|\n",
     );
     let mut embree = String::new();
+    let mut ratios = String::new();
     for model in ["bunny.ply", "snowden.ply", "dragon.ply"] {
         let Some(scene) = model_scene(model)? else {
             continue;
         };
         let mut scene = scene;
         let tris = scene.objects()[0].shape.prim_count();
+        let mut sah_ms = f64::NAN;
         for builder in [Builder::Sah, Builder::Midpoint] {
             scene.set_build_options(BuildOptions {
                 builder,
@@ -334,6 +336,9 @@ fn build(a: &Args) -> Result<String> {
                         .collect(),
                 );
             }
+            if builder == Builder::Sah {
+                sah_ms = ms[1];
+            }
             let c = scene.committed()?;
             let bytes = c.tree.node_bytes() + c.tree.leaf_list_bytes();
             writeln!(
@@ -349,8 +354,13 @@ fn build(a: &Args) -> Result<String> {
             .ok();
         }
         if let Some(shadow) = find_set(model.trim_end_matches(".ply"), "shadow") {
+            // Embree's 2-thread medians by build name, for the ratios.
+            let mut two = std::collections::HashMap::new();
             for r in embree_rows(&shared().join("models").join(model), &[shadow], a.runs) {
                 if r.get(2).is_some_and(|s| s == "BUILD") {
+                    if r[4] == "2" {
+                        two.insert(r[3].clone(), r[6].parse::<f64>().unwrap_or(f64::NAN));
+                    }
                     writeln!(
                         embree,
                         "| {model} | {} | {} | {} | {:.2} |",
@@ -362,7 +372,25 @@ fn build(a: &Args) -> Result<String> {
                     .ok();
                 }
             }
+            let ratio = |name: &str| two.get(name).map_or(f64::NAN, |&e| sah_ms / e);
+            writeln!(
+                ratios,
+                "| {model} | {sah_ms:.1} | {:.2}x | {:.2}x |",
+                ratio("high(non-robust)"),
+                ratio("robust+high")
+            )
+            .ok();
         }
+    }
+    if !ratios.is_empty() {
+        out += "\nSAH with perfect splits against Embree 3, 2 threads each (RT2 ms / Embree ms). Embree's \
+                high-quality build is `RTC_BUILD_QUALITY_HIGH` without `RTC_SCENE_FLAG_ROBUST`: \
+                an SBVH, whose spatial splits are the BVH analogue of perfect splits. With the \
+                ROBUST flag Embree 3.13 ignores the quality and runs its static SAH builder \
+                (`../shared/peers/src/bench_embree.cpp`), which makes no spatial splits.\n\n\
+                | model | RT2 SAH 2 threads ms | vs Embree high (SBVH) | vs Embree robust (static SAH) |\n\
+                |---|---|---|---|\n";
+        out += &ratios;
     }
     out += &layout_effect(a)?;
     out += &traversal_cost_effect(a)?;
