@@ -2,6 +2,7 @@
 //! the statistics of each chunk summed at the end (no shared counters in the hot loop). A chunk
 //! is traced one ray at a time, in packets or as one stream ([`QueryMode`]).
 
+use super::batch::octant;
 use super::simd::Width;
 use super::traverse::{self, Traversal, TraverseOptions};
 use super::{packet, stream};
@@ -12,18 +13,18 @@ use rayon::prelude::*;
 /// Rays per parallel task: the granularity Embree's peer harness uses too.
 const CHUNK: usize = 4096;
 
-/// Fewest rays per stream. A stream gains from more rays per node (the paper traces all rays
-/// at once): the batch is cut into one stream per thread, but not below this size.
+/// Fewest rays per stream when a batch is cut to keep every thread busy.
 pub const STREAM_CHUNK: usize = 16384;
 
-/// Most rays per stream. Past this the lists of rays pending at the far children of the upper
-/// nodes no longer fit the caches: coherent rays cross both children of most upper nodes, so
-/// the ray stack holds about one copy of the stream per level. Measured with one thread on
-/// 1376×768 orbit frames (the `rt2 bench streams` workload), one 1 M-ray stream ran at
-/// 0.55–0.65× the speed of 32 K-ray streams on the bunny and the Snowden bust, and 64 K-ray
-/// streams already lost 25% on the bust. Incoherent rays would take longer streams (on the
-/// bunny's incoherent set 131 K-ray streams are about 12% faster than 32 K-ray ones), but their
-/// loss is the smaller one.
+/// Most rays per stream. A stream walks the tree once per octant group (the paper), so the
+/// batch is first sorted by octant and cut into streams of one octant each: a stream then
+/// holds as many rays of its octant as a batch eight times its size would. Past this size
+/// coherent rays outgrow the caches: they cross both children of most upper nodes, so the
+/// far children's lists pending on the ray stack hold about one copy of the stream per level,
+/// and the stream's ray arrays are written out before the walk reads them back. On 1376×768
+/// orbit frames (one thread, `rt2 bench streams`) one 1 M-ray stream ran at 0.55–0.65× the
+/// speed of 32 K-ray streams on the bunny and the Snowden bust, and 128 K-ray streams lost 40%
+/// on the bust.
 pub const STREAM_MAX: usize = 32768;
 
 /// How a batch is traced. Every mode returns the same closest hits, bit for bit (the packet and
@@ -46,16 +47,6 @@ impl QueryMode {
             QueryMode::Single => "single",
             QueryMode::Packet => "packet",
             QueryMode::Stream => "stream",
-        }
-    }
-
-    /// Rays per parallel task in this mode for a batch of `n` rays.
-    pub fn chunk(self, n: usize) -> usize {
-        match self {
-            QueryMode::Stream => n
-                .div_ceil(rayon::current_num_threads())
-                .clamp(STREAM_CHUNK, STREAM_MAX),
-            _ => CHUNK,
         }
     }
 }
@@ -84,16 +75,19 @@ pub fn intersect_width(
     width: Width,
 ) -> TraversalStats {
     let (tree, prims) = (&scene.tree, &scene.prims);
-    chunked(rays, hits, mode.chunk(rays.len()), |r, h| {
-        serial(
-            r,
-            h,
-            mode,
-            |ray, stats| traverse::intersect(tree, prims, ray, how, opts, stats),
-            |r, h| packet::intersect(tree, prims, r, h, width),
-            |r, h| stream::intersect(tree, prims, r, h, width).0,
-        )
-    })
+    match mode {
+        QueryMode::Single => chunked(rays, hits, CHUNK, |r, h| {
+            serial(r, h, |ray, stats| {
+                traverse::intersect(tree, prims, ray, how, opts, stats)
+            })
+        }),
+        QueryMode::Packet => chunked(rays, hits, CHUNK, |r, h| {
+            packet::intersect(tree, prims, r, h, width)
+        }),
+        QueryMode::Stream => streamed(rays, hits, Hit::MISS, |r, h| {
+            stream::intersect(tree, prims, r, h, width).0
+        }),
+    }
 }
 
 /// Any-hit queries: `occluded[i]` is true when something lies in ray i's `[tmin, tmax)`.
@@ -106,16 +100,19 @@ pub fn occluded(
     mode: QueryMode,
 ) -> TraversalStats {
     let (tree, prims, width) = (&scene.tree, &scene.prims, Width::best());
-    chunked(rays, occluded, mode.chunk(rays.len()), |r, o| {
-        serial(
-            r,
-            o,
-            mode,
-            |ray, stats| traverse::occluded(tree, prims, ray, how, opts, stats),
-            |r, o| packet::occluded(tree, prims, r, o, width),
-            |r, o| stream::occluded(tree, prims, r, o, width).0,
-        )
-    })
+    match mode {
+        QueryMode::Single => chunked(rays, occluded, CHUNK, |r, o| {
+            serial(r, o, |ray, stats| {
+                traverse::occluded(tree, prims, ray, how, opts, stats)
+            })
+        }),
+        QueryMode::Packet => chunked(rays, occluded, CHUNK, |r, o| {
+            packet::occluded(tree, prims, r, o, width)
+        }),
+        QueryMode::Stream => streamed(rays, occluded, false, |r, o| {
+            stream::occluded(tree, prims, r, o, width).0
+        }),
+    }
 }
 
 /// Traces `chunk`-ray pieces of a batch in parallel (`out[i]` belongs to `rays[i]`) and sums
@@ -124,36 +121,84 @@ fn chunked<T: Send>(
     rays: &[Ray],
     out: &mut [T],
     chunk: usize,
-    serial: impl Fn(&[Ray], &mut [T]) -> TraversalStats + Sync,
+    trace: impl Fn(&[Ray], &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
     rays.par_chunks(chunk)
         .zip(out.par_chunks_mut(chunk))
-        .map(|(r, o)| serial(r, o))
+        .map(|(r, o)| trace(r, o))
         .reduce(TraversalStats::default, |mut a, b| {
             a.add(&b);
             a
         })
 }
 
-/// One chunk of a query on the calling thread: `single` answers one ray at a time, `packet`
-/// and `stream` a whole chunk in their mode.
+/// One ray at a time, for one chunk on the calling thread.
 fn serial<T>(
     rays: &[Ray],
     out: &mut [T],
-    mode: QueryMode,
     single: impl Fn(&Ray, &mut TraversalStats) -> T,
-    packet: impl FnOnce(&[Ray], &mut [T]) -> TraversalStats,
-    stream: impl FnOnce(&[Ray], &mut [T]) -> TraversalStats,
 ) -> TraversalStats {
-    match mode {
-        QueryMode::Single => {
-            let mut stats = TraversalStats::default();
-            for (ray, o) in rays.iter().zip(out) {
-                *o = single(ray, &mut stats);
-            }
-            stats
-        }
-        QueryMode::Packet => packet(rays, out),
-        QueryMode::Stream => stream(rays, out),
+    let mut stats = TraversalStats::default();
+    for (ray, o) in rays.iter().zip(out) {
+        *o = single(ray, &mut stats);
     }
+    stats
+}
+
+/// Rays per octant run, on average, from which a batch is streamed in its own order: camera
+/// rays in scanline order change octant once or twice per row, and sorting them would only
+/// cost a copy of every ray (measured: 25% of the speed on 1376×768 frames).
+const LONG_RUNS: usize = 64;
+
+/// Streams of at most [`STREAM_MAX`] rays, no more than a thread's share (but at least
+/// [`STREAM_CHUNK`]), traced in parallel. Rays that come in long octant runs are cut in their
+/// own order; others are sorted by octant (a stable counting sort) and each stream, of one
+/// octant, traced on a gathered copy, with `out` filled from `empty` and its answers.
+fn streamed<T: Copy + Send + Sync>(
+    rays: &[Ray],
+    out: &mut [T],
+    empty: T,
+    trace: impl Fn(&[Ray], &mut [T]) -> TraversalStats + Sync,
+) -> TraversalStats {
+    let size = rays
+        .len()
+        .div_ceil(rayon::current_num_threads())
+        .clamp(STREAM_CHUNK, STREAM_MAX);
+    let octants: Vec<u8> = rays.iter().map(|r| octant(r) as u8).collect();
+    let runs = 1 + octants.windows(2).filter(|w| w[0] != w[1]).count();
+    if runs * LONG_RUNS <= rays.len() {
+        return chunked(rays, out, size, trace);
+    }
+    let mut start = [0usize; 9];
+    for &o in &octants {
+        start[o as usize + 1] += 1;
+    }
+    for o in 0..8 {
+        start[o + 1] += start[o];
+    }
+    let mut order = vec![0u32; rays.len()];
+    let mut next = start;
+    for (i, &o) in octants.iter().enumerate() {
+        order[next[o as usize]] = i as u32;
+        next[o as usize] += 1;
+    }
+    let parts: Vec<&[u32]> = (0..8)
+        .flat_map(|o| order[start[o]..start[o + 1]].chunks(size))
+        .collect();
+    let answers: Vec<(TraversalStats, Vec<T>)> = parts
+        .par_iter()
+        .map(|part| {
+            let part_rays: Vec<Ray> = part.iter().map(|&i| rays[i as usize]).collect();
+            let mut answers = vec![empty; part.len()];
+            (trace(&part_rays, &mut answers), answers)
+        })
+        .collect();
+    let mut stats = TraversalStats::default();
+    for (part, (s, answers)) in parts.iter().zip(answers) {
+        stats.add(&s);
+        for (&i, a) in part.iter().zip(answers) {
+            out[i as usize] = a;
+        }
+    }
+    stats
 }

@@ -140,13 +140,13 @@ pub(super) fn streams(a: &Args) -> Result<String> {
         "### All rays at once: n-ray streams, packets and single rays (CPU, 1 thread)\n\n\
          Modes: **n-rays** = `QueryMode::Stream`, **packets** = `QueryMode::Packet` ({w} lanes, \
          the paper's 4-rays column), **1-ray** = `QueryMode::Single` with the standard traversal; \
-         all return bit-identical hits. A batch is traced as streams of {lo}–{hi} rays \
-         (`STREAM_CHUNK`, `STREAM_MAX`): longer streams of coherent rays outgrow the caches. Trees: SAH with perfect splits (the library default; the \
+         all return bit-identical hits. A batch is sorted by octant and cut into streams of one \
+         octant, at most {hi} rays (`STREAM_MAX`): longer streams of coherent rays outgrow the \
+         caches. Trees: SAH with perfect splits (the library default; the \
          paper used midpoint trees). Paper: Pentium-M, 1 core; its third model is the Buddha, the \
          Snowden bust stands in for it. Ratios are measured in this run on a shared 2-core machine \
          (±10%); each figure is the fastest of the timed runs, because other processes only add time.\n\n",
         w = width.lanes(),
-        lo = STREAM_CHUNK,
         hi = STREAM_MAX
     );
     let mut t1 = String::from(
