@@ -176,7 +176,8 @@ enum rt2_query_mode
    */
   RT2_QUERY_MODE_PACKET = 1,
   /**
-   * All rays at once: the n-ray traversal of the vectorised-traversal paper.
+   * The n-ray traversal of the vectorised-traversal paper: all rays of a stream at once, in
+   * streams of one octant and at most 32768 rays (`cpu::query::STREAM_MAX`).
    */
   RT2_QUERY_MODE_STREAM = 2,
 };
@@ -599,8 +600,9 @@ typedef struct rt2_scene_statistics {
    */
   uint64_t bytes_leaf_lists;
   /**
-   * Ropes (24 bytes per leaf) and the rank words that number the leaves for them (2 bits
-   * per node); 0 until a rope traversal needs them.
+   * Ropes (6 per leaf, packed at the bits a node index needs: 12-16 bytes per leaf for
+   * 16-21 bits) and the rank words that number the leaves for them (2 bits per node); 0
+   * until a rope traversal needs them.
    */
   uint64_t bytes_ropes;
   uint64_t bytes_leaf_boxes;

@@ -8,7 +8,9 @@
 // distances, zero direction components infinite reciprocals), and WGSL lets compilers assume
 // neither exists. So NaN tests and sign tests read the bits, never `x != x` or `sign(x)`.
 
-struct KdNode { split: f32, bits: u32 }
+// `split` is read as bits: a leaf keeps its first primitive index there (`KdNode` in
+// src/kdtree/mod.rs), which as a float is a subnormal that a shader compiler may flush.
+struct KdNode { split: u32, bits: u32 }
 struct RankWord { leaf_bits: u32, before: u32 }
 struct Triangle { v0: array<f32, 3>, e1: array<f32, 3>, e2: array<f32, 3> }
 struct Sphere { center: array<f32, 3>, radius: f32 }
@@ -267,6 +269,8 @@ fn clip_scene(r: TRay) -> Seg {
 
 fn is_leaf(n: KdNode) -> bool { return (n.bits & 3u) == 3u; }
 fn node_index(n: KdNode) -> u32 { return n.bits >> 2u; }
+// A leaf's primitives: prim_indices[split .. split + count].
+fn prim_count(n: KdNode) -> u32 { return n.bits >> 2u; }
 // A leaf's number (`Ropes::leaf_number`): the leaves before leaf node `node`.
 fn leaf_number(node: u32) -> u32 {
     let w = leaf_rank[node / 32u];
@@ -281,7 +285,7 @@ struct Crossing { both: bool, child: u32, far: u32, t_split: f32 }
 
 fn kd_step(n: KdNode, r: TRay, t0: f32, t1: f32) -> Crossing {
     let axis = n.bits & 3u;
-    let t_split = dist(r, axis, n.split);
+    let t_split = dist(r, axis, bitcast<f32>(n.split));
     let below = node_index(n);
     var near = below + 1u;
     var far = below;
@@ -292,13 +296,10 @@ fn kd_step(n: KdNode, r: TRay, t0: f32, t1: f32) -> Crossing {
 }
 
 // The leaf visit of both queries (`Closest` / `AnyHit`): true when the traversal can stop.
-// A leaf node lists prim_indices[first..first + count]: first in the bits of `split`, count
-// in `bits >> 2` (`KdNode` in src/kdtree/mod.rs).
 fn visit_leaf(leaf: KdNode, t_exit: f32, r: Ray, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, Stats>) -> bool {
     (*st).leaves += 1u;
-    let first = bitcast<u32>(leaf.split);
-    for (var j = 0u; j < node_index(leaf); j++) {
-        let p = prim_indices[first + j];
+    for (var j = 0u; j < prim_count(leaf); j++) {
+        let p = prim_indices[leaf.split + j];
         (*st).prims += 1u;
         if (any_hit) {
             var fresh = miss();

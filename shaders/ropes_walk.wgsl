@@ -5,13 +5,16 @@
 
 struct Exit { t: f32, face: u32 }
 
-// Rope `face` of leaf `leaf` (`RopeLinks::get`): `params.rope_bits` bits at bit
-// (6 leaf + face) rope_bits of the word stream, the all-ones value for INVALID.
+// Rope `face` of leaf `leaf` (`RopeLinks::get`): rope k = 6 leaf + face takes
+// `params.rope_bits` bits from bit k rope_bits of the word stream, the all-ones value for
+// INVALID. 32 ropes fill exactly rope_bits words, so the word is found per group of 32: the
+// bit offset itself would overflow u32 past 512 MiB of ropes.
 fn rope(leaf: u32, face: u32) -> u32 {
     let bits = params.rope_bits;
-    let at = (6u * leaf + face) * bits;
-    let w = at / 32u;
-    let shift = at % 32u;
+    let k = 6u * leaf + face;
+    let r = (k & 31u) * bits;
+    let w = (k >> 5u) * bits + (r >> 5u);
+    let shift = r & 31u;
     var value = ropes[w] >> shift;
     if (shift + bits > 32u) { value |= ropes[w + 1u] << (32u - shift); }
     let mask = select((1u << bits) - 1u, 0xffffffffu, bits >= 32u);

@@ -211,6 +211,18 @@ fn check_tree(set: &PrimitiveSet, tree: &KdTree, what: &str) {
 fn check_ropes(tree: &KdTree, voxels: &[Option<(Aabb, u32)>], what: &str) {
     let Some(ropes) = &tree.ropes else { return };
     assert_eq!(ropes.leaf_bounds.len(), tree.leaf_count());
+    let bits = ropes.links.bits as usize;
+    // The fewest bits that keep every node index below the all-ones INVALID.
+    assert!(
+        tree.nodes.len() < 1 << bits && (bits == 1 || tree.nodes.len() >= 1 << (bits - 1)),
+        "{what}: {bits}-bit ropes for {} nodes",
+        tree.nodes.len()
+    );
+    assert_eq!(
+        ropes.links.words.len(),
+        (6 * tree.leaf_count() * bits).div_ceil(32) + 1,
+        "{what}: rope words"
+    );
     // Leaf numbers: each leaf node its own, 0..leaf_count, in node order.
     let numbered: Vec<(u32, usize)> = (0..tree.nodes.len() as u32)
         .filter(|&n| tree.nodes[n as usize].is_leaf())
@@ -442,7 +454,7 @@ fn layouts_differ_only_in_node_order() {
             let (na, nb) = (df.nodes[a], veb.nodes[b]);
             assert_eq!(na.is_leaf(), nb.is_leaf());
             if na.is_leaf() {
-                assert_eq!(na.index(), nb.index());
+                assert_eq!(na.prim_range(), nb.prim_range());
             } else {
                 assert_eq!((na.axis(), na.split), (nb.axis(), nb.split));
                 let (ca, cb) = (na.index() as usize, nb.index() as usize);
@@ -507,7 +519,7 @@ fn stats_match_the_tree() {
         let s = tree.stats;
         let voxels = tree.leaf_voxels();
         assert_eq!(s.node_count as usize, tree.nodes.len());
-        assert_eq!(s.leaf_count as usize, tree.leaf_count());
+        assert_eq!(s.leaf_count as usize, voxels.len());
         assert_eq!(voxels.len(), tree.leaf_count());
         let count = |v: &(u32, Aabb, u32)| tree.nodes[v.0 as usize].prim_range().len();
         let empty = voxels.iter().filter(|v| count(v) == 0).count();

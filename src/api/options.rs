@@ -47,7 +47,8 @@ pub enum Rt2QueryMode {
     Single = 0,
     /// Packets of 8 rays (4 without AVX2) of one octant (Wald); standard traversal order.
     Packet = 1,
-    /// All rays at once: the n-ray traversal of the vectorised-traversal paper.
+    /// The n-ray traversal of the vectorised-traversal paper: all rays of a stream at once, in
+    /// streams of one octant and at most 32768 rays (`cpu::query::STREAM_MAX`).
     Stream = 2,
 }
 

@@ -347,8 +347,9 @@ pub struct rt2_scene_statistics {
     pub bytes_nodes: u64,
     /// The leaves' primitive indices, 4 bytes each.
     pub bytes_leaf_lists: u64,
-    /// Ropes (24 bytes per leaf) and the rank words that number the leaves for them (2 bits
-    /// per node); 0 until a rope traversal needs them.
+    /// Ropes (6 per leaf, packed at the bits a node index needs: 12-16 bytes per leaf for
+    /// 16-21 bits) and the rank words that number the leaves for them (2 bits per node); 0
+    /// until a rope traversal needs them.
     pub bytes_ropes: u64,
     pub bytes_leaf_boxes: u64,
     pub bytes_primitives: u64,

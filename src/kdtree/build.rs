@@ -51,9 +51,9 @@ pub struct BuildOptions {
     /// SAH cost of one traversal step, relative to one primitive test (1.0). Larger values make
     /// fewer, fuller leaves: a smaller tree built faster, slower coherent single rays. The
     /// default 3 keeps the dragon's tree (15 MiB) under the RT² thesis' 17.2 MB and builds about
-    /// 20% faster than 2, for 3–6% fewer single rays per second on the bunny; the dragon's single
-    /// rays, packets and streams are as fast or faster (`rt2 bench build`, "Effect of the SAH
-    /// traversal cost").
+    /// 20% faster than 2. It costs up to 6% of the single rays per second (bunny, primary rays)
+    /// and up to 9% of incoherent packets (dragon); streams are unchanged within noise (`rt2
+    /// bench build`, "Effect of the SAH traversal cost").
     pub traversal_cost: f32,
     /// Factor λ applied to the SAH cost of a split that leaves one side empty (Wald & Havran
     /// 2006, §4.3 use 0.8): below 1 it favours cutting off empty space.

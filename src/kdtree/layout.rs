@@ -1,9 +1,9 @@
 //! Node layouts: depth-first and van Emde Boas.
 //!
 //! The unit of layout is the sibling pair: the format keeps the two children of a node side by
-//! side, so a layout is an order of pairs (the root sits alone at index 0). The leaves and
-//! their primitive lists are numbered in depth-first order by both layouts, so two trees that
-//! differ only in layout have identical `leaves` and `prim_indices`.
+//! side, so a layout is an order of pairs (the root sits alone at index 0). Both layouts write
+//! the leaves' primitive lists in depth-first order, so two trees that differ only in layout
+//! have identical `prim_indices` and the same leaf nodes in depth-first order.
 
 use super::split::BuildNode;
 use super::{KdNode, KdTree, Layout, TreeStats};
@@ -30,7 +30,9 @@ pub(super) fn flatten(root: &BuildNode, bounds: Aabb, layout: Layout) -> KdTree 
 fn depth_first(node: &BuildNode, at: usize, tree: &mut KdTree) {
     match node {
         BuildNode::Leaf(prims) => {
-            tree.nodes[at] = KdNode::leaf(tree.prim_indices.len() as u32, prims.len() as u32);
+            let first = u32::try_from(tree.prim_indices.len())
+                .expect("over 2^32 leaf references: more than the node format can address");
+            tree.nodes[at] = KdNode::leaf(first, prims.len() as u32);
             tree.prim_indices.extend_from_slice(prims);
         }
         BuildNode::Inner {

@@ -31,10 +31,10 @@ use crate::geometry::{Aabb, PrimitiveSet, INVALID};
 /// Leaf: `bits >> 2` is the number of primitives and `split` holds, as its bit pattern, the index
 /// of the first of them in `prim_indices`. The leaf's range lives in the node rather than in a
 /// table of ranges: 8 bytes less per leaf, and a leaf visit goes from the node straight to its
-/// list instead of through one more dependent load. (The pattern is never a NaN: it would take
-/// over two billion references.)
+/// list instead of through one more dependent load. The GPU reads the word as bits (a subnormal
+/// float could be flushed there); on the CPU `to_bits`/`from_bits` are exact for every pattern.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+#[derive(Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct KdNode {
     pub split: f32,
     pub bits: u32,
@@ -85,6 +85,24 @@ impl KdNode {
     }
 }
 
+/// A leaf shows its range, an inner node its split (the derived form would print a leaf's first
+/// index as a tiny float).
+impl std::fmt::Debug for KdNode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.is_leaf() {
+            write!(f, "Leaf {:?}", self.prim_range())
+        } else {
+            let child = self.index();
+            write!(
+                f,
+                "Inner {{ axis: {}, split: {}, child: {child} }}",
+                self.axis(),
+                self.split
+            )
+        }
+    }
+}
+
 /// One word of [`Ropes::rank`]: which of 32 consecutive nodes are leaves, and how many leaves
 /// come before them.
 #[repr(C)]
@@ -132,7 +150,7 @@ impl Ropes {
 /// The six ropes of every leaf, each packed in `bits` bits: the fewest that hold every node
 /// index, with the all-ones value for `INVALID`. A rope is read once per leaf a ray leaves, so
 /// unpacking costs little, and 16–21 bits instead of 32 take the ropes from 24 to 12–16 bytes
-/// per leaf. Rope `6 * leaf + face` occupies bits `[k * bits, (k + 1) * bits)` of the
+/// per leaf. Rope `k = 6 * leaf + face` occupies bits `[k * bits, (k + 1) * bits)` of the
 /// little-endian stream of `words` (the GPU reads the same words).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct RopeLinks {
@@ -228,7 +246,8 @@ impl KdTree {
         self.nodes.len().div_ceil(2)
     }
 
-    /// Adds ropes (and leaf boxes) if they are not there yet.
+    /// Adds ropes (with leaf boxes and the rank words that number the leaves) if they are not
+    /// there yet.
     pub fn ensure_ropes(&mut self) {
         if self.ropes.is_none() {
             self.ropes = Some(ropes::build_ropes(self));
@@ -301,7 +320,10 @@ mod tests {
                 })
                 .collect();
             let packed = RopeLinks::pack(&links, nodes);
-            assert!(packed.bits <= bits, "{bits}: packed at {}", packed.bits);
+            assert_eq!(packed.bits, bits, "{nodes} nodes");
+            // One node more and the all-ones value would be a node index: one bit more.
+            let wider = RopeLinks::pack(&links, nodes + 1);
+            assert_eq!(wider.bits, (bits + 1).min(32), "{} nodes", nodes + 1);
             for (leaf, l) in links.iter().enumerate() {
                 assert_eq!(packed.leaf(leaf), *l, "{bits} bits, leaf {leaf}");
             }

@@ -111,16 +111,32 @@ fn push_events(b: &Aabb, prim: u32, events: &mut Events) {
     }
 }
 
-/// One step of merging the sorted `extra` into the sorted list being written to `out`: appends
-/// the events of `extra[*next..]` that sort before `e`, then `e`. The rest of `extra` is
-/// appended once the other list has run out.
-#[inline]
-fn push_merged(out: &mut Vec<Event>, e: Event, extra: &[Event], next: &mut usize) {
-    while let Some(&x) = extra.get(*next).filter(|&&x| x < e) {
-        out.push(x);
-        *next += 1;
+/// Merges a sorted list of new events into a sorted list while the latter is written out:
+/// [`Merge::push`] each event of the list in order, then [`Merge::finish`].
+struct Merge<'a> {
+    extra: &'a [Event],
+    next: usize,
+}
+
+impl<'a> Merge<'a> {
+    fn new(extra: &'a [Event]) -> Self {
+        Merge { extra, next: 0 }
     }
-    out.push(e);
+
+    /// Appends the new events that sort before `e`, then `e`.
+    #[inline]
+    fn push(&mut self, out: &mut Vec<Event>, e: Event) {
+        while let Some(&x) = self.extra.get(self.next).filter(|&&x| x < e) {
+            out.push(x);
+            self.next += 1;
+        }
+        out.push(e);
+    }
+
+    /// Appends the new events left after the last of the list.
+    fn finish(self, out: &mut Vec<Event>) {
+        out.extend_from_slice(&self.extra[self.next..]);
+    }
 }
 
 /// `prims` are (index, bounds) pairs inside `voxel`.
@@ -346,7 +362,7 @@ impl Sah<'_> {
             }
             // One pass: the parent's one-sided events go to their child in order, each child's
             // sorted straddler events merged in as they fall due.
-            let mut next = [0usize; 2];
+            let mut merges = extra.map(|x| Merge::new(x));
             for &e in list {
                 let child = match side[e.prim()] {
                     Side::Below => 0,
@@ -354,15 +370,10 @@ impl Sah<'_> {
                     Side::Both => continue,
                 };
                 let e = e.renumbered(moved[e.prim()]);
-                push_merged(
-                    &mut children[child].1[axis],
-                    e,
-                    extra[child],
-                    &mut next[child],
-                );
+                merges[child].push(&mut children[child].1[axis], e);
             }
-            for (child, (_, events)) in children.iter_mut().enumerate() {
-                events[axis].extend_from_slice(&extra[child][next[child]..]);
+            for ((_, events), merge) in children.iter_mut().zip(merges) {
+                merge.finish(&mut events[axis]);
             }
         }
         drop(events);
@@ -416,7 +427,7 @@ mod tests {
     }
 
     #[test]
-    fn push_merged_gives_the_sorted_union() {
+    fn merge_gives_the_sorted_union() {
         let events = |positions: &[f32]| -> Vec<Event> {
             let mut v: Vec<Event> = positions
                 .iter()
@@ -435,11 +446,11 @@ mod tests {
             let (list, extra) = (events(a), events(b));
             let mut expected = [list.clone(), extra.clone()].concat();
             expected.sort_unstable();
-            let (mut out, mut next) = (Vec::new(), 0);
+            let (mut out, mut merge) = (Vec::new(), Merge::new(&extra));
             for &e in &list {
-                push_merged(&mut out, e, &extra, &mut next);
+                merge.push(&mut out, e);
             }
-            out.extend_from_slice(&extra[next..]);
+            merge.finish(&mut out);
             assert_eq!(out, expected);
         }
     }

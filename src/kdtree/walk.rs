@@ -33,7 +33,7 @@ impl KdTree {
         out
     }
 
-    /// The leaf node (a node index, not a leaf index) whose voxel holds `p`, descending below
+    /// The leaf node (a node index, not a rope leaf number) whose voxel holds `p`, descending below
     /// the plane when `p[axis] <= split`. For points outside the root box it is the leaf the
     /// point would fall in if the outer voxels were extended to infinity; ropes++ starts
     /// secondary rays here instead of at the root.

@@ -121,8 +121,8 @@ fn next(c: Crossing) -> u32 {
 
 /// Descends from `node` to the leaf holding the start of the segment `[t0, t1]`, telling `seen`
 /// about every crossing (the stack-based traversals push there, push-down moves its root there).
-/// Counts every node fetched, the leaf included. Returns the leaf's index and node and its exit
-/// distance (`t1` shrunk to the near part at every two-child crossing).
+/// Counts every node fetched, the leaf included. Returns the leaf's node index, the node and
+/// its exit distance (`t1` shrunk to the near part at every two-child crossing).
 #[inline]
 pub(super) fn descend(
     tree: &KdTree,
