@@ -75,19 +75,15 @@ pub fn intersect_width(
     width: Width,
 ) -> TraversalStats {
     let (tree, prims) = (&scene.tree, &scene.prims);
-    match mode {
-        QueryMode::Single => chunked(rays, hits, CHUNK, |r, h| {
-            serial(r, h, |ray, stats| {
-                traverse::intersect(tree, prims, ray, how, opts, stats)
-            })
-        }),
-        QueryMode::Packet => chunked(rays, hits, CHUNK, |r, h| {
-            packet::intersect(tree, prims, r, h, width)
-        }),
-        QueryMode::Stream => streamed(rays, hits, Hit::MISS, |r, h| {
-            stream::intersect(tree, prims, r, h, width).0
-        }),
-    }
+    traced(
+        rays,
+        hits,
+        mode,
+        Hit::MISS,
+        |ray, stats| traverse::intersect(tree, prims, ray, how, opts, stats),
+        |r, h| packet::intersect(tree, prims, r, h, width),
+        |r, h| stream::intersect(tree, prims, r, h, width).0,
+    )
 }
 
 /// Any-hit queries: `occluded[i]` is true when something lies in ray i's `[tmin, tmax)`.
@@ -100,18 +96,32 @@ pub fn occluded(
     mode: QueryMode,
 ) -> TraversalStats {
     let (tree, prims, width) = (&scene.tree, &scene.prims, Width::best());
+    traced(
+        rays,
+        occluded,
+        mode,
+        false,
+        |ray, stats| traverse::occluded(tree, prims, ray, how, opts, stats),
+        |r, o| packet::occluded(tree, prims, r, o, width),
+        |r, o| stream::occluded(tree, prims, r, o, width).0,
+    )
+}
+
+/// A batch in `mode`: `single` answers one ray, `packet` and `stream` a slice of rays;
+/// streams fill from `empty` (see [`streamed`]).
+fn traced<T: Copy + Send + Sync>(
+    rays: &[Ray],
+    out: &mut [T],
+    mode: QueryMode,
+    empty: T,
+    single: impl Fn(&Ray, &mut TraversalStats) -> T + Sync,
+    packet: impl Fn(&[Ray], &mut [T]) -> TraversalStats + Sync,
+    stream: impl Fn(&[Ray], &mut [T]) -> TraversalStats + Sync,
+) -> TraversalStats {
     match mode {
-        QueryMode::Single => chunked(rays, occluded, CHUNK, |r, o| {
-            serial(r, o, |ray, stats| {
-                traverse::occluded(tree, prims, ray, how, opts, stats)
-            })
-        }),
-        QueryMode::Packet => chunked(rays, occluded, CHUNK, |r, o| {
-            packet::occluded(tree, prims, r, o, width)
-        }),
-        QueryMode::Stream => streamed(rays, occluded, false, |r, o| {
-            stream::occluded(tree, prims, r, o, width).0
-        }),
+        QueryMode::Single => chunked(rays, out, CHUNK, |r, o| serial(r, o, &single)),
+        QueryMode::Packet => chunked(rays, out, CHUNK, packet),
+        QueryMode::Stream => streamed(rays, out, empty, stream),
     }
 }
 
