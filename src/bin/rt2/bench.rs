@@ -325,16 +325,7 @@ fn build(a: &Args) -> Result<String> {
                 } else {
                     a.runs
                 };
-                ms[k] = median(
-                    (0..runs)
-                        .map(|_| {
-                            let _ = ctx.install(|| scene.commit());
-                            scene
-                                .committed()
-                                .map_or(f64::NAN, |c| c.tree.stats.build_ms as f64)
-                        })
-                        .collect(),
-                );
+                ms[k] = median_build_ms(&ctx, &mut scene, runs);
             }
             if builder == Builder::Sah {
                 sah_ms = ms[1];
@@ -411,6 +402,21 @@ fn build(a: &Args) -> Result<String> {
     Ok(out)
 }
 
+/// Median tree build time of `runs` commits of `scene` on `ctx`'s threads (NaN for a failed
+/// commit).
+fn median_build_ms(ctx: &Context, scene: &mut Scene, runs: usize) -> f64 {
+    median(
+        (0..runs)
+            .map(|_| {
+                let _ = ctx.install(|| scene.commit());
+                scene
+                    .committed()
+                    .map_or(f64::NAN, |c| c.tree.stats.build_ms as f64)
+            })
+            .collect(),
+    )
+}
+
 /// The SAH's traversal cost `K_T` trades memory and build time against speed: a larger `K_T`
 /// makes fewer, fuller leaves. For the bunny and the dragon: tree size with and without ropes,
 /// build time (2 threads), and Mrays/s (1 thread, standard traversal) of single rays, packets
@@ -444,16 +450,7 @@ fn traversal_cost_effect(a: &Args) -> Result<String> {
                 ..BuildOptions::default()
             };
             scene.set_build_options(options);
-            let build_ms = median(
-                (0..a.runs.min(3))
-                    .map(|_| {
-                        let _ = build_ctx.install(|| scene.commit());
-                        scene
-                            .committed()
-                            .map_or(f64::NAN, |c| c.tree.stats.build_ms as f64)
-                    })
-                    .collect(),
-            );
+            let build_ms = median_build_ms(&build_ctx, &mut scene, a.runs.min(3));
             scene.ensure_ropes()?;
             let c = scene.committed()?;
             let plain = c.tree.node_bytes() + c.tree.leaf_list_bytes();
