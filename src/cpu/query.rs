@@ -1,6 +1,7 @@
 //! Batch ray queries on the CPU: rays split into chunks that the context's pool traces, with
 //! the statistics of each chunk summed at the end (no shared counters in the hot loop). A chunk
-//! is traced one ray at a time, in packets or as one stream ([`QueryMode`]).
+//! is traced one ray at a time, in packets or as one stream ([`QueryMode`]); streams are cut
+//! by octant ([`STREAM_MAX`]).
 
 use super::batch::octant;
 use super::simd::Width;
