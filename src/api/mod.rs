@@ -1,6 +1,6 @@
 //! Layer 1: the C API. One module per C object; every exported function validates its
 //! arguments, returns an `rt2_status`, leaves objects unchanged on failure and runs inside
-//! [`guard`], the panic barrier. `include/rt2.h` is generated from this folder by `build.rs`.
+//! `ffi::guard`, the panic barrier. `include/rt2.h` is generated from this folder by `build.rs`.
 //!
 //! Handles are boxed Rust objects carrying a magic number, so a NULL, foreign or destroyed
 //! handle is an error rather than undefined behaviour in the common cases.
