@@ -8,6 +8,7 @@
 //! (traversal included, inlined) inside a `#[target_feature]` function, so the same source
 //! becomes SSE (4 lanes), AVX2 (8) or AVX-512 (16) code.
 
+use super::batch::{for_lanes, lanes_where};
 use crate::geometry::{Hit, PrimIndex, Ray, Triangle, INVALID};
 
 /// Lane width of packets, stream lists and triangle blocks.
@@ -113,6 +114,23 @@ impl<const N: usize> TriBlock<N> {
         prim: [INVALID; N],
     };
 
+    /// The triangles `triangles[p]` for the first N indices of `ids` (every one a triangle
+    /// index); lanes past `ids.len()` stay empty.
+    #[inline(always)]
+    pub fn from_triangles(triangles: &[Triangle], ids: &[u32]) -> Self {
+        let mut b = Self::EMPTY;
+        for (lane, &p) in ids.iter().take(N).enumerate() {
+            let tri = &triangles[p as usize];
+            for a in 0..3 {
+                b.v0[a][lane] = tri.v0[a];
+                b.e1[a][lane] = tri.e1[a];
+                b.e2[a][lane] = tri.e2[a];
+            }
+            b.prim[lane] = p;
+        }
+        b
+    }
+
     /// Closest-hit test of one ray against the block, offered to `hit` lane by lane. Every lane
     /// does the scalar [`Triangle::intersect`]'s operations in the same order (no fused
     /// multiply-add), so `t`, `u`, `v` are bit-identical to the single-ray path.
@@ -120,18 +138,19 @@ impl<const N: usize> TriBlock<N> {
     pub fn intersect(&self, ray: &Ray, hit: &mut Hit) {
         let tmax = hit.bound(ray);
         let (t, u, v) = self.lanes(ray, tmax);
-        for l in 0..N {
-            if t[l] < f32::INFINITY {
-                hit.offer(t[l], u[l], v[l], self.prim[l]);
-            }
-        }
+        // The lanes hit, as one mask first: a test per lane inside the loop lets LLVM move the
+        // whole computation into per-lane branches.
+        let hits = lanes_where::<N>(|l| t[l] < f32::INFINITY);
+        for_lanes(hits, |l| {
+            hit.offer(t[l], u[l], v[l], self.prim[l]);
+        });
     }
 
     /// Any-hit test: whether some lane is hit in `[tmin, tmax)`.
     #[inline(always)]
     pub fn occludes(&self, ray: &Ray) -> bool {
         let (t, _, _) = self.lanes(ray, ray.tmax);
-        t.iter().any(|&t| t < f32::INFINITY)
+        lanes_where::<N>(|l| t[l] < f32::INFINITY) != 0
     }
 
     /// Möller–Trumbore on every lane; `t = inf` marks a miss.
@@ -426,6 +445,106 @@ mod tests {
             _ => Width::W16,
         };
         dispatch(w, Job);
+    }
+
+    /// SplitMix64 on a coarse grid: coordinates in steps of 1/4, so that many rays pass exactly
+    /// through edges and corners and many triangles are degenerate, where an operation done in
+    /// another order or fused would change the bits.
+    struct Grid(u64);
+
+    impl Grid {
+        fn coord(&mut self) -> f32 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            ((z ^ (z >> 31)) % 9) as f32 / 4.0 - 1.0
+        }
+
+        fn point(&mut self) -> glam::Vec3 {
+            glam::Vec3::new(self.coord(), self.coord(), self.coord())
+        }
+
+        fn ray(&mut self) -> Ray {
+            let org = self.point() * 3.0;
+            let dir = self.point() - org / 3.0;
+            let tmax = if self.coord() < 0.0 {
+                0.75
+            } else {
+                f32::INFINITY
+            };
+            Ray::new(org, dir, 0.0, tmax)
+        }
+    }
+
+    /// The scalar test's closest hit among `tris`, offered in index order.
+    fn scalar(tris: &[Triangle], ray: &Ray) -> Hit {
+        let mut hit = Hit::MISS;
+        for (p, tri) in tris.iter().enumerate() {
+            let how = crate::geometry::TriangleTest::MollerTrumbore;
+            if let Some((t, u, v)) = tri.intersect(ray, &how, hit.bound(ray)) {
+                hit.offer(t, u, v, p as u32);
+            }
+        }
+        hit
+    }
+
+    fn same_bits(a: (f32, f32, f32), b: (f32, f32, f32)) -> bool {
+        a.0.to_bits() == b.0.to_bits()
+            && a.1.to_bits() == b.1.to_bits()
+            && a.2.to_bits() == b.2.to_bits()
+    }
+
+    /// Both lane orders (1 ray × N triangles, N rays × 1 triangle) against the scalar
+    /// Möller–Trumbore, bit for bit, at every width this CPU runs.
+    #[test]
+    fn lane_tests_match_the_scalar_test_bit_for_bit() {
+        struct Job;
+        impl Kernel for Job {
+            type Out = usize;
+            fn run<const N: usize>(self) -> usize {
+                let mut g = Grid(N as u64);
+                let mut hits = 0;
+                for _ in 0..4000 {
+                    let tris: Vec<Triangle> = (0..N)
+                        .map(|_| Triangle::from_vertices(g.point(), g.point(), g.point()))
+                        .collect();
+                    let ray = g.ray();
+                    let ids: Vec<u32> = (0..N as u32).collect();
+                    let block = TriBlock::<N>::from_triangles(&tris, &ids);
+                    let mut simd = Hit::MISS;
+                    block.intersect(&ray, &mut simd);
+                    let want = scalar(&tris, &ray);
+                    assert!(
+                        simd.prim == want.prim
+                            && same_bits((simd.t, simd.u, simd.v), (want.t, want.u, want.v)),
+                        "{N} lanes, {ray:?}: block {simd:?}, scalar {want:?}"
+                    );
+                    assert_eq!(block.occludes(&ray), want.is_hit());
+                    hits += want.is_hit() as usize;
+
+                    let rays: Vec<Ray> = (0..N).map(|_| g.ray()).collect();
+                    let lanes = RayLanes::<N>::gather(&rays, &std::array::from_fn(|l| l as u32));
+                    let (t, u, v) = lanes.triangle(&tris[0], &lanes.tmax);
+                    for (l, ray) in rays.iter().enumerate() {
+                        let how = crate::geometry::TriangleTest::MollerTrumbore;
+                        match tris[0].intersect(ray, &how, ray.tmax) {
+                            Some(want) => assert!(
+                                same_bits((t[l], u[l], v[l]), want),
+                                "{N} lanes, {ray:?}: lane {:?}, scalar {want:?}",
+                                (t[l], u[l], v[l])
+                            ),
+                            None => assert_eq!(t[l], f32::INFINITY, "{N} lanes, {ray:?}"),
+                        }
+                    }
+                }
+                hits
+            }
+        }
+        for w in Width::ALL {
+            // Enough rays hit for the comparison to mean something.
+            assert!(dispatch(w, Job) > 100, "{w:?}");
+        }
     }
 
     #[test]
