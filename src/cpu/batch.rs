@@ -10,7 +10,7 @@
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
 use super::simd::{self, prefetch, Kernel, LeafPrims, RayLanes, Width};
-use super::traverse::{clip, TRay};
+use super::traverse::{any_in_subtree, clip, closest_in_subtree, Entry, TRay};
 use crate::geometry::{Hit, PrimitiveSet, Ray, RayTest, TraversalStats};
 use crate::kdtree::KdTree;
 
@@ -42,6 +42,17 @@ pub(crate) trait Answer {
         live: u32,
         t_exit: &[f32; N],
     ) -> u32;
+    /// Ray `i` through the subtree `start` alone, with the standard single-ray traversal.
+    /// True when the ray is finished.
+    fn single(
+        &mut self,
+        tree: &KdTree,
+        prims: &PrimitiveSet,
+        i: usize,
+        ray: &Ray,
+        start: Entry,
+        stats: &mut TraversalStats,
+    ) -> bool;
     /// Starts loading what [`Answer::leaf`] will touch for ray `i`.
     fn prefetch(&self, i: usize);
 }
@@ -128,6 +139,19 @@ impl Answer for Closest<'_> {
     }
 
     #[inline(always)]
+    fn single(
+        &mut self,
+        tree: &KdTree,
+        prims: &PrimitiveSet,
+        i: usize,
+        ray: &Ray,
+        start: Entry,
+        stats: &mut TraversalStats,
+    ) -> bool {
+        closest_in_subtree(tree, prims, ray, start, &mut self.0[i], stats)
+    }
+
+    #[inline(always)]
     fn prefetch(&self, i: usize) {
         if let Some(h) = self.0.get(i) {
             prefetch(h);
@@ -199,6 +223,20 @@ impl Answer for AnyHit<'_> {
         let found = found & live;
         for_lanes(live, |l| self.0[ids[l] as usize] = found >> l & 1 == 1);
         found
+    }
+
+    #[inline(always)]
+    fn single(
+        &mut self,
+        tree: &KdTree,
+        prims: &PrimitiveSet,
+        i: usize,
+        ray: &Ray,
+        start: Entry,
+        stats: &mut TraversalStats,
+    ) -> bool {
+        self.0[i] = any_in_subtree(tree, prims, ray, start, stats);
+        self.0[i]
     }
 
     #[inline(always)]
@@ -301,6 +339,22 @@ impl<'a, A: Answer> Batch<'a, A> {
             .leaf_rays(self.prims, leaf, self.rays, ids, live, t_exit);
         for_lanes(live, |l| self.done[ids[l] as usize] = done >> l & 1 == 1);
         self.finished += done.count_ones() as usize;
+    }
+
+    /// Traces ray `i` through the subtree `start` alone and marks it done when finished.
+    #[inline(always)]
+    pub fn trace_single(&mut self, i: u32, start: Entry) {
+        let i = i as usize;
+        let done = self.answer.single(
+            self.tree,
+            self.prims,
+            i,
+            &self.rays[i],
+            start,
+            &mut self.stats,
+        );
+        self.done[i] = done;
+        self.finished += done as usize;
     }
 
     /// Tests ray `i` against a prepared leaf and marks it done when finished.

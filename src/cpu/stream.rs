@@ -9,8 +9,10 @@
 //! end), structure of arrays over the whole list rather than the paper's array of 4-ray packets,
 //! so that a compacted group of live lanes is one vector store per column wherever the list ends
 //! ([`simd::compress`]). Rays that finished in a nearer subtree leave a list when it is popped;
-//! rays past their `tmax` never get a segment there. A list that fits one packet (≤ N rays) is
-//! finished by the packet traversal (the paper's future work). The parametric traversal uses
+//! rays past their `tmax` never get a segment there. A list of one or two rays is finished one
+//! ray at a time by the standard traversal, one that fits a packet (≤ N rays) by the packet
+//! traversal (the paper's future work: stop paying for lists once rays no longer share nodes).
+//! The parametric traversal uses
 //! the general split distance `(split - org) * inv_dir` rather than the paper's halving: it
 //! serves SAH trees too and is what makes the hits bit-identical to the single-ray traversals.
 
@@ -19,6 +21,7 @@ use super::batch::{
 };
 use super::packet::{self, Lanes};
 use super::simd::{self, Width};
+use super::traverse::Entry;
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
 
@@ -96,6 +99,13 @@ pub struct StreamMemory {
     pub ray_array_bytes: usize,
 }
 
+/// Longest list finished one ray at a time by the standard traversal (the paper's future work:
+/// single rays once few rays share a node); longer lists of at most N rays are finished as one
+/// packet. A packet of one or two live lanes pays for N. Tuned on the bunny's and dragon's
+/// sets (`rt2 bench streams`, 1 thread, 5 interleaved runs each): thresholds 0, 2, 3 and 4 were
+/// within the machine's noise of each other on primary, incoherent and diffuse rays.
+const SINGLE_MAX: usize = 2;
+
 /// Lane mask of the first `count` lanes of N (N ≤ 16).
 #[inline(always)]
 fn first<const N: usize>(count: usize) -> u32 {
@@ -139,6 +149,20 @@ fn traverse<const N: usize, A: Answer>(
             continue;
         }
         let n = b.tree.nodes[f.node as usize];
+        if count <= SINGLE_MAX {
+            for k in f.start..f.start + count {
+                let (t0, t1) = (f32::from_bits(lists.t0[k]), f32::from_bits(lists.t1[k]));
+                b.trace_single(
+                    lists.id[k],
+                    Entry {
+                        node: f.node,
+                        t0,
+                        t1,
+                    },
+                );
+            }
+            continue;
+        }
         if count <= N {
             let (id, t0, t1) = lists.load::<N>(f.start);
             let p = Lanes {

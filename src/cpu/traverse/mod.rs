@@ -15,7 +15,7 @@ mod ropes;
 mod standard;
 
 pub use common::MAX_SHORT_STACK;
-pub(crate) use common::{clip, TRay};
+pub(crate) use common::{clip, Entry, TRay};
 
 use crate::geometry::{Aabb, Hit, PrimIndex, PrimitiveSet, Ray, RayTest, TraversalStats, INVALID};
 use crate::kdtree::KdTree;
@@ -168,6 +168,45 @@ pub fn occluded(
     query.found
 }
 
+/// The standard traversal of one subtree, `start`, for ray `ray` of a batch whose list of rays
+/// became too short to share nodes (the n-ray traversal's finish): the closest hit goes into
+/// `hit` (the planes were tested already). Returns whether the ray is finished there.
+pub(crate) fn closest_in_subtree(
+    tree: &KdTree,
+    prims: &PrimitiveSet,
+    ray: &Ray,
+    start: Entry,
+    hit: &mut Hit,
+    stats: &mut TraversalStats,
+) -> bool {
+    let mut query = Closest {
+        prims,
+        ray,
+        test: RayTest::PLAIN,
+        hit: *hit,
+    };
+    let done = standard::traverse(tree, &TRay::new(ray), start, &mut query, stats);
+    *hit = query.hit;
+    done
+}
+
+/// [`closest_in_subtree`] for any-hit queries: whether something is hit in the subtree.
+pub(crate) fn any_in_subtree(
+    tree: &KdTree,
+    prims: &PrimitiveSet,
+    ray: &Ray,
+    start: Entry,
+    stats: &mut TraversalStats,
+) -> bool {
+    let mut query = AnyHit {
+        prims,
+        ray,
+        test: RayTest::PLAIN,
+        found: false,
+    };
+    standard::traverse(tree, &TRay::new(ray), start, &mut query, stats)
+}
+
 fn traverse(
     tree: &KdTree,
     ray: &Ray,
@@ -208,6 +247,9 @@ fn traverse(
         }
         (Traversal::Ropes, Some(ropes)) => ropes::ropes(tree, ropes, &ray, scene, query, stats),
         // Standard, and rope traversals on a tree without ropes.
-        _ => standard::traverse(tree, &ray, scene, query, stats),
+        _ => {
+            let (t0, t1) = scene;
+            standard::traverse(tree, &ray, Entry { node: 0, t0, t1 }, query, stats);
+        }
     }
 }

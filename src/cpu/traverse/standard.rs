@@ -6,19 +6,17 @@ use super::common::{descend, visit_leaf, Crossing, Entry, LeafQuery, Stack, TRay
 use crate::geometry::TraversalStats;
 use crate::kdtree::KdTree;
 
-pub(super) fn traverse(
+/// Traverses the subtree `start` (a node and the ray's segment in it). Returns true when the
+/// query stopped (the ray is finished), false when the subtree ran out first.
+pub(crate) fn traverse(
     tree: &KdTree,
     ray: &TRay,
-    (scene_min, scene_max): (f32, f32),
+    start: Entry,
     query: &mut impl LeafQuery,
     stats: &mut TraversalStats,
-) {
+) -> bool {
     let mut stack = Stack::new();
-    stack.push(Entry {
-        node: 0,
-        t0: scene_min,
-        t1: scene_max,
-    });
+    stack.push(start);
     while let Some(Entry { node, t0, t1 }) = stack.pop() {
         let (_, leaf, t_exit) = descend(tree, ray, node, t0, t1, stats, |c| {
             if let Crossing::Both {
@@ -33,7 +31,8 @@ pub(super) fn traverse(
             }
         });
         if visit_leaf(tree, leaf, t_exit, query, stats) {
-            return;
+            return true;
         }
     }
+    false
 }
