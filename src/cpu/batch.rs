@@ -10,7 +10,9 @@
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
 use super::simd::{self, prefetch, Kernel, LeafPrims, RayLanes, Width};
-use super::traverse::{any_in_subtree, clip, closest_in_subtree, Entry, TRay};
+use super::traverse::{
+    any_among, any_in_subtree, clip, closest_among, closest_in_subtree, Entry, TRay,
+};
 use crate::geometry::{Hit, PrimitiveSet, Ray, RayTest, TraversalStats};
 use crate::kdtree::KdTree;
 
@@ -86,9 +88,9 @@ impl Answer for Closest<'_> {
         for b in &leaf.blocks {
             b.intersect(ray, hit);
         }
-        for &p in &leaf.others {
-            prims.intersect(p, ray, &RayTest::PLAIN, hit);
-        }
+        // Counted above.
+        let mut counted = TraversalStats::default();
+        closest_among(prims, ray, &RayTest::PLAIN, &leaf.others, hit, &mut counted);
         // Strictly before the exit, as `traverse::common::Closest`.
         hit.t < t_exit
     }
@@ -186,11 +188,10 @@ impl Answer for AnyHit<'_> {
         stats: &mut TraversalStats,
     ) -> bool {
         stats.prim_tests += leaf.count as u64;
+        // Counted above.
+        let mut counted = TraversalStats::default();
         let found = leaf.blocks.iter().any(|b| b.occludes(ray))
-            || leaf.others.iter().any(|&p| {
-                let mut hit = Hit::MISS;
-                prims.intersect(p, ray, &RayTest::PLAIN, &mut hit)
-            });
+            || any_among(prims, ray, &RayTest::PLAIN, &leaf.others, &mut counted);
         self.0[i] = found;
         found
     }

@@ -254,14 +254,17 @@ impl<const N: usize> RayLanes<N> {
     }
 }
 
-/// Fewest rays at a leaf for which its triangles are gathered into blocks. Gathering costs about
-/// as much as testing each triangle once, and SAH leaves hold ~3 triangles, so for one or two
-/// rays the scalar test is cheaper (on the bunny's sets, stream ×8 went from 1.13× to 1.34× the
-/// single-ray speed on primary rays with this rule; incoherent rays were within noise).
+/// Fewest rays at a leaf for which its triangles are gathered into N-lane blocks once for all of
+/// them. Gathering costs about as much as testing each triangle once, and SAH leaves hold ~3
+/// triangles, so one or two rays take the single-ray leaf test instead (4 triangles per
+/// block, gathered per ray; on the bunny's sets, stream ×8 went from 1.13× to 1.34× the
+/// single-ray speed on primary rays with this rule, then with a scalar test for the few rays;
+/// incoherent rays were within noise).
 pub const GATHER_MIN_RAYS: usize = 3;
 
 /// A leaf's primitives prepared once per leaf visit for all the rays that reach it: triangles
-/// gathered into [`TriBlock`]s, other kinds kept as indices for the scalar tests. Reused from
+/// gathered into [`TriBlock`]s, the rest kept as indices for the single-ray leaf test
+/// (`traverse::closest_among`). Reused from
 /// leaf to leaf, so a traversal allocates nothing per node.
 #[derive(Default)]
 pub struct LeafPrims<const N: usize> {
@@ -273,7 +276,7 @@ pub struct LeafPrims<const N: usize> {
 
 impl<const N: usize> LeafPrims<N> {
     /// Prepares the leaf `prims` for `rays` rays. Gathering costs about one triangle test per
-    /// triangle, so for fewer than [`GATHER_MIN_RAYS`] rays every primitive stays scalar.
+    /// triangle, so for fewer than [`GATHER_MIN_RAYS`] rays every primitive stays an index.
     #[inline(always)]
     pub fn gather(&mut self, triangles: &[Triangle], prims: &[u32], rays: usize) {
         self.blocks.clear();
@@ -447,18 +450,19 @@ mod tests {
         dispatch(w, Job);
     }
 
-    /// SplitMix64 on a coarse grid: coordinates in steps of 1/4, so that many rays pass exactly
-    /// through edges and corners and many triangles are degenerate, where an operation done in
-    /// another order or fused would change the bits.
-    struct Grid(u64);
+    /// Random coordinates, half of them on a grid of step 1/4, so that many rays pass exactly
+    /// through edges and corners and many triangles are degenerate, and the others round, so
+    /// that an operation done in another order or fused changes the bits.
+    struct Grid(crate::scene::builtin::Rng);
 
     impl Grid {
         fn coord(&mut self) -> f32 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            ((z ^ (z >> 31)) % 9) as f32 / 4.0 - 1.0
+            let x = 2.0 * self.0.next() - 1.0;
+            if self.0.next() < 0.5 {
+                (x * 4.0).round() / 4.0
+            } else {
+                x
+            }
         }
 
         fn point(&mut self) -> glam::Vec3 {
@@ -503,7 +507,7 @@ mod tests {
         impl Kernel for Job {
             type Out = usize;
             fn run<const N: usize>(self) -> usize {
-                let mut g = Grid(N as u64);
+                let mut g = Grid(crate::scene::builtin::Rng(N as u64));
                 let mut hits = 0;
                 for _ in 0..4000 {
                     let tris: Vec<Triangle> = (0..N)

@@ -28,11 +28,13 @@ pub fn by_name(name: &str) -> Result<Builtin> {
     }
 }
 
-/// SplitMix64: a tiny deterministic generator, so built-in scenes are the same everywhere.
-struct Rng(u64);
+/// SplitMix64: a tiny deterministic generator, so built-in scenes are the same everywhere (the
+/// library's unit tests draw from it too).
+pub(crate) struct Rng(pub(crate) u64);
 
 impl Rng {
-    fn next(&mut self) -> f32 {
+    /// Uniform in `[0, 1)`, 24 bits.
+    pub(crate) fn next(&mut self) -> f32 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);

@@ -173,21 +173,57 @@ pub(crate) struct Closest<'a> {
 impl LeafQuery for Closest<'_> {
     #[inline]
     fn visit(&mut self, prims: &[u32], t_exit: f32, stats: &mut TraversalStats) -> bool {
-        let (set, ray, test) = (self.prims, self.ray, &self.test);
-        let hit = &mut self.hit;
-        // Every primitive is tested: a closest-hit query never stops inside a leaf.
-        for_each_test(set, test, prims, stats, |g| match g {
-            Group::Block(b) => {
-                b.intersect(ray, hit);
-                false
-            }
-            Group::One(p) => {
-                set.intersect(p, ray, test, hit);
-                false
-            }
-        });
+        closest_among(
+            self.prims,
+            self.ray,
+            &self.test,
+            prims,
+            &mut self.hit,
+            stats,
+        );
         self.hit.t < t_exit
     }
+}
+
+/// Offers every primitive of `prims` (a leaf's list) to `hit`: the leaf test of one ray.
+#[inline(always)]
+pub(crate) fn closest_among(
+    set: &PrimitiveSet,
+    ray: &Ray,
+    test: &RayTest,
+    prims: &[u32],
+    hit: &mut Hit,
+    stats: &mut TraversalStats,
+) {
+    // Every primitive is tested: a closest-hit query never stops inside a leaf.
+    for_each_test(set, test, prims, stats, |g| match g {
+        Group::Block(b) => {
+            b.intersect(ray, hit);
+            false
+        }
+        Group::One(p) => {
+            set.intersect(p, ray, test, hit);
+            false
+        }
+    });
+}
+
+/// Whether some primitive of `prims` is hit in the ray's window; stops at the first.
+#[inline(always)]
+pub(crate) fn any_among(
+    set: &PrimitiveSet,
+    ray: &Ray,
+    test: &RayTest,
+    prims: &[u32],
+    stats: &mut TraversalStats,
+) -> bool {
+    for_each_test(set, test, prims, stats, |g| match g {
+        Group::Block(b) => b.occludes(ray),
+        Group::One(p) => {
+            let mut hit = Hit::MISS;
+            set.intersect(p, ray, test, &mut hit)
+        }
+    })
 }
 
 /// Triangles per SIMD block of a leaf test: 4 lanes are SSE, which every x86-64 has, and SAH
@@ -205,7 +241,7 @@ enum Group<'a> {
 /// (Möller–Trumbore, nothing excluded), which the blocks compute bit-identically to the scalar
 /// test; other primitives and tests one at a time. Stops when `f` returns true and says so.
 /// Counts the primitives tested.
-#[inline]
+#[inline(always)]
 fn for_each_test(
     set: &PrimitiveSet,
     test: &RayTest,
@@ -244,14 +280,7 @@ pub(crate) struct AnyHit<'a> {
 impl LeafQuery for AnyHit<'_> {
     #[inline]
     fn visit(&mut self, prims: &[u32], _t_exit: f32, stats: &mut TraversalStats) -> bool {
-        let (set, ray, test) = (self.prims, self.ray, &self.test);
-        self.found = for_each_test(set, test, prims, stats, |g| match g {
-            Group::Block(b) => b.occludes(ray),
-            Group::One(p) => {
-                let mut hit = Hit::MISS;
-                set.intersect(p, ray, test, &mut hit)
-            }
-        });
+        self.found = any_among(self.prims, self.ray, &self.test, prims, stats);
         self.found
     }
 }
