@@ -8,7 +8,8 @@
 //! node allocates. Each list is a run of slots in columns (ray index, segment start, segment
 //! end), structure of arrays over the whole list rather than the paper's array of 4-ray packets,
 //! so that a compacted group of live lanes is one vector store per column wherever the list ends
-//! ([`simd::compress`]). Rays that finished in a nearer subtree leave a list when it is popped;
+//! ([`simd::compress`]); a list whose rays all enter one child with their segments unchanged is
+//! handed to that child in place, uncopied. Rays that finished in a nearer subtree leave a list when it is popped;
 //! rays past their `tmax` never get a segment there. A list of one or two rays is finished one
 //! ray at a time by the standard traversal, one that fits a packet (≤ N rays) by the packet
 //! traversal (the paper's future work: stop paying for lists once rays no longer share nodes).
@@ -67,6 +68,16 @@ impl Lists {
             col(&self.t0).map(f32::from_bits),
             col(&self.t1).map(f32::from_bits),
         )
+    }
+
+    /// Appends the `count` slots from `from` to the list whose end is `*at` (below `from` or at
+    /// least `count` slots above it), and moves the end past them.
+    #[inline(always)]
+    fn copy(&mut self, from: usize, count: usize, at: &mut usize) {
+        for c in [&mut self.id, &mut self.t0, &mut self.t1] {
+            c.copy_within(from..from + count, *at);
+        }
+        *at += count;
     }
 
     /// Appends the lanes of `keep` to the list whose end is `*at`, and moves the end past them.
@@ -203,6 +214,11 @@ fn traverse<const N: usize, A: Answer>(
         };
         let split = &b.split[axis][..=last];
         let (mut nc, mut fc) = (near_start, far_start);
+        // While every ray so far enters one and the same child with its segment unchanged, the
+        // child's list would be a copy of the parent's: nothing is written, and if the whole
+        // list does so the child takes over the parent's slots. Coherent rays skip most copies
+        // this way below the top of the tree.
+        let mut whole = Some(Side::Unknown);
         for k in (0..count).step_by(N) {
             if k + N < count {
                 for &i in &lists.id[f.start + k + N..(f.start + k + 2 * N).min(f.start + count)] {
@@ -223,11 +239,37 @@ fn traverse<const N: usize, A: Answer>(
                 ef |= (e_far as u32) << l;
             }
             let live = first::<N>(count - k);
-            lists.push(&mut fc, ef & live, &id, &far_t0, &t1);
-            lists.push(&mut nc, en & live, &id, &t0, &near_t1);
+            let (en, ef) = (en & live, ef & live);
+            if let Some(so_far) = whole {
+                // A lane entering one child only keeps its segment: near only means
+                // `ts >= t1` (so `near_t1 = t1`), far only `ts <= t0` (so `far_t0 = t0`).
+                let side = match (en == live, ef == live) {
+                    (true, false) if ef == 0 => Side::Near,
+                    (false, true) if en == 0 => Side::Far,
+                    _ => Side::Both,
+                };
+                if side != Side::Both && (so_far == Side::Unknown || so_far == side) {
+                    whole = Some(side);
+                    continue;
+                }
+                // The rays before this chunk all went to `so_far`: written there now.
+                match so_far {
+                    Side::Near => lists.copy(f.start, k, &mut nc),
+                    Side::Far => lists.copy(f.start, k, &mut fc),
+                    Side::Unknown | Side::Both => {}
+                }
+                whole = None;
+            }
+            lists.push(&mut fc, ef, &id, &far_t0, &t1);
+            lists.push(&mut nc, en, &id, &t0, &near_t1);
         }
+        let (far_list, near_list) = match whole {
+            Some(Side::Near) => ((far_start, far_start), (f.start, f.start + count)),
+            Some(Side::Far) => ((f.start, f.start + count), (near_start, near_start)),
+            _ => ((far_start, fc), (near_start, nc)),
+        };
         // Far first on the frame stack, so that near is walked first (front to back).
-        for (node, start, end) in [(far, far_start, fc), (near, near_start, nc)] {
+        for (node, (start, end)) in [(far, far_list), (near, near_list)] {
             if end > start {
                 frames.push(Frame {
                     node,
@@ -238,6 +280,16 @@ fn traverse<const N: usize, A: Answer>(
             }
         }
     }
+}
+
+/// Which children the rays of a list seen so far enter, when it is one child for all of them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Side {
+    /// No ray seen yet.
+    Unknown,
+    Near,
+    Far,
+    Both,
 }
 
 /// The stream mode of a batch (one thread): every octant group traversed once with all its rays.
