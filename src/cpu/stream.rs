@@ -4,18 +4,18 @@
 //! (SIMD over N lanes), a leaf tests its triangles against every ray of its list (N rays × 1
 //! triangle: SAH leaves hold ~2 triangles per visit, too few to fill a block of N triangles).
 //!
-//! Memory: the lists live on one ray stack, reused for the whole batch and never shrunk, so no
-//! node allocates. Each list is a run of slots in columns (ray index, segment start, segment
-//! end), structure of arrays over the whole list rather than the paper's array of 4-ray packets,
-//! so that a compacted group of live lanes is one vector store per column wherever the list ends
+//! Memory: the lists live on one ray stack, reused for the whole batch and never shrunk, so no node
+//! allocates. Each list is a run of slots in columns (ray index, segment start, segment end),
+//! structure of arrays over the whole list rather than the paper's array of 4-ray packets, so that
+//! a compacted group of live lanes is one vector store per column wherever the list ends
 //! ([`simd::compress`]); a list whose rays all enter one child with their segments unchanged is
-//! handed to that child in place, uncopied. Rays that finished in a nearer subtree leave a list when it is popped;
-//! rays past their `tmax` never get a segment there. A list of one or two rays is finished one
-//! ray at a time by the standard traversal, one that fits a packet (≤ N rays) by the packet
-//! traversal (the paper's future work: stop paying for lists once rays no longer share nodes).
-//! The parametric traversal uses
-//! the general split distance `(split - org) * inv_dir` rather than the paper's halving: it
-//! serves SAH trees too and is what makes the hits bit-identical to the single-ray traversals.
+//! handed to that child in place, uncopied. Rays that finished in a nearer subtree leave a list
+//! when it is popped; rays past their `tmax` never get a segment there. A list of one or two rays
+//! is finished one ray at a time by the standard traversal, one that fits a packet (≤ N rays) by
+//! the packet traversal (the paper's future work: stop paying for lists once rays no longer share
+//! nodes). The parametric traversal uses the general split distance `(split - org) * inv_dir`
+//! rather than the paper's halving: it serves SAH trees too and is what makes the hits
+//! bit-identical to the single-ray traversals.
 
 use super::batch::{
     lanes_where, positive, run, split_lane, Answer, AnyHit, Batch, Closest, Mode, Root,
