@@ -171,7 +171,7 @@ pub(crate) struct Closest<'a> {
 }
 
 impl LeafQuery for Closest<'_> {
-    #[inline]
+    #[inline(always)]
     fn visit(&mut self, prims: &[u32], t_exit: f32, stats: &mut TraversalStats) -> bool {
         closest_among(
             self.prims,
@@ -195,17 +195,32 @@ pub(crate) fn closest_among(
     hit: &mut Hit,
     stats: &mut TraversalStats,
 ) {
-    // Every primitive is tested: a closest-hit query never stops inside a leaf.
-    for_each_test(set, test, prims, stats, |g| match g {
-        Group::Block(b) => {
-            b.intersect(ray, hit);
+    /// Every primitive is tested: a closest-hit query never stops inside a leaf.
+    struct Offer<'a> {
+        set: &'a PrimitiveSet,
+        ray: &'a Ray,
+        test: &'a RayTest,
+        hit: &'a mut Hit,
+    }
+    impl GroupTest for Offer<'_> {
+        #[inline(always)]
+        fn block(&mut self, b: &TriBlock<BLOCK>) -> bool {
+            b.intersect(self.ray, self.hit);
             false
         }
-        Group::One(p) => {
-            set.intersect(p, ray, test, hit);
+        #[inline(always)]
+        fn one(&mut self, p: u32) -> bool {
+            self.set.intersect(p, self.ray, self.test, self.hit);
             false
         }
-    });
+    }
+    let mut offer = Offer {
+        set,
+        ray,
+        test,
+        hit,
+    };
+    test_groups(set, test, prims, stats, &mut offer);
 }
 
 /// Whether some primitive of `prims` is hit in the ray's window; stops at the first.
@@ -217,50 +232,75 @@ pub(crate) fn any_among(
     prims: &[u32],
     stats: &mut TraversalStats,
 ) -> bool {
-    for_each_test(set, test, prims, stats, |g| match g {
-        Group::Block(b) => b.occludes(ray),
-        Group::One(p) => {
-            let mut hit = Hit::MISS;
-            set.intersect(p, ray, test, &mut hit)
+    struct Any<'a> {
+        set: &'a PrimitiveSet,
+        ray: &'a Ray,
+        test: &'a RayTest,
+    }
+    impl GroupTest for Any<'_> {
+        #[inline(always)]
+        fn block(&mut self, b: &TriBlock<BLOCK>) -> bool {
+            b.occludes(self.ray)
         }
-    })
+        #[inline(always)]
+        fn one(&mut self, p: u32) -> bool {
+            let mut hit = Hit::MISS;
+            self.set.intersect(p, self.ray, self.test, &mut hit)
+        }
+    }
+    test_groups(set, test, prims, stats, &mut Any { set, ray, test })
 }
 
 /// Triangles per SIMD block of a leaf test: 4 lanes are SSE, which every x86-64 has, and SAH
 /// leaves hold about 3 triangles.
 const BLOCK: usize = 4;
 
-/// One test of a leaf visit: up to [`BLOCK`] triangles at once, or one primitive alone.
-enum Group<'a> {
-    Block(&'a TriBlock<BLOCK>),
-    One(u32),
+/// What a leaf test does with its groups of primitives; each returns true to stop. A trait
+/// rather than a closure, so that both are inlined into every traversal.
+trait GroupTest {
+    /// Up to [`BLOCK`] triangles at once.
+    fn block(&mut self, b: &TriBlock<BLOCK>) -> bool;
+    /// One primitive alone.
+    fn one(&mut self, p: u32) -> bool;
 }
 
-/// Runs `f` on the leaf's primitives in order, triangles gathered into SIMD blocks (1 ray ×
+/// Runs `t` on the leaf's primitives in order, triangles gathered into SIMD blocks (1 ray ×
 /// 4 triangles, the vectorised-traversal paper's test) wherever the ray takes the default test
 /// (Möller–Trumbore, nothing excluded), which the blocks compute bit-identically to the scalar
-/// test; other primitives and tests one at a time. Stops when `f` returns true and says so.
-/// Counts the primitives tested.
+/// test; other primitives and tests one at a time. Stops when `t` says so and returns whether
+/// it did. Counts the primitives tested.
 #[inline(always)]
-fn for_each_test(
+fn test_groups(
     set: &PrimitiveSet,
     test: &RayTest,
     prims: &[u32],
     stats: &mut TraversalStats,
-    mut f: impl FnMut(Group) -> bool,
+    t: &mut impl GroupTest,
 ) -> bool {
     let triangles = &set.triangles;
-    let blocks = matches!(test.triangle, TriangleTest::MollerTrumbore) && test.exclude == INVALID;
+    let blocks = matches!(test.triangle, TriangleTest::MollerTrumbore)
+        && test.exclude == INVALID
+        && !triangles.is_empty();
+    if !blocks {
+        // A scene of analytic primitives, or a test the blocks do not compute.
+        for &p in prims {
+            stats.prim_tests += 1;
+            if t.one(p) {
+                return true;
+            }
+        }
+        return false;
+    }
     for group in prims.chunks(BLOCK) {
-        if blocks && group.iter().all(|&p| (p as usize) < triangles.len()) {
+        if group.iter().all(|&p| (p as usize) < triangles.len()) {
             stats.prim_tests += group.len() as u64;
-            if f(Group::Block(&TriBlock::from_triangles(triangles, group))) {
+            if t.block(&TriBlock::from_triangles(triangles, group)) {
                 return true;
             }
         } else {
             for &p in group {
                 stats.prim_tests += 1;
-                if f(Group::One(p)) {
+                if t.one(p) {
                     return true;
                 }
             }
@@ -278,7 +318,7 @@ pub(crate) struct AnyHit<'a> {
 }
 
 impl LeafQuery for AnyHit<'_> {
-    #[inline]
+    #[inline(always)]
     fn visit(&mut self, prims: &[u32], _t_exit: f32, stats: &mut TraversalStats) -> bool {
         self.found = any_among(self.prims, self.ray, &self.test, prims, stats);
         self.found
