@@ -83,14 +83,13 @@ impl Answer for Closest<'_> {
         t_exit: f32,
         stats: &mut TraversalStats,
     ) -> bool {
-        stats.prim_tests += leaf.count as u64;
+        // The blocks' triangles here; the rest are counted by the single-ray leaf test.
+        stats.prim_tests += (leaf.count - leaf.others.len()) as u64;
         let hit = &mut self.0[i];
         for b in &leaf.blocks {
             b.intersect(ray, hit);
         }
-        // Counted above.
-        let mut counted = TraversalStats::default();
-        closest_among(prims, ray, &RayTest::PLAIN, &leaf.others, hit, &mut counted);
+        closest_among(prims, ray, &RayTest::PLAIN, &leaf.others, hit, stats);
         // Strictly before the exit, as `traverse::common::Closest`.
         hit.t < t_exit
     }
@@ -187,11 +186,10 @@ impl Answer for AnyHit<'_> {
         _t_exit: f32,
         stats: &mut TraversalStats,
     ) -> bool {
-        stats.prim_tests += leaf.count as u64;
-        // Counted above.
-        let mut counted = TraversalStats::default();
+        // The blocks' triangles here; the rest are counted by the single-ray leaf test.
+        stats.prim_tests += (leaf.count - leaf.others.len()) as u64;
         let found = leaf.blocks.iter().any(|b| b.occludes(ray))
-            || any_among(prims, ray, &RayTest::PLAIN, &leaf.others, &mut counted);
+            || any_among(prims, ray, &RayTest::PLAIN, &leaf.others, stats);
         self.0[i] = found;
         found
     }

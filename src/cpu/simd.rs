@@ -268,16 +268,15 @@ impl<const N: usize> RayLanes<N> {
 
 /// Fewest rays at a leaf for which its triangles are gathered into N-lane blocks once for all of
 /// them. Gathering costs about as much as testing each triangle once, and SAH leaves hold ~3
-/// triangles, so one or two rays take the single-ray leaf test instead (4 triangles per
-/// block, gathered per ray; on the bunny's sets, stream ×8 went from 1.13× to 1.34× the
-/// single-ray speed on primary rays with this rule, then with a scalar test for the few rays;
-/// incoherent rays were within noise).
+/// triangles, so one or two rays take the single-ray leaf test instead, which gathers 4
+/// triangles per ray (on the bunny's sets this rule took stream ×8 from 1.13× to 1.34× the
+/// single-ray speed on primary rays; incoherent rays were within noise).
 pub const GATHER_MIN_RAYS: usize = 3;
 
 /// A leaf's primitives prepared once per leaf visit for all the rays that reach it: triangles
 /// gathered into [`TriBlock`]s, the rest kept as indices for the single-ray leaf test
-/// (`traverse::closest_among`). Reused from
-/// leaf to leaf, so a traversal allocates nothing per node.
+/// (`traverse::closest_among`). Reused from leaf to leaf, so a traversal allocates nothing per
+/// node.
 #[derive(Default)]
 pub struct LeafPrims<const N: usize> {
     pub blocks: Vec<TriBlock<N>>,

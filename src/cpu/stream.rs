@@ -159,7 +159,6 @@ fn traverse<const N: usize, A: Answer>(
         if count == 0 {
             continue;
         }
-        let n = b.tree.nodes[f.node as usize];
         if count <= SINGLE_MAX {
             for k in f.start..f.start + count {
                 let (t0, t1) = (f32::from_bits(lists.t0[k]), f32::from_bits(lists.t1[k]));
@@ -185,6 +184,7 @@ fn traverse<const N: usize, A: Answer>(
             packet::traverse(b, scratch, f.node, p, positive);
             continue;
         }
+        let n = b.tree.nodes[f.node as usize];
         b.stats.nodes_visited += count as u64;
         if n.is_leaf() {
             let leaf = b.tree.leaf_prims(n);
@@ -243,9 +243,9 @@ fn traverse<const N: usize, A: Answer>(
             if let Some(so_far) = whole {
                 // A lane entering one child only keeps its segment: near only means
                 // `ts >= t1` (so `near_t1 = t1`), far only `ts <= t0` (so `far_t0 = t0`).
-                let side = match (en == live, ef == live) {
-                    (true, false) if ef == 0 => Side::Near,
-                    (false, true) if en == 0 => Side::Far,
+                let side = match (en, ef) {
+                    (near, 0) if near == live => Side::Near,
+                    (0, far) if far == live => Side::Far,
                     _ => Side::Both,
                 };
                 if side != Side::Both && (so_far == Side::Unknown || so_far == side) {

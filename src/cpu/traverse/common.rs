@@ -153,7 +153,7 @@ pub(super) fn descend(
 
 /// What a traversal does with the primitives of a leaf: the closest hit or any hit. Written once,
 /// so every traversal serves both `intersect` and `occluded`.
-pub(crate) trait LeafQuery {
+pub(super) trait LeafQuery {
     /// Tests the leaf's primitives; `t_exit` is where the ray leaves the leaf. True when the
     /// traversal can stop.
     fn visit(&mut self, prims: &[u32], t_exit: f32, stats: &mut TraversalStats) -> bool;
@@ -163,7 +163,7 @@ pub(crate) trait LeafQuery {
 /// beyond the current leaf; the traversal stops only when the hit is *before* the leaf's exit:
 /// every later leaf starts at or after `t_exit`. Strictly before — a primitive in a later leaf may
 /// be hit at exactly `t_exit` with a lower index, and the tie rule wants it.
-pub(crate) struct Closest<'a> {
+pub(super) struct Closest<'a> {
     pub prims: &'a PrimitiveSet,
     pub ray: &'a Ray,
     pub test: RayTest,
@@ -310,7 +310,7 @@ fn test_groups(
 }
 
 /// Any hit in the ray window (shadow rays): stops at the first primitive hit.
-pub(crate) struct AnyHit<'a> {
+pub(super) struct AnyHit<'a> {
     pub prims: &'a PrimitiveSet,
     pub ray: &'a Ray,
     pub test: RayTest,

@@ -8,7 +8,7 @@ use crate::kdtree::KdTree;
 
 /// Traverses the subtree `start` (a node and the ray's segment in it). Returns true when the
 /// query stopped (the ray is finished), false when the subtree ran out first.
-pub(crate) fn traverse(
+pub(super) fn traverse(
     tree: &KdTree,
     ray: &TRay,
     start: Entry,
