@@ -11,20 +11,25 @@ use crate::geometry::{
     Aabb, Hit, PrimitiveSet, Ray, RayTest, TraversalStats, TriangleTest, INVALID,
 };
 use crate::kdtree::{KdNode, KdTree};
-use glam::Vec3;
 
 /// The ray as the traversals read it, with the reciprocal direction (`±inf` for `±0` components).
+///
+/// Origin and reciprocal are arrays, not `Vec3`s: indexing a `Vec3` by a run-time axis is a
+/// `match`, which LLVM compiles to an indirect jump through a table, one per node visited and
+/// mispredicted whenever the split axis changes. An array index is a plain load.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct TRay {
     pub ray: Ray,
-    pub inv_dir: Vec3,
+    org: [f32; 3],
+    pub inv_dir: [f32; 3],
 }
 
 impl TRay {
     pub fn new(ray: &Ray) -> Self {
         TRay {
             ray: *ray,
-            inv_dir: ray.dir.recip(),
+            org: ray.org.to_array(),
+            inv_dir: ray.dir.recip().to_array(),
         }
     }
 
@@ -32,14 +37,15 @@ impl TRay {
     /// the plane (zero direction component, origin on the plane); `±inf` when it runs parallel.
     #[inline]
     pub fn dist(&self, axis: usize, plane: f32) -> f32 {
-        (plane - self.ray.org[axis]) * self.inv_dir[axis]
+        (plane - self.org[axis]) * self.inv_dir[axis]
     }
 
     /// Direction sign on `axis`, with `-0.0` negative: the sign of a zero component still picks
-    /// a side, so a ray lying in a split plane is sent to exactly one child, consistently.
+    /// a side, so a ray lying in a split plane is sent to exactly one child, consistently. The
+    /// reciprocal keeps the direction's sign (`1 / -0 = -inf`).
     #[inline]
     pub fn positive(&self, axis: usize) -> bool {
-        self.ray.dir[axis].is_sign_positive()
+        self.inv_dir[axis].is_sign_positive()
     }
 }
 
