@@ -9,7 +9,7 @@
 //!
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
-use super::simd::{self, prefetch, Kernel, LeafPrims, RayLanes, Width};
+use super::simd::{self, lanes_less, prefetch, Kernel, LeafPrims, RayLanes, Width};
 use super::traverse::{
     any_among, any_in_subtree, clip, closest_among, closest_in_subtree, Entry, TRay,
 };
@@ -121,7 +121,7 @@ impl Answer for Closest<'_> {
                     };
                 }
                 let (t, u, v) = lanes.triangle(tri, &bound);
-                let hits = lanes_where::<N>(|l| t[l] < f32::INFINITY);
+                let hits = lanes_less(&t, &[f32::INFINITY; N]);
                 for_lanes(live & hits, |l| {
                     let hit = &mut self.0[ids[l] as usize];
                     hit.offer(t[l], u[l], v[l], p);
@@ -136,7 +136,7 @@ impl Answer for Closest<'_> {
             }
         }
         // Strictly before the exit, as `traverse::common::Closest`.
-        live & lanes_where::<N>(|l| hit_t[l] < t_exit[l])
+        live & lanes_less(&hit_t, t_exit)
     }
 
     #[inline(always)]
@@ -209,7 +209,7 @@ impl Answer for AnyHit<'_> {
         for &p in leaf {
             if let Some(tri) = prims.triangles.get(p as usize) {
                 let (t, _, _) = lanes.triangle(tri, &lanes.tmax);
-                found |= lanes_where::<N>(|l| t[l] < f32::INFINITY);
+                found |= lanes_less(&t, &[f32::INFINITY; N]);
             } else {
                 for_lanes(live & !found, |l| {
                     let mut hit = Hit::MISS;
