@@ -36,7 +36,8 @@ const FRAMES: usize = 100;
 /// Frames of the 1376×768 orbit (fewer: each is 16× the rays of a 256² frame).
 const WIDE_FRAMES: usize = 10;
 
-/// The three modes in the paper's column order: n-rays, packets (4-rays), 1-ray.
+/// The three modes in the paper's column order: n-rays, packets (4-rays; the default width here,
+/// with 4-lane packets measured beside), 1-ray.
 const MODES: [QueryMode; 3] = [QueryMode::Stream, QueryMode::Packet, QueryMode::Single];
 
 /// Primary rays of an orbit frame: the camera of `../shared/raysets` (60° vertical field of view,
@@ -138,9 +139,10 @@ pub(super) fn streams(a: &Args) -> Result<String> {
     let one = Context::new(BackendRequest::Cpu, 1)?;
     let mut out = format!(
         "### All rays at once: n-ray streams, packets and single rays (CPU, 1 thread)\n\n\
-         Modes: **n-rays** = `QueryMode::Stream`, **packets** = `QueryMode::Packet` ({w} lanes, \
-         the paper's 4-rays column), **1-ray** = `QueryMode::Single` with the standard traversal; \
-         all return bit-identical hits. A batch is sorted by octant and cut into streams of one \
+         Modes: **n-rays** = `QueryMode::Stream`, **packets** = `QueryMode::Packet` at the \
+         default width ({w} lanes), **packets ×4** = 4-lane packets (Wald's, the paper's 4-rays \
+         column), **1-ray** = `QueryMode::Single` with the standard traversal; all return \
+         bit-identical hits. A batch is sorted by octant and cut into streams of one \
          octant, at most {hi} rays (`STREAM_MAX`): longer streams of coherent rays outgrow the \
          caches. Trees: SAH with perfect splits (the library default; the \
          paper used midpoint trees). Paper: Pentium-M, 1 core; its third model is the Buddha, the \
@@ -151,17 +153,17 @@ pub(super) fn streams(a: &Args) -> Result<String> {
     );
     let mut t1 = String::from(
         "#### Table 1 — coherent rays: 100-frame orbit at 256², Mrays/s (paper beside)\n\n\
-         | model | triangles | n-rays | packets | 1-ray | n-rays / packets | n-rays / 1-ray | paper n / 4 / 1 |\n\
-         |---|---|---|---|---|---|---|---|\n",
+         | model | triangles | n-rays | packets | packets ×4 | 1-ray | n-rays / packets | n-rays / packets ×4 | n-rays / 1-ray | paper n / 4 / 1 |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut t2 = String::from(
         "#### Table 2 — the same animation in frames per second\n\n\
-         | model | n-rays fps | packets fps | 1-ray fps | paper fps n / 4 / 1 |\n|---|---|---|---|---|\n",
+         | model | n-rays fps | packets fps | packets ×4 fps | 1-ray fps | paper fps n / 4 / 1 |\n|---|---|---|---|---|---|\n",
     );
     let mut t3 = String::from(
         "#### Table 3 — incoherent rays (two uniform points on the bounding sphere), Mrays/s\n\n\
-         | model | rays | n-rays | packets | 1-ray | n-rays / 1-ray | paper n / 4 / 1 |\n\
-         |---|---|---|---|---|---|---|\n",
+         | model | rays | n-rays | packets | packets ×4 | 1-ray | n-rays / 1-ray | paper n / 4 / 1 |\n\
+         |---|---|---|---|---|---|---|---|\n",
     );
     let mut wide = String::from(
         "#### 1376×768 orbit (10 frames), Mrays/s\n\n\
@@ -192,6 +194,8 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             .iter()
             .map(|&m| seconds(&one, c, &orbit, m, width, a.runs))
             .collect();
+        let secs4 = seconds(&one, c, &orbit, QueryMode::Packet, Width::W4, a.runs);
+        let mr4 = rays_of(&orbit) / secs4 / 1e6;
         let mr: Vec<f64> = secs.iter().map(|s| rays_of(&orbit) / s / 1e6).collect();
         let paper = PAPER_COHERENT.iter().find(|p| p.0 == model).map(|p| p.1);
         let fmt3 = |p: Option<[f64; 3]>, scale: f64| {
@@ -206,11 +210,13 @@ pub(super) fn streams(a: &Args) -> Result<String> {
         };
         writeln!(
             t1,
-            "| {model} | {tris} | {:.2} | {:.2} | {:.2} | {:.2}× | {:.2}× | {} |",
+            "| {model} | {tris} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2}× | {:.2}× | {:.2}× | {} |",
             mr[0],
             mr[1],
+            mr4,
             mr[2],
             mr[0] / mr[1],
+            mr[0] / mr4,
             mr[0] / mr[2],
             fmt3(paper, 1.0)
         )
@@ -218,9 +224,10 @@ pub(super) fn streams(a: &Args) -> Result<String> {
         let frame_rays = 256.0 * 256.0 / 1e6;
         writeln!(
             t2,
-            "| {model} | {:.1} | {:.1} | {:.1} | {} |",
+            "| {model} | {:.1} | {:.1} | {:.1} | {:.1} | {} |",
             FRAMES as f64 / secs[0],
             FRAMES as f64 / secs[1],
+            FRAMES as f64 / secs4,
             FRAMES as f64 / secs[2],
             fmt3(paper, 1.0 / frame_rays)
         )
@@ -230,13 +237,16 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             .iter()
             .map(|&m| rays_of(&inco) / seconds(&one, c, &inco, m, width, a.runs) / 1e6)
             .collect();
+        let mi4 =
+            rays_of(&inco) / seconds(&one, c, &inco, QueryMode::Packet, Width::W4, a.runs) / 1e6;
         let paper = PAPER_INCOHERENT.iter().find(|p| p.0 == model).map(|p| p.1);
         writeln!(
             t3,
-            "| {model} | {} | {:.2} | {:.2} | {:.2} | {:.2}× | {} |",
+            "| {model} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2}× | {} |",
             inco[0].len(),
             mi[0],
             mi[1],
+            mi4,
             mi[2],
             mi[0] / mi[2],
             fmt3(paper, 1.0)
