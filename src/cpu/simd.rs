@@ -3,8 +3,8 @@
 //! rays × 1 triangle for stream leaves) and the stream compaction.
 //!
 //! The code is portable: fixed-size `[f32; N]` lanes written as straight-line loops that LLVM
-//! turns into vector instructions; only the compaction has x86 intrinsics (with a portable
-//! loop). [`dispatch`] picks `N` at run time from the CPU's features and runs the whole kernel
+//! turns into vector instructions; only the compaction and the lane masks ([`lanes_less`]) have
+//! x86 intrinsics, each with a portable loop. [`dispatch`] picks `N` at run time from the CPU's features and runs the whole kernel
 //! (traversal included, inlined) inside a `#[target_feature]` function, so the same source
 //! becomes SSE (4 lanes), AVX2 (8) or AVX-512 (16) code.
 
