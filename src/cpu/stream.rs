@@ -218,7 +218,7 @@ fn traverse<const N: usize, A: Answer>(
         // child's list would be a copy of the parent's: nothing is written, and if the whole
         // list does so the child takes over the parent's slots. Coherent rays skip most copies
         // this way below the top of the tree.
-        let mut whole = Some(Side::Unknown);
+        let mut whole = Side::Unknown;
         for k in (0..count).step_by(N) {
             if k + N < count {
                 for &i in &lists.id[f.start + k + N..(f.start + k + 2 * N).min(f.start + count)] {
@@ -240,7 +240,7 @@ fn traverse<const N: usize, A: Answer>(
             }
             let live = first::<N>(count - k);
             let (en, ef) = (en & live, ef & live);
-            if let Some(so_far) = whole {
+            if whole != Side::Both {
                 // A lane entering one child only keeps its segment: near only means
                 // `ts >= t1` (so `near_t1 = t1`), far only `ts <= t0` (so `far_t0 = t0`).
                 let side = match (en, ef) {
@@ -248,25 +248,25 @@ fn traverse<const N: usize, A: Answer>(
                     (0, far) if far == live => Side::Far,
                     _ => Side::Both,
                 };
-                if side != Side::Both && (so_far == Side::Unknown || so_far == side) {
-                    whole = Some(side);
+                if side != Side::Both && (whole == Side::Unknown || whole == side) {
+                    whole = side;
                     continue;
                 }
-                // The rays before this chunk all went to `so_far`: written there now.
-                match so_far {
+                // The rays before this chunk all went to one child: written there now.
+                match whole {
                     Side::Near => lists.copy(f.start, k, &mut nc),
                     Side::Far => lists.copy(f.start, k, &mut fc),
                     Side::Unknown | Side::Both => {}
                 }
-                whole = None;
+                whole = Side::Both;
             }
             lists.push(&mut fc, ef, &id, &far_t0, &t1);
             lists.push(&mut nc, en, &id, &t0, &near_t1);
         }
         let (far_list, near_list) = match whole {
-            Some(Side::Near) => ((far_start, far_start), (f.start, f.start + count)),
-            Some(Side::Far) => ((f.start, f.start + count), (near_start, near_start)),
-            _ => ((far_start, fc), (near_start, nc)),
+            Side::Near => ((far_start, far_start), (f.start, f.start + count)),
+            Side::Far => ((f.start, f.start + count), (near_start, near_start)),
+            Side::Unknown | Side::Both => ((far_start, fc), (near_start, nc)),
         };
         // Far first on the frame stack, so that near is walked first (front to back).
         for (node, (start, end)) in [(far, far_list), (near, near_list)] {
@@ -282,13 +282,17 @@ fn traverse<const N: usize, A: Answer>(
     }
 }
 
-/// Which children the rays of a list seen so far enter, when it is one child for all of them.
+/// Which children the rays of a list seen so far enter: the chunk's rays at a node, or the
+/// whole list's while it is one child for all of them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Side {
     /// No ray seen yet.
     Unknown,
+    /// All of them enter the near child only, segments unchanged.
     Near,
+    /// All of them enter the far child only, segments unchanged.
     Far,
+    /// Some enter both, or not all the same one: the children's lists are written out.
     Both,
 }
 
