@@ -441,15 +441,47 @@ pub(crate) fn positive(o: usize) -> [bool; 3] {
     [o & 1 == 0, o & 2 == 0, o & 4 == 0]
 }
 
-/// One ray at an inner node, segment `[t0, t1]`, split distance `ts`: the cases of
-/// `traverse::common::step` written as lane masks. Returns whether the ray enters the near child
-/// and the end of its segment there, whether it enters the far child and the start there.
-/// (`ts <= t0` or NaN: far only; `ts >= t1`: near only; else both, cut at `ts`.)
-#[inline(always)]
-pub(crate) fn split_lane(ts: f32, t0: f32, t1: f32) -> (bool, f32, bool, f32) {
-    let near = ts > t0;
-    let far = !near || ts < t1;
-    let near_t1 = if ts < t1 { ts } else { t1 };
-    let far_t0 = if near { ts } else { t0 };
-    (near, near_t1, far, far_t0)
+/// N rays at an inner node whose split distances `ts` from their segments `[t0, t1]` are:
+/// the cases of `traverse::common::step`, lane by lane (`ts <= t0` or NaN: far only; `ts >= t1`:
+/// near only; else both, cut at `ts`).
+pub(crate) struct Split<const N: usize> {
+    /// Lanes entering the near child, and the end of their segment there.
+    pub near: u32,
+    pub near_t1: [f32; N],
+    /// Lanes entering the far child, and the start of their segment there.
+    pub far: u32,
+    pub far_t0: [f32; N],
+}
+
+impl<const N: usize> Split<N> {
+    /// The split of the lanes `live` at plane `split`, for rays with origins `org` and
+    /// reciprocal directions `inv` on the node's axis. Each result is one vector operation
+    /// (masks by [`lanes_less`], segment ends by min/max selects): a lane-by-lane decision made
+    /// LLVM build the masks one lane at a time, 60 instructions per 8-ray packet step.
+    #[inline(always)]
+    pub fn new(
+        split: f32,
+        org: &[f32; N],
+        inv: &[f32; N],
+        t0: &[f32; N],
+        t1: &[f32; N],
+        live: u32,
+    ) -> Self {
+        let mut ts = [0.0f32; N];
+        for l in 0..N {
+            ts[l] = (split - org[l]) * inv[l];
+        }
+        let (mut near_t1, mut far_t0) = ([0.0f32; N], [0.0f32; N]);
+        for l in 0..N {
+            near_t1[l] = if ts[l] < t1[l] { ts[l] } else { t1[l] };
+            far_t0[l] = if ts[l] > t0[l] { ts[l] } else { t0[l] };
+        }
+        let near = lanes_less(t0, &ts);
+        Split {
+            near: near & live,
+            near_t1,
+            far: (!near | lanes_less(&ts, t1)) & live,
+            far_t0,
+        }
+    }
 }

@@ -6,7 +6,7 @@
 //! The same function finishes a stream traversal when few rays reach a node (the paper's future
 //! work: stop paying for lists when the rays no longer share nodes).
 
-use super::batch::{positive, run, split_lane, Answer, Batch, Mode, Root};
+use super::batch::{positive, run, Answer, Batch, Mode, Root, Split};
 use super::simd::{LeafPrims, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
@@ -102,17 +102,19 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
             } else {
                 (above, below)
             };
-            let (mut nm, mut fm) = (0u32, 0u32);
-            let (mut near_t1, mut far_t0) = ([0.0f32; N], [0.0f32; N]);
-            for l in 0..N {
-                let ts = (n.split - org[axis][l]) * inv[axis][l];
-                let (en, t1, ef, t0) = split_lane(ts, cur.lanes.t0[l], cur.lanes.t1[l]);
-                nm |= (en as u32) << l;
-                fm |= (ef as u32) << l;
-                near_t1[l] = t1;
-                far_t0[l] = t0;
-            }
-            let (nm, fm) = (nm & live, fm & live);
+            let Split {
+                near: nm,
+                near_t1,
+                far: fm,
+                far_t0,
+            } = Split::new(
+                n.split,
+                &org[axis],
+                &inv[axis],
+                &cur.lanes.t0,
+                &cur.lanes.t1,
+                live,
+            );
             let far_entry = Entry {
                 node: far,
                 lanes: Lanes {

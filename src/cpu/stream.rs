@@ -17,9 +17,7 @@
 //! rather than the paper's halving: it serves SAH trees too and is what makes the hits
 //! bit-identical to the single-ray traversals.
 
-use super::batch::{
-    lanes_where, positive, run, split_lane, Answer, AnyHit, Batch, Closest, Mode, Root,
-};
+use super::batch::{lanes_where, positive, run, Answer, AnyHit, Batch, Closest, Mode, Root, Split};
 use super::packet::{self, Lanes};
 use super::simd::{self, Width};
 use super::traverse::Entry;
@@ -227,19 +225,18 @@ fn traverse<const N: usize, A: Answer>(
                 }
             }
             let (id, t0, t1) = lists.load::<N>(f.start + k);
-            let (mut near_t1, mut far_t0, mut en, mut ef) = ([0.0; N], [0.0; N], 0u32, 0u32);
+            let (mut org, mut inv) = ([0.0; N], [0.0; N]);
             for l in 0..N {
                 // Lanes past the list's end hold stale ray indices: clamped, never out of bounds.
-                let i = (id[l] as usize).min(last);
-                let [org, inv] = split[i];
-                let ts = (n.split - org) * inv;
-                let (e_near, t1_near, e_far, t0_far) = split_lane(ts, t0[l], t1[l]);
-                (near_t1[l], far_t0[l]) = (t1_near, t0_far);
-                en |= (e_near as u32) << l;
-                ef |= (e_far as u32) << l;
+                [org[l], inv[l]] = split[(id[l] as usize).min(last)];
             }
             let live = first::<N>(count - k);
-            let (en, ef) = (en & live, ef & live);
+            let Split {
+                near: en,
+                near_t1,
+                far: ef,
+                far_t0,
+            } = Split::new(n.split, &org, &inv, &t0, &t1, live);
             if whole != Side::Both {
                 // A lane entering one child only keeps its segment: near only means
                 // `ts >= t1` (so `near_t1 = t1`), far only `ts <= t0` (so `far_t0 = t0`).
