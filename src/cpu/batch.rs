@@ -9,18 +9,19 @@
 //!
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
-use super::simd::{self, lanes_less, prefetch, Kernel, LeafPrims, RayLanes, Width};
-use super::traverse::{
-    any_among, any_in_subtree, clip, closest_among, closest_in_subtree, Entry, TRay,
-};
+use super::simd::{self, lanes_less, lanes_less_eq, prefetch, Kernel, LeafPrims, RayLanes, Width};
+use super::traverse::{any_among, any_in_subtree, closest_among, closest_in_subtree, Entry};
+use crate::geometry::Aabb;
 use crate::geometry::{Hit, PrimitiveSet, Ray, RayTest, TraversalStats};
 use crate::kdtree::KdTree;
 
 /// What a batch query computes per ray, written once for packets and streams.
 pub(crate) trait Answer {
-    /// Resets ray `i`'s answer and tests the planes (outside the tree). False when the ray needs
-    /// no traversal: degenerate, or already answered by a plane (any-hit).
-    fn start(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool;
+    /// Resets every ray's answer: a miss.
+    fn reset(&mut self);
+    /// Tests the planes (outside the tree) against ray `i`, not degenerate. False when that
+    /// answers the ray (any-hit): it needs no traversal.
+    fn planes(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool;
     /// Tests ray `i` against a leaf's prepared primitives; `t_exit` is where the ray leaves the
     /// leaf. True when the ray is finished (the standard traversal's stop rule).
     fn leaf<const N: usize>(
@@ -63,12 +64,11 @@ pub(crate) trait Answer {
 pub(crate) struct Closest<'a>(pub &'a mut [Hit]);
 
 impl Answer for Closest<'_> {
-    #[inline(always)]
-    fn start(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool {
-        self.0[i] = Hit::MISS;
-        if ray.is_degenerate() {
-            return false;
-        }
+    fn reset(&mut self) {
+        self.0.fill(Hit::MISS);
+    }
+
+    fn planes(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool {
         prims.intersect_planes(ray, &RayTest::PLAIN, &mut self.0[i]);
         true
     }
@@ -164,12 +164,11 @@ impl Answer for Closest<'_> {
 pub(crate) struct AnyHit<'a>(pub &'a mut [bool]);
 
 impl Answer for AnyHit<'_> {
-    #[inline(always)]
-    fn start(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool {
-        self.0[i] = false;
-        if ray.is_degenerate() {
-            return false;
-        }
+    fn reset(&mut self) {
+        self.0.fill(false);
+    }
+
+    fn planes(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool {
         let mut planes = Hit::MISS;
         prims.intersect_planes(ray, &RayTest::PLAIN, &mut planes);
         self.0[i] = planes.is_hit();
@@ -272,30 +271,51 @@ impl<'a, A: Answer> Batch<'a, A> {
     /// Prepares the rays and returns them grouped by octant (the signs of the direction, `-0.0`
     /// negative as in `TRay::positive`): within a group every node has the same near child for
     /// every ray, so the group can be traversed front to back at once (paper: ≤ 8 traversals).
-    pub fn new(
+    ///
+    /// Set up N rays at a time, as vectors: the reciprocal directions, the degenerate rays
+    /// (`Ray::is_degenerate`) and the clipping to the root voxel (`traverse::clip`), with the
+    /// same operations per lane, so the segments are bit-identical to the single-ray ones. Ray
+    /// by ray, this setup cost a fifth of an 8-ray packet traversal's instructions.
+    #[inline(always)]
+    pub fn new<const N: usize>(
         tree: &'a KdTree,
         prims: &'a PrimitiveSet,
         rays: &'a [Ray],
         mut answer: A,
     ) -> (Self, [Vec<Root>; 8]) {
         let n = rays.len();
-        let mut split = [vec![[0.0; 2]; n], vec![[0.0; 2]; n], vec![[0.0; 2]; n]];
+        let mut split = [(); 3].map(|_| Vec::with_capacity(n));
         let mut groups: [Vec<Root>; 8] = Default::default();
-        for (i, ray) in rays.iter().enumerate() {
-            let r = TRay::new(ray);
-            for (a, s) in split.iter_mut().enumerate() {
-                s[i] = [ray.org[a], r.inv_dir[a]];
+        answer.reset();
+        for start in (0..n).step_by(N) {
+            let live = first::<N>(n - start);
+            let r = RayLanes::<N>::gather(rays, &std::array::from_fn(|l| (start + l) as u32));
+            let inv = r.dir.map(|d| d.map(|d| 1.0 / d));
+            for a in 0..3 {
+                split[a].extend((0..(n - start).min(N)).map(|l| [r.org[a][l], inv[a][l]]));
             }
-            if !answer.start(prims, i, ray) || tree.nodes.is_empty() {
-                continue;
-            }
-            if let Some((t0, t1)) = clip(&tree.bounds, &r) {
-                groups[octant(ray)].push(Root {
-                    id: i as u32,
-                    t0,
-                    t1,
+            let sound = live & sound(&r);
+            let mut todo = sound;
+            if !prims.planes.is_empty() {
+                // The planes are outside the tree, tested before it as the single-ray query does.
+                for_lanes(sound, |l| {
+                    if !answer.planes(prims, start + l, &rays[start + l]) {
+                        todo &= !(1 << l);
+                    }
                 });
             }
+            if tree.nodes.is_empty() {
+                continue;
+            }
+            let (t0, t1, inside) = clip(&tree.bounds, &r, &inv);
+            for_lanes(todo & inside, |l| {
+                let i = start + l;
+                groups[octant(&rays[i])].push(Root {
+                    id: i as u32,
+                    t0: t0[l],
+                    t1: t1[l],
+                });
+            });
         }
         let batch = Batch {
             tree,
@@ -370,6 +390,60 @@ impl<'a, A: Answer> Batch<'a, A> {
     }
 }
 
+/// The lanes of rays that are not degenerate (`Ray::is_degenerate`, lane by lane): finite
+/// origin and direction, a direction other than zero, a window `tmin <= tmax` without NaN.
+#[inline(always)]
+fn sound<const N: usize>(r: &RayLanes<N>) -> u32 {
+    let inf = [f32::INFINITY; N];
+    let mut ok = lanes_less_eq(&r.tmin, &r.tmax);
+    // Sum of the direction's magnitudes: above zero unless every component is ±0 (finite
+    // components: a sum that overflows is infinite, still above zero).
+    let mut length = [0.0f32; N];
+    for a in 0..3 {
+        ok &= lanes_less(&r.org[a].map(f32::abs), &inf);
+        ok &= lanes_less(&r.dir[a].map(f32::abs), &inf);
+        for (length, d) in length.iter_mut().zip(&r.dir[a]) {
+            *length += d.abs();
+        }
+    }
+    ok & lanes_less(&[0.0; N], &length)
+}
+
+/// The segments `[t0, t1]` of the rays `r` (reciprocal directions `inv`) inside the box, and
+/// the lanes whose segment is not empty: `traverse::clip`'s operations, lane by lane (the
+/// slab's near plane chosen by the sign of the reciprocal, a NaN distance never clips).
+#[inline(always)]
+fn clip<const N: usize>(
+    bounds: &Aabb,
+    r: &RayLanes<N>,
+    inv: &[[f32; N]; 3],
+) -> ([f32; N], [f32; N], u32) {
+    let (mut t0, mut t1) = (r.tmin, r.tmax);
+    for (a, inv) in inv.iter().enumerate() {
+        let (min, max) = (bounds.min[a], bounds.max[a]);
+        for l in 0..N {
+            let (near, far) = if inv[l].is_sign_positive() {
+                (min, max)
+            } else {
+                (max, min)
+            };
+            let near = (near - r.org[a][l]) * inv[l];
+            let far = (far - r.org[a][l]) * inv[l];
+            t0[l] = if near > t0[l] { near } else { t0[l] };
+            t1[l] = if far < t1[l] { far } else { t1[l] };
+        }
+    }
+    // `t0 = inf` is a ray outside a slab it runs parallel to.
+    let inside = lanes_less_eq(&t0, &t1) & lanes_less(&t0, &[f32::INFINITY; N]);
+    (t0, t1, inside)
+}
+
+/// Lane mask of the first `count` lanes of N (N ≤ 16).
+#[inline(always)]
+pub(crate) fn first<const N: usize>(count: usize) -> u32 {
+    (1u32 << count.min(N)) - 1
+}
+
 /// Calls `f` with each lane set in `mask`, lowest first.
 #[inline(always)]
 pub(crate) fn for_lanes(mut mask: u32, mut f: impl FnMut(usize)) {
@@ -420,7 +494,7 @@ pub(crate) fn run<M: Mode, A: Answer>(
         type Out = M::Out;
         #[inline(always)]
         fn run<const N: usize>(self) -> M::Out {
-            let (mut b, groups) = Batch::new(self.tree, self.prims, self.rays, self.answer);
+            let (mut b, groups) = Batch::new::<N>(self.tree, self.prims, self.rays, self.answer);
             M::trace::<N, A>(&mut b, &groups)
         }
     }

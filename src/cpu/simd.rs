@@ -341,22 +341,42 @@ pub fn prefetch<T>(x: &T) {
 /// shifted by one lane, a load the store could not forward to (7% of an 8-ray packet's time).
 #[inline(always)]
 pub fn lanes_less<const N: usize>(a: &[f32; N], b: &[f32; N]) -> u32 {
+    lanes_compare::<N, LESS>(a, b)
+}
+
+/// The mask of the lanes where `a[l] <= b[l]` (false for NaN), as [`lanes_less`].
+#[inline(always)]
+pub fn lanes_less_eq<const N: usize>(a: &[f32; N], b: &[f32; N]) -> u32 {
+    lanes_compare::<N, LESS_EQ>(a, b)
+}
+
+/// The comparisons of [`lanes_compare`], numbered as x86's `_CMP_LT_OQ` and `_CMP_LE_OQ`.
+const LESS: i32 = 17;
+const LESS_EQ: i32 = 18;
+
+/// The mask of the lanes where `a[l] P b[l]`, `P` one of [`LESS`] and [`LESS_EQ`].
+#[inline(always)]
+fn lanes_compare<const N: usize, const P: i32>(a: &[f32; N], b: &[f32; N]) -> u32 {
     #[cfg(target_arch = "x86_64")]
     {
         if N == 4 {
             // SAFETY: SSE is part of x86-64; the slices hold 4 lanes.
-            return unsafe { x86::less4(a, b) };
+            return unsafe { x86::compare4::<N, P>(a, b) };
         }
         if N == 8 && std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the CPU has AVX (checked just above).
-            return unsafe { x86::less8(a, b) };
+            return unsafe { x86::compare8::<N, P>(a, b) };
         }
         if N == 16 && std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the CPU has AVX-512F (checked just above).
-            return unsafe { x86::less16(a, b) };
+            return unsafe { x86::compare16::<N, P>(a, b) };
         }
     }
-    lanes_where::<N>(|l| a[l] < b[l])
+    if P == LESS {
+        lanes_where::<N>(|l| a[l] < b[l])
+    } else {
+        lanes_where::<N>(|l| a[l] <= b[l])
+    }
 }
 
 /// Stream compaction (the paper's "compactación" of the near and far lists): writes the lanes of
@@ -395,6 +415,8 @@ pub fn compress<const N: usize, const K: usize>(
 #[cfg(target_arch = "x86_64")]
 mod x86 {
     use std::arch::x86_64::*;
+
+    const _: () = assert!(super::LESS == _CMP_LT_OQ && super::LESS_EQ == _CMP_LE_OQ);
 
     /// For each 8-bit mask, the indices of its set bits in order, one nibble each (lowest first).
     const PERM8: [u32; 256] = {
@@ -435,30 +457,38 @@ mod x86 {
         }
     }
 
-    /// [`super::lanes_less`] for 4 lanes.
+    /// [`super::lanes_compare`] for 4 lanes (SSE has no compare taking the predicate).
     #[inline]
-    pub(super) unsafe fn less4<const N: usize>(a: &[f32; N], b: &[f32; N]) -> u32 {
+    pub(super) unsafe fn compare4<const N: usize, const P: i32>(a: &[f32; N], b: &[f32; N]) -> u32 {
         assert!(N == 4);
-        let lt = _mm_cmplt_ps(_mm_loadu_ps(a.as_ptr()), _mm_loadu_ps(b.as_ptr()));
-        _mm_movemask_ps(lt) as u32
+        let (a, b) = (_mm_loadu_ps(a.as_ptr()), _mm_loadu_ps(b.as_ptr()));
+        let m = if P == _CMP_LT_OQ {
+            _mm_cmplt_ps(a, b)
+        } else {
+            _mm_cmple_ps(a, b)
+        };
+        _mm_movemask_ps(m) as u32
     }
 
-    /// [`super::lanes_less`] for 8 lanes.
+    /// [`super::lanes_compare`] for 8 lanes.
     #[inline]
     #[target_feature(enable = "avx")]
-    pub(super) unsafe fn less8<const N: usize>(a: &[f32; N], b: &[f32; N]) -> u32 {
+    pub(super) unsafe fn compare8<const N: usize, const P: i32>(a: &[f32; N], b: &[f32; N]) -> u32 {
         assert!(N == 8);
         let (a, b) = (_mm256_loadu_ps(a.as_ptr()), _mm256_loadu_ps(b.as_ptr()));
-        _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(a, b)) as u32
+        _mm256_movemask_ps(_mm256_cmp_ps::<P>(a, b)) as u32
     }
 
-    /// [`super::lanes_less`] for 16 lanes.
+    /// [`super::lanes_compare`] for 16 lanes.
     #[inline]
     #[target_feature(enable = "avx512f")]
-    pub(super) unsafe fn less16<const N: usize>(a: &[f32; N], b: &[f32; N]) -> u32 {
+    pub(super) unsafe fn compare16<const N: usize, const P: i32>(
+        a: &[f32; N],
+        b: &[f32; N],
+    ) -> u32 {
         assert!(N == 16);
         let (a, b) = (_mm512_loadu_ps(a.as_ptr()), _mm512_loadu_ps(b.as_ptr()));
-        u32::from(_mm512_cmp_ps_mask::<_CMP_LT_OQ>(a, b))
+        u32::from(_mm512_cmp_ps_mask::<P>(a, b))
     }
 
     /// [`super::compress`] for 16 lanes.
@@ -623,10 +653,10 @@ mod tests {
         check::<16>();
     }
 
-    /// Every width's own path against the plain comparison, with the values a hit mask meets:
+    /// Every width's own path against the plain comparisons, with the values a hit mask meets:
     /// equal lanes, infinities, NaN (never less) and signed zeros.
     #[test]
-    fn lanes_less_is_the_lane_by_lane_comparison() {
+    fn lane_compares_are_the_lane_by_lane_comparisons() {
         struct Job;
         impl Kernel for Job {
             type Out = usize;
@@ -650,7 +680,9 @@ mod tests {
                     let b: [f32; N] = std::array::from_fn(|_| pick());
                     let want = (0..N).filter(|&l| a[l] < b[l]).fold(0, |m, l| m | 1 << l);
                     assert_eq!(lanes_less(&a, &b), want, "{N} lanes: {a:?} < {b:?}");
-                    set += want.count_ones() as usize;
+                    let want_eq = (0..N).filter(|&l| a[l] <= b[l]).fold(0, |m, l| m | 1 << l);
+                    assert_eq!(lanes_less_eq(&a, &b), want_eq, "{N} lanes: {a:?} <= {b:?}");
+                    set += want.count_ones() as usize + (want_eq & !want).count_ones() as usize;
                 }
                 set
             }

@@ -17,7 +17,9 @@
 //! rather than the paper's halving: it serves SAH trees too and is what makes the hits
 //! bit-identical to the single-ray traversals.
 
-use super::batch::{lanes_where, positive, run, Answer, AnyHit, Batch, Closest, Mode, Root, Split};
+use super::batch::{
+    first, lanes_where, positive, run, Answer, AnyHit, Batch, Closest, Mode, Root, Split,
+};
 use super::packet::{self, Lanes};
 use super::simd::{self, Width};
 use super::traverse::Entry;
@@ -114,12 +116,6 @@ pub struct StreamMemory {
 /// sets (`rt2 bench streams`, 1 thread, 5 interleaved runs each): thresholds 0, 2, 3 and 4 were
 /// within the machine's noise of each other on primary, incoherent and diffuse rays.
 const SINGLE_MAX: usize = 2;
-
-/// Lane mask of the first `count` lanes of N (N ≤ 16).
-#[inline(always)]
-fn first<const N: usize>(count: usize) -> u32 {
-    (1u32 << count.min(N)) - 1
-}
 
 /// Walks the tree once with all the rays of one octant group.
 #[inline(always)]
