@@ -105,33 +105,31 @@ impl Answer for Closest<'_> {
         t_exit: &[f32; N],
     ) -> u32 {
         let lanes = RayLanes::gather(rays, ids);
-        // Each lane's closest `t` so far, kept beside the hits for the bound of the next test.
-        let mut hit_t = [f32::INFINITY; N];
-        for_lanes(live, |l| hit_t[l] = self.0[ids[l] as usize].t);
+        // Each lane's closest `t` so far and its `Hit::bound`, kept beside the hits and updated
+        // only when a lane's hit changes: recomputed for every lane at every triangle, the
+        // bound (a `next_up` per lane) cost a twentieth of a stream's instructions.
+        let (mut hit_t, mut bound) = ([f32::INFINITY; N], lanes.tmax);
+        let update = |hit: &Hit, l: usize, hit_t: &mut [f32; N], bound: &mut [f32; N]| {
+            hit_t[l] = hit.t;
+            bound[l] = hit.bound(&rays[ids[l] as usize]);
+        };
+        for_lanes(live, |l| {
+            update(&self.0[ids[l] as usize], l, &mut hit_t, &mut bound)
+        });
         for &p in leaf {
             if let Some(tri) = prims.triangles.get(p as usize) {
-                let mut bound = [0.0; N];
-                for l in 0..N {
-                    // `Hit::bound`, per lane.
-                    let tmax = lanes.tmax[l];
-                    bound[l] = if hit_t[l] < tmax {
-                        hit_t[l].next_up()
-                    } else {
-                        tmax
-                    };
-                }
                 let (t, u, v) = lanes.triangle(tri, &bound);
                 let hits = lanes_less(&t, &[f32::INFINITY; N]);
                 for_lanes(live & hits, |l| {
                     let hit = &mut self.0[ids[l] as usize];
                     hit.offer(t[l], u[l], v[l], p);
-                    hit_t[l] = hit.t;
+                    update(hit, l, &mut hit_t, &mut bound);
                 });
             } else {
                 for_lanes(live, |l| {
                     let hit = &mut self.0[ids[l] as usize];
                     prims.intersect(p, &rays[ids[l] as usize], &RayTest::PLAIN, hit);
-                    hit_t[l] = hit.t;
+                    update(hit, l, &mut hit_t, &mut bound);
                 });
             }
         }
