@@ -292,11 +292,11 @@ impl<'a, A: Answer> Batch<'a, A> {
             for a in 0..3 {
                 split[a].extend((0..(n - start).min(N)).map(|l| [r.org[a][l], inv[a][l]]));
             }
-            let sound = live & sound(&r);
-            let mut todo = sound;
+            let valid = live & sound(&r);
+            let mut todo = valid;
             if !prims.planes.is_empty() {
                 // The planes are outside the tree, tested before it as the single-ray query does.
-                for_lanes(sound, |l| {
+                for_lanes(valid, |l| {
                     if !answer.planes(prims, start + l, &rays[start + l]) {
                         todo &= !(1 << l);
                     }
@@ -513,7 +513,7 @@ pub(crate) fn positive(o: usize) -> [bool; 3] {
     [o & 1 == 0, o & 2 == 0, o & 4 == 0]
 }
 
-/// N rays at an inner node whose split distances `ts` from their segments `[t0, t1]` are:
+/// Where N rays go at an inner node, from each ray's split distance `ts` and segment `[t0, t1]`:
 /// the cases of `traverse::common::step`, lane by lane (`ts <= t0` or NaN: far only; `ts >= t1`:
 /// near only; else both, cut at `ts`).
 pub(crate) struct Split<const N: usize> {
