@@ -31,11 +31,14 @@ impl<const N: usize> Lanes<N> {
     }
 }
 
-/// A pending far subtree: the node and the live lanes' segments there.
+/// A pending far subtree: the node, the lanes' segments there and the live lanes. The ray
+/// indices are the packet's throughout, so they are not copied with every entry.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Entry<const N: usize> {
     node: u32,
-    lanes: Lanes<N>,
+    t0: [f32; N],
+    t1: [f32; N],
+    mask: u32,
 }
 
 /// Reused buffers of one thread: the packet stack and the leaf's gathered triangles.
@@ -74,10 +77,16 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
     let tree = b.tree;
     let base = s.stack.len();
     let mut dead = 0u32;
-    let mut cur = Entry { node, lanes: p };
+    let id = p.id;
+    let mut cur = Entry {
+        node,
+        t0: p.t0,
+        t1: p.t1,
+        mask: p.mask,
+    };
     loop {
         let n = tree.nodes[cur.node as usize];
-        let live = cur.lanes.mask;
+        let live = cur.mask;
         b.stats.nodes_visited += live.count_ones() as u64;
         let next = if n.is_leaf() {
             s.leaf.gather(
@@ -89,7 +98,7 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
             while m != 0 {
                 let l = m.trailing_zeros() as usize;
                 m &= m - 1;
-                if b.visit_leaf(&s.leaf, cur.lanes.id[l], cur.lanes.t1[l]) {
+                if b.visit_leaf(&s.leaf, id[l], cur.t1[l]) {
                     dead |= 1 << l;
                 }
             }
@@ -107,29 +116,18 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
                 near_t1,
                 far: fm,
                 far_t0,
-            } = Split::new(
-                n.split,
-                &org[axis],
-                &inv[axis],
-                &cur.lanes.t0,
-                &cur.lanes.t1,
-                live,
-            );
+            } = Split::new(n.split, &org[axis], &inv[axis], &cur.t0, &cur.t1, live);
             let far_entry = Entry {
                 node: far,
-                lanes: Lanes {
-                    t0: far_t0,
-                    mask: fm,
-                    ..cur.lanes
-                },
+                t0: far_t0,
+                mask: fm,
+                ..cur
             };
             let near_entry = Entry {
                 node: near,
-                lanes: Lanes {
-                    t1: near_t1,
-                    mask: nm,
-                    ..cur.lanes
-                },
+                t1: near_t1,
+                mask: nm,
+                ..cur
             };
             match (nm != 0, fm != 0) {
                 (true, true) => {
@@ -148,8 +146,8 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
                     return;
                 }
                 let mut e = s.stack.pop().expect("the stack is above its base");
-                e.lanes.mask &= !dead;
-                if e.lanes.mask != 0 {
+                e.mask &= !dead;
+                if e.mask != 0 {
                     break e;
                 }
             },
