@@ -10,8 +10,9 @@
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
 use super::simd::{self, lanes_less, lanes_less_eq, prefetch, Kernel, LeafPrims, RayLanes, Width};
-use super::traverse::{any_among, any_in_subtree, closest_among, closest_in_subtree, Entry};
-use crate::geometry::Aabb;
+use super::traverse::{
+    any_among, any_in_subtree, clip_lanes, closest_among, closest_in_subtree, Entry,
+};
 use crate::geometry::{Hit, PrimitiveSet, Ray, RayTest, TraversalStats};
 use crate::kdtree::KdTree;
 
@@ -271,7 +272,7 @@ impl<'a, A: Answer> Batch<'a, A> {
     /// every ray, so the group can be traversed front to back at once (paper: ≤ 8 traversals).
     ///
     /// Set up N rays at a time, as vectors: the reciprocal directions, the degenerate rays
-    /// (`Ray::is_degenerate`) and the clipping to the root voxel (`traverse::clip`), with the
+    /// (`Ray::is_degenerate`) and the clipping to the root voxel (`traverse::clip_lanes`), with the
     /// same operations per lane, so the segments are bit-identical to the single-ray ones. Ray
     /// by ray, this setup cost a fifth of an 8-ray packet traversal's instructions.
     #[inline(always)]
@@ -305,7 +306,7 @@ impl<'a, A: Answer> Batch<'a, A> {
             if tree.nodes.is_empty() {
                 continue;
             }
-            let (t0, t1, inside) = clip(&tree.bounds, &r, &inv);
+            let (t0, t1, inside) = clip_lanes(&tree.bounds, &r.org, &inv, r.tmin, r.tmax);
             for_lanes(todo & inside, |l| {
                 let i = start + l;
                 groups[octant(&rays[i])].push(Root {
@@ -405,35 +406,6 @@ fn sound<const N: usize>(r: &RayLanes<N>) -> u32 {
         }
     }
     ok & lanes_less(&[0.0; N], &length)
-}
-
-/// The segments `[t0, t1]` of the rays `r` (reciprocal directions `inv`) inside the box, and
-/// the lanes whose segment is not empty: `traverse::clip`'s operations, lane by lane (the
-/// slab's near plane chosen by the sign of the reciprocal, a NaN distance never clips).
-#[inline(always)]
-fn clip<const N: usize>(
-    bounds: &Aabb,
-    r: &RayLanes<N>,
-    inv: &[[f32; N]; 3],
-) -> ([f32; N], [f32; N], u32) {
-    let (mut t0, mut t1) = (r.tmin, r.tmax);
-    for (a, inv) in inv.iter().enumerate() {
-        let (min, max) = (bounds.min[a], bounds.max[a]);
-        for l in 0..N {
-            let (near, far) = if inv[l].is_sign_positive() {
-                (min, max)
-            } else {
-                (max, min)
-            };
-            let near = (near - r.org[a][l]) * inv[l];
-            let far = (far - r.org[a][l]) * inv[l];
-            t0[l] = if near > t0[l] { near } else { t0[l] };
-            t1[l] = if far < t1[l] { far } else { t1[l] };
-        }
-    }
-    // `t0 = inf` is a ray outside a slab it runs parallel to.
-    let inside = lanes_less_eq(&t0, &t1) & lanes_less(&t0, &[f32::INFINITY; N]);
-    (t0, t1, inside)
 }
 
 /// Lane mask of the first `count` lanes of N (N ≤ 16).

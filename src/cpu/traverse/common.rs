@@ -6,7 +6,7 @@
 //! makes the seven traversals return bit-identical hits, because they then agree on every leaf's
 //! exit distance and on every side decision.
 
-use crate::cpu::simd::TriBlock;
+use crate::cpu::simd::{lanes_less, lanes_less_eq, TriBlock};
 use crate::geometry::{
     Aabb, Hit, PrimitiveSet, Ray, RayTest, TraversalStats, TriangleTest, INVALID,
 };
@@ -50,28 +50,53 @@ impl TRay {
 }
 
 /// The parametric segment `[t0, t1]` of the ray inside the closed box, clamped to the ray's window,
-/// or `None` when the ray misses it. Like `Aabb::clip_ray`, but with the slab's near and far planes
-/// chosen by the direction sign: a ray lying in a face plane (NaN distance) is inside the closed
-/// slab for either sign of zero, where `clip_ray` rejects it for `+0.0` and keeps it for `-0.0`.
+/// or `None` when the ray misses it: [`clip_lanes`] with one lane.
 pub(crate) fn clip(bounds: &Aabb, ray: &TRay) -> Option<(f32, f32)> {
-    let (mut t0, mut t1) = (ray.ray.tmin, ray.ray.tmax);
-    for axis in 0..3 {
-        let (near, far) = if ray.positive(axis) {
-            (bounds.min[axis], bounds.max[axis])
-        } else {
-            (bounds.max[axis], bounds.min[axis])
-        };
-        let (near, far) = (ray.dist(axis, near), ray.dist(axis, far));
-        // NaN compares false: no clipping by a plane the ray lies in.
-        if near > t0 {
-            t0 = near;
-        }
-        if far < t1 {
-            t1 = far;
+    let (t0, t1, inside) = clip_lanes::<1>(
+        bounds,
+        &ray.org.map(|x| [x]),
+        &ray.inv_dir.map(|x| [x]),
+        [ray.ray.tmin],
+        [ray.ray.tmax],
+    );
+    (inside == 1).then_some((t0[0], t1[0]))
+}
+
+/// The segments `[t0, t1]` of N rays (origins `org`, reciprocal directions `inv`, windows
+/// `[tmin, tmax]`) inside the closed box, and the mask of the lanes whose segment is not empty.
+/// Like `Aabb::clip_ray`, but with the slab's near and far planes chosen by the direction sign:
+/// a ray lying in a face plane (NaN distance) is inside the closed slab for either sign of zero,
+/// where `clip_ray` rejects it for `+0.0` and keeps it for `-0.0`. Written over lanes so that
+/// the batch setup of packets and streams clips N rays as vectors, with the single-ray clip's
+/// operations.
+#[inline(always)]
+pub(crate) fn clip_lanes<const N: usize>(
+    bounds: &Aabb,
+    org: &[[f32; N]; 3],
+    inv: &[[f32; N]; 3],
+    tmin: [f32; N],
+    tmax: [f32; N],
+) -> ([f32; N], [f32; N], u32) {
+    let (mut t0, mut t1) = (tmin, tmax);
+    for a in 0..3 {
+        let (min, max) = (bounds.min[a], bounds.max[a]);
+        for l in 0..N {
+            // The reciprocal keeps the direction's sign (`TRay::positive`).
+            let (near, far) = if inv[a][l].is_sign_positive() {
+                (min, max)
+            } else {
+                (max, min)
+            };
+            let near = (near - org[a][l]) * inv[a][l];
+            let far = (far - org[a][l]) * inv[a][l];
+            // NaN compares false: no clipping by a plane the ray lies in.
+            t0[l] = if near > t0[l] { near } else { t0[l] };
+            t1[l] = if far < t1[l] { far } else { t1[l] };
         }
     }
     // `t0 = inf` is a ray outside a slab it runs parallel to.
-    (t0 <= t1 && t0 < f32::INFINITY).then_some((t0, t1))
+    let inside = lanes_less_eq(&t0, &t1) & lanes_less(&t0, &[f32::INFINITY; N]);
+    (t0, t1, inside)
 }
 
 /// What the segment `[t0, t1]` does at an inner node (the three cases of the thesis' pseudo-code).
