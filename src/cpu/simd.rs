@@ -46,16 +46,16 @@ impl Width {
         }
     }
 
-    /// The width used by default: 8 lanes where AVX2 exists, else 4. AVX-512's 16 lanes are
-    /// available ([`Width::W16`]) but measured no faster than 8 (`rt2 bench streams`, width
-    /// columns of BENCHMARKS.md, and again after the SIMD compaction of the stream lists): the
-    /// SAH leaves hold ~3 triangles, so a packet's 16-triangle block is mostly padding.
+    /// The width used by default: the widest this CPU runs. On the Intel Xeon with AVX-512
+    /// used for BENCHMARKS.md, 16 lanes beat 8 on coherent rays (`rt2 bench streams`, bunny
+    /// primary set: packets 8.68 against 7.29 Mrays/s, streams 10.55 against 8.22) and match
+    /// them on incoherent ones; on an AMD EPYC (Zen 4, which runs 512-bit operations as two
+    /// halves) they were within noise of 8, so the wider width costs nothing there.
     pub fn best() -> Width {
-        if Width::W8.supported() {
-            Width::W8
-        } else {
-            Width::W4
-        }
+        [Width::W16, Width::W8]
+            .into_iter()
+            .find(|w| w.supported())
+            .unwrap_or(Width::W4)
     }
 }
 
