@@ -311,13 +311,19 @@ struct WaveRay {
     path: u32,
 }
 
+/// Most samples traced as one wavefront: the pixels are rendered in runs of at most this many
+/// primary rays, so that a frame's memory does not grow with its size × samples (a 4096² frame
+/// at 64 samples is a billion paths; as one wavefront its rays alone took 3.5 GB and the
+/// allocation aborted). A million rays keeps the stream queries long.
+const WAVE_PATHS: usize = 1 << 20;
+
 /// Breadth-first (wavefront) rendering, the schedule the vectorised-traversal paper needs: the
 /// closest hits of all rays of a depth as one stream query, then all their shadow rays as one
 /// occlusion query, then the next depth's rays. Each sample's radiance is the depth-first one's
 /// terms (same rays, same hits, same shading) summed in another order; float addition is not
 /// associative, so a pixel may round to the next 1/255 step. The stream queries carry no
 /// per-ray excluded primitive, so `OffsetMode::ExcludePrim` is refused before rendering
-/// ([`check_schedule`]).
+/// ([`check_schedule`]). The traced pixels go in runs of at most [`WAVE_PATHS`] samples.
 fn render_breadth_first(
     scene: &Committed,
     camera: &Camera,
@@ -329,26 +335,51 @@ fn render_breadth_first(
     let rays = camera.rays(w, h);
     let size = Vec2::new(w as f32, h as f32);
     let tracer = Tracer::new(scene, opts, traversal);
-    let topts = tracer.traverse_options(INVALID);
     let (pixels, mask) = frame.pixels_and_mask_mut();
     let traced: Vec<u32> = (0..w * h)
         .filter(|&i| mask.is_none_or(|m| m[i as usize] != 0))
         .collect();
     let samples = opts.samples;
-    let mut wave: Vec<WaveRay> = traced
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(k, &i)| {
-            let rays = &rays;
-            (0..samples).map(move |s| WaveRay {
-                ray: primary_ray(rays, size, i % w, i / w, s, samples),
-                weight: Vec3::ONE,
-                depth: 1,
-                path: (k as u32) * samples + s,
+    let run = (WAVE_PATHS / samples as usize).max(1);
+    for pixels_run in traced.chunks(run) {
+        let wave: Vec<WaveRay> = pixels_run
+            .par_iter()
+            .enumerate()
+            .flat_map_iter(|(k, &i)| {
+                let rays = &rays;
+                (0..samples).map(move |s| WaveRay {
+                    ray: primary_ray(rays, size, i % w, i / w, s, samples),
+                    weight: Vec3::ONE,
+                    depth: 1,
+                    path: (k as u32) * samples + s,
+                })
             })
-        })
-        .collect();
-    let mut color = vec![Vec3::ZERO; traced.len() * samples as usize];
+            .collect();
+        let color = trace_wavefronts(scene, &tracer, opts, traversal, wave, pixels_run.len());
+        for (k, &i) in pixels_run.iter().enumerate() {
+            let s = samples as usize;
+            let c = color[k * s..(k + 1) * s]
+                .iter()
+                .fold(Vec3::ZERO, |a, &c| a + c);
+            let i = i as usize * 4;
+            pixels[i..i + 4].copy_from_slice(&rgba(c, samples));
+        }
+    }
+}
+
+/// Traces the wavefront `wave` of `pixels` pixels' samples and every wavefront it spawns, depth
+/// by depth; returns the radiance of each path (`WaveRay::path`).
+fn trace_wavefronts(
+    scene: &Committed,
+    tracer: &Tracer,
+    opts: &RenderOptions,
+    traversal: Traversal,
+    mut wave: Vec<WaveRay>,
+    pixels: usize,
+) -> Vec<Vec3> {
+    let topts = tracer.traverse_options(INVALID);
+    let samples = opts.samples;
+    let mut color = vec![Vec3::ZERO; pixels * samples as usize];
     let mut hits = Vec::new();
     let mut shadows = Vec::new();
     let mut blocked = Vec::new();
@@ -404,14 +435,7 @@ fn render_breadth_first(
         }
         wave = next;
     }
-    for (k, &i) in traced.iter().enumerate() {
-        let s = samples as usize;
-        let c = color[k * s..(k + 1) * s]
-            .iter()
-            .fold(Vec3::ZERO, |a, &c| a + c);
-        let i = i as usize * 4;
-        pixels[i..i + 4].copy_from_slice(&rgba(c, samples));
-    }
+    color
 }
 
 /// Options the breadth-first schedule cannot honour: its stream queries test triangles with
