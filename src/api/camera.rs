@@ -18,10 +18,9 @@ pub struct rt2_camera {
 impl Handle for rt2_camera {
     const MAGIC: u64 = 0x7274_325f_6361_6d00;
     const NAME: &'static str = "rt2_camera";
-    fn magic(&self) -> u64 {
-        self.magic
-    }
 }
+
+const _: () = assert!(std::mem::offset_of!(rt2_camera, magic) == 0);
 
 /// Creates a camera with the defaults.
 ///
@@ -46,7 +45,7 @@ pub unsafe extern "C" fn rt2_camera_create(out: *mut *mut rt2_camera) -> Rt2Stat
 #[no_mangle]
 pub unsafe extern "C" fn rt2_camera_destroy(camera: *mut rt2_camera) {
     guard(|| {
-        destroy(camera, |c| c.magic = 0);
+        destroy(camera);
         Ok(())
     });
 }

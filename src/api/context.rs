@@ -31,10 +31,9 @@ pub struct rt2_context {
 impl Handle for rt2_context {
     const MAGIC: u64 = 0x7274_325f_6374_7800;
     const NAME: &'static str = "rt2_context";
-    fn magic(&self) -> u64 {
-        self.magic
-    }
 }
+
+const _: () = assert!(std::mem::offset_of!(rt2_context, magic) == 0);
 
 /// What a context decided (`rt2_context_info`).
 #[repr(C)]
@@ -109,7 +108,7 @@ impl rt2_context {
 #[no_mangle]
 pub unsafe extern "C" fn rt2_context_destroy(ctx: *mut rt2_context) {
     guard(|| {
-        destroy(ctx, |c| c.magic = 0);
+        destroy(ctx);
         Ok(())
     });
 }

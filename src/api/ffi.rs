@@ -38,31 +38,41 @@ pub(crate) fn guard_ptr<T>(f: impl FnOnce() -> Result<*const T>) -> *const T {
     out
 }
 
-/// A boxed object handed to C. `MAGIC` tells handles of this type from anything else.
+/// A boxed object handed to C. `MAGIC` tells handles of this type from anything else. Every
+/// handle is `#[repr(C)]` with its magic as the first field (a `u64` at offset 0, asserted
+/// at compile time beside each type), so the magic is read through the raw pointer before any
+/// reference to the handle exists.
 pub(crate) trait Handle: Sized {
     const MAGIC: u64;
     const NAME: &'static str;
-    fn magic(&self) -> u64;
+}
+
+/// The magic at the start of the handle `p` points to, read without making a `&T`: a handle
+/// of another kind may be smaller than `T`, and a reference to it would claim `T`'s size.
+///
+/// # Safety
+/// `p` must be non-NULL and point to a live RT2 handle (of any kind).
+unsafe fn magic_of<T: Handle>(p: *const T) -> u64 {
+    p.cast::<u64>().read()
 }
 
 /// Borrows a handle after checking it is non-NULL and carries the right magic.
 ///
 /// # Safety
-/// `p` must be NULL or point to a live RT2 handle. Every handle is `#[repr(C)]` with its magic
-/// first, so a handle of another type is read only within its own allocation and rejected;
-/// a destroyed handle is rejected as long as its memory was not reused.
+/// `p` must be NULL or point to a live RT2 handle. Only its magic (first) is read before the
+/// check, so a handle of another type is read within its own allocation and rejected; a
+/// destroyed handle is rejected as long as its memory was not reused.
 pub(crate) unsafe fn handle<'a, T: Handle>(p: *const T, arg: &str) -> Result<&'a T> {
     if p.is_null() {
         return Err(Error::invalid_argument(format!("{arg} is NULL")));
     }
-    let r = &*p;
-    if r.magic() != T::MAGIC {
+    if magic_of(p) != T::MAGIC {
         return Err(Error::invalid_argument(format!(
             "{arg} is not a live {} (destroyed, or a different kind of handle)",
             T::NAME
         )));
     }
-    Ok(r)
+    Ok(&*p)
 }
 
 /// Mutable variant of [`handle`].
@@ -74,15 +84,17 @@ pub(crate) unsafe fn handle_mut<'a, T: Handle>(p: *mut T, arg: &str) -> Result<&
     Ok(&mut *p)
 }
 
-/// Frees a handle made by `Box::into_raw`, ignoring NULL and handles that fail the check.
+/// Frees a handle made by `Box::into_raw`, ignoring NULL and handles that fail the check. The
+/// magic is cleared first, so a second destroy of the same pointer is ignored while the
+/// memory is not reused.
 ///
 /// # Safety
-/// `p` must be NULL or a handle of type `T` not yet destroyed.
-pub(crate) unsafe fn destroy<T: Handle>(p: *mut T, clear_magic: impl FnOnce(&mut T)) {
-    if p.is_null() || (*p).magic() != T::MAGIC {
+/// `p` must be NULL or point to a live RT2 handle (of any kind).
+pub(crate) unsafe fn destroy<T: Handle>(p: *mut T) {
+    if p.is_null() || magic_of(p) != T::MAGIC {
         return;
     }
-    clear_magic(&mut *p);
+    p.cast::<u64>().write(0);
     drop(Box::from_raw(p));
 }
 

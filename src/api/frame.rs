@@ -19,10 +19,9 @@ pub struct rt2_frame {
 impl Handle for rt2_frame {
     const MAGIC: u64 = 0x7274_325f_6672_6d00;
     const NAME: &'static str = "rt2_frame";
-    fn magic(&self) -> u64 {
-        self.magic
-    }
 }
+
+const _: () = assert!(std::mem::offset_of!(rt2_frame, magic) == 0);
 
 /// Creates a frame; each side must be in 1..=32768.
 ///
@@ -51,7 +50,7 @@ pub unsafe extern "C" fn rt2_frame_create(
 #[no_mangle]
 pub unsafe extern "C" fn rt2_frame_destroy(frame: *mut rt2_frame) {
     guard(|| {
-        destroy(frame, |f| f.magic = 0);
+        destroy(frame);
         Ok(())
     });
 }

@@ -23,10 +23,9 @@ pub struct rt2_scene {
 impl Handle for rt2_scene {
     const MAGIC: u64 = 0x7274_325f_7363_6e00;
     const NAME: &'static str = "rt2_scene";
-    fn magic(&self) -> u64 {
-        self.magic
-    }
 }
+
+const _: () = assert!(std::mem::offset_of!(rt2_scene, magic) == 0);
 
 impl rt2_scene {
     /// A panic while holding the lock leaves the scene as it was before the failed edit (all
@@ -84,7 +83,7 @@ pub unsafe extern "C" fn rt2_scene_create(
 #[no_mangle]
 pub unsafe extern "C" fn rt2_scene_destroy(scene: *mut rt2_scene) {
     guard(|| {
-        destroy(scene, |s| s.magic = 0);
+        destroy(scene);
         Ok(())
     });
 }
