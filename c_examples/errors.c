@@ -41,6 +41,20 @@ static void must(rt2_status s, const char *what) {
     }
 }
 
+/* Runs after main returns, when this thread's storage is already torn down (as in a C++ static
+ * destructor): a failing call must still return its status rather than abort. Silent on
+ * success (the summary stays the last line of the output); exits 3 on failure. */
+static void call_during_exit(void) {
+    rt2_status s = rt2_scene_commit(NULL);
+    const char *msg = rt2_last_error_message();
+    if (s != RT2_STATUS_INVALID_ARGUMENT || msg == NULL) {
+        printf("FAIL rt2_scene_commit(NULL) during exit: %s\n", rt2_status_string(s));
+        fflush(stdout);
+        _Exit(3);
+    }
+    fprintf(stderr, "rt2_scene_commit(NULL) during exit: %s, message \"%s\"\n", rt2_status_string(s), msg);
+}
+
 /* The parts of the statistics that depend only on the scene's content (not on timing). */
 static int same_stats(const rt2_scene_statistics *a, const rt2_scene_statistics *b) {
     return a->object_count == b->object_count && a->triangle_count == b->triangle_count &&
@@ -51,6 +65,7 @@ static int same_stats(const rt2_scene_statistics *a, const rt2_scene_statistics 
 
 int main(int argc, char **argv) {
     const char *tmpdir = argc > 1 ? argv[1] : "/tmp";
+    atexit(call_during_exit);
     /* A sentinel that no rt2 call returns: outputs must still hold it after a failure. */
     static int sentinel_storage;
     void *const SENTINEL = &sentinel_storage;

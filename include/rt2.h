@@ -966,7 +966,8 @@ const char *rt2_status_string(uint32_t status);
 
 /**
  * The message of the last failed call on this thread ("" if none failed yet). Valid until
- * the next failing call on this thread.
+ * the next failing call on this thread. During thread exit, when the message is gone, a
+ * static message says so.
  */
 const char *rt2_last_error_message(void);
 

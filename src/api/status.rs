@@ -12,7 +12,10 @@ pub(crate) fn set_last_error(message: &str) {
     // Interior NULs would cut the C string short; they cannot occur in our messages but a
     // file name could carry one, so replace them.
     let c = CString::new(message.replace('\0', "\\0")).unwrap_or_default();
-    LAST_ERROR.with(|e| *e.borrow_mut() = c);
+    // During thread exit (a C `atexit` handler, a C++ static destructor) the thread-local is
+    // gone: the message is lost but the status still says what failed. `with` would panic
+    // there, outside the panic barrier.
+    let _ = LAST_ERROR.try_with(|e| *e.borrow_mut() = c);
 }
 
 /// The library version as "MAJOR.MINOR.PATCH" (static storage).
@@ -41,8 +44,13 @@ pub extern "C" fn rt2_status_string(status: u32) -> *const c_char {
 }
 
 /// The message of the last failed call on this thread ("" if none failed yet). Valid until
-/// the next failing call on this thread.
+/// the next failing call on this thread. During thread exit, when the message is gone, a
+/// static message says so.
 #[no_mangle]
 pub extern "C" fn rt2_last_error_message() -> *const c_char {
-    guard_ptr(|| Ok(LAST_ERROR.with(|e| e.borrow().as_ptr())))
+    guard_ptr(|| {
+        Ok(LAST_ERROR
+            .try_with(|e| e.borrow().as_ptr())
+            .unwrap_or(c"(no error message: the thread is exiting)".as_ptr()))
+    })
 }
