@@ -131,6 +131,12 @@ int main(int argc, char **argv) {
     expect(rt2_camera_look_at(camera, eye, origin, up_parallel), RT2_STATUS_INVALID_ARGUMENT, "up",
            "rt2_camera_look_at(up parallel to the view)");
     expect(rt2_camera_look_at(camera, nan3, origin, up), RT2_STATUS_INVALID_ARGUMENT, "eye", "rt2_camera_look_at(eye NaN)");
+    {
+        /* Finite but far apart: the view direction overflows to infinity. */
+        const float far_eye[3] = {3e38f, 0.0f, 0.0f}, far_target[3] = {-3e38f, 0.0f, 0.0f};
+        expect(rt2_camera_look_at(camera, far_eye, far_target, up), RT2_STATUS_INVALID_ARGUMENT, "target",
+               "rt2_camera_look_at(eye 3e38, target -3e38)");
+    }
     expect(rt2_camera_look_at(NULL, eye, origin, up), RT2_STATUS_INVALID_ARGUMENT, "camera", "rt2_camera_look_at(camera = NULL)");
     expect(rt2_camera_look_at(camera, eye, NULL, up), RT2_STATUS_INVALID_ARGUMENT, "target", "rt2_camera_look_at(target = NULL)");
     expect(rt2_camera_set_fov(camera, 180.0f), RT2_STATUS_INVALID_ARGUMENT, NULL, "rt2_camera_set_fov(180)");
@@ -274,6 +280,25 @@ int main(int argc, char **argv) {
     o = rt2_render_options_default();
     o.background[1] = NAN;
     expect(rt2_render(ctx, scene, camera, &o, frame), RT2_STATUS_INVALID_ARGUMENT, "background", "rt2_render(background NaN)");
+    {
+        /* A caller built against an older header whose options struct was 8 bytes: only those
+         * 8 bytes are its own. Under valgrind (scripts/sanitize.sh) reading past them is an
+         * error, so the size must be checked before the rest is read. */
+        uint32_t *older = malloc(2 * sizeof(uint32_t));
+        if (older == NULL) must(RT2_STATUS_OUT_OF_MEMORY, "malloc");
+        older[0] = 2 * sizeof(uint32_t);
+        older[1] = 1;
+        expect(rt2_render(ctx, scene, camera, (const rt2_render_options *)older, frame), RT2_STATUS_INVALID_ARGUMENT,
+               "struct_size", "rt2_render(an older header's 8-byte options)");
+        expect(rt2_scene_set_build_options(scene, (const rt2_build_options *)older), RT2_STATUS_INVALID_ARGUMENT,
+               "struct_size", "rt2_scene_set_build_options(an older header's 8-byte options)");
+        expect(rt2_scene_add_material(scene, (const rt2_material *)older, NULL), RT2_STATUS_INVALID_ARGUMENT,
+               "struct_size", "rt2_scene_add_material(an older header's 8-byte material)");
+        rt2_context *never = NULL;
+        expect(rt2_context_create((const rt2_context_desc *)older, &never), RT2_STATUS_INVALID_ARGUMENT,
+               "struct_size", "rt2_context_create(an older header's 8-byte descriptor)");
+        free(older);
+    }
     expect(rt2_render(NULL, scene, camera, NULL, frame), RT2_STATUS_INVALID_ARGUMENT, "ctx", "rt2_render(ctx = NULL)");
     expect(rt2_render(ctx, NULL, camera, NULL, frame), RT2_STATUS_INVALID_ARGUMENT, "scene", "rt2_render(scene = NULL)");
     expect(rt2_render(ctx, scene, NULL, NULL, frame), RT2_STATUS_INVALID_ARGUMENT, "camera", "rt2_render(camera = NULL)");
@@ -283,6 +308,36 @@ int main(int argc, char **argv) {
         int untouched = px != NULL;
         for (int i = 0; px && i < 16 * 12 * 4; i++) untouched &= px[i] == 0;
         report(untouched, "failed renders left the frame untouched (transparent black)", NULL);
+    }
+
+    {
+        /* Options refused as UNSUPPORTED (ropes traversal with the watertight test: breadth-first
+         * renders and packet queries take Möller–Trumbore only) leave the scene as it was: no
+         * ropes, no exact vertices built on the way to the refusal. */
+        rt2_scene_statistics before = {0}, after = {0};
+        before.struct_size = after.struct_size = sizeof before;
+        must(rt2_scene_stats(scene, &before), "rt2_scene_stats (before refused options)");
+        rt2_render_options bf = rt2_render_options_default();
+        bf.traversal = RT2_TRAVERSAL_ROPES;
+        bf.intersector = RT2_INTERSECTOR_WATERTIGHT;
+        bf.schedule = RT2_SCHEDULE_BREADTH_FIRST;
+        expect(rt2_render(ctx, scene, camera, &bf, frame), RT2_STATUS_UNSUPPORTED, "breadth-first",
+               "rt2_render(breadth-first, watertight, ropes)");
+        rt2_query_options q = rt2_query_options_default();
+        q.traversal = RT2_TRAVERSAL_ROPES;
+        q.intersector = RT2_INTERSECTOR_WATERTIGHT;
+        q.mode = RT2_QUERY_MODE_PACKET;
+        const rt2_ray ray = {{0.0f, 0.0f, 5.0f}, 0.0f, {0.0f, 0.0f, -1.0f}, INFINITY};
+        rt2_hit hit;
+        expect(rt2_intersect(ctx, scene, &ray, 1, &hit, &q, NULL), RT2_STATUS_UNSUPPORTED, "Möller",
+               "rt2_intersect(packets, watertight, ropes)");
+        must(rt2_scene_stats(scene, &after), "rt2_scene_stats (after refused options)");
+        char d[128];
+        snprintf(d, sizeof d, "ropes %llu -> %llu bytes, primitives %llu -> %llu bytes",
+                 (unsigned long long)before.bytes_ropes, (unsigned long long)after.bytes_ropes,
+                 (unsigned long long)before.bytes_primitives, (unsigned long long)after.bytes_primitives);
+        report(before.bytes_ropes == after.bytes_ropes && before.bytes_primitives == after.bytes_primitives,
+               "  ... the refused calls left the scene's memory unchanged", d);
     }
 
     /* Failed edits did not invalidate the commit: stats unchanged and rendering works. */

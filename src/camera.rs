@@ -53,11 +53,24 @@ impl Camera {
                 )));
             }
         }
+        // The basis is built from the normalised view direction and up: their squared
+        // lengths must be finite (not overflowed) and non-zero (not underflowed).
         let f = target - eye;
-        if f.length_squared() == 0.0 {
+        let (ff, uu) = (f.length_squared(), up.length_squared());
+        if ff == 0.0 {
             return Err(Error::invalid_argument("eye and target are the same point"));
         }
-        if f.cross(up).length_squared() <= 1e-12 * f.length_squared() * up.length_squared() {
+        if !ff.is_finite() {
+            return Err(Error::invalid_argument(format!(
+                "eye {eye} and target {target} are too far apart (at most about 1e19)"
+            )));
+        }
+        if !uu.is_finite() {
+            return Err(Error::invalid_argument(format!(
+                "up is {up}: too long (at most about 1e19)"
+            )));
+        }
+        if f.cross(up).length_squared() <= 1e-12 * ff * uu {
             return Err(Error::invalid_argument(
                 "up is zero or parallel to the view direction",
             ));

@@ -349,7 +349,7 @@ fn gpu_lacks(intersector: Intersector, offset: OffsetMode) -> Option<&'static st
 
 /// Packets and streams test triangles with Möller–Trumbore (their SIMD test); the watertight
 /// test runs one ray at a time.
-fn check_query(q: &QueryOptions) -> Result<()> {
+pub(crate) fn check_query(q: &QueryOptions) -> Result<()> {
     if q.mode != cpu::query::QueryMode::Single && q.intersector != Intersector::MollerTrumbore {
         return Err(Error::unsupported(
             "packet and stream queries test triangles with Möller–Trumbore only: use single-ray \

@@ -3,7 +3,9 @@
 //! `rt2_context_info` reports the backend, why it was chosen, why the last job ran on the CPU
 //! after all when an AUTO context's GPU could not take it, and what AUTO chose for that job.
 
-use super::ffi::{check_out, check_struct_size, destroy, guard, handle, write_out, Handle};
+use super::ffi::{
+    check_out, check_struct_size, destroy, guard, handle, read_versioned, write_out, Handle,
+};
 use super::options::{backend_from, rt2_context_desc, Rt2Backend};
 use crate::context::Context;
 use crate::dispatch::Backend;
@@ -80,9 +82,8 @@ pub unsafe extern "C" fn rt2_context_create(
         let d = if desc.is_null() {
             super::options::rt2_context_desc_default()
         } else {
-            *desc
+            read_versioned(desc)?
         };
-        check_struct_size::<rt2_context_desc>(d.struct_size, "rt2_context_desc")?;
         let ctx = Context::new(backend_from(d.backend)?, d.threads)?;
         write_out(out, "out", rt2_context::from_context(ctx))
     })

@@ -191,6 +191,24 @@ pub(crate) unsafe fn path_arg(p: *const c_char, arg: &str) -> Result<std::path::
     }
 }
 
+/// A versioned C input struct: `#[repr(C)]`, starting with its `struct_size` (a `u32` at
+/// offset 0, asserted at compile time beside each type).
+pub(crate) trait Versioned: Copy {
+    const NAME: &'static str;
+}
+
+/// Copies the versioned input at `p` (non-NULL) once its `struct_size` is checked. The size is
+/// read alone first: a caller built against an older, smaller struct gets the error instead of
+/// a read past its struct's end.
+///
+/// # Safety
+/// `p` must point to at least a readable `u32`, and to a whole `T` when that `u32` is
+/// `size_of::<T>()`.
+pub(crate) unsafe fn read_versioned<T: Versioned>(p: *const T) -> Result<T> {
+    check_struct_size::<T>(p.cast::<u32>().read(), T::NAME)?;
+    Ok(p.read())
+}
+
 /// Checks the `struct_size` field of a versioned descriptor.
 pub(crate) fn check_struct_size<T>(struct_size: u32, name: &str) -> Result<()> {
     let want = std::mem::size_of::<T>();

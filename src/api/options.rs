@@ -2,7 +2,7 @@
 //! change fields, so fields can be added later. Enum-typed fields are `uint32_t` on the wire
 //! and checked, because an out-of-range C enum value must be an error, not undefined behaviour.
 
-use super::ffi::{check_struct_size, enum_error};
+use super::ffi::enum_error;
 use crate::cpu::query::QueryMode;
 use crate::cpu::traverse::Traversal;
 use crate::dispatch::BackendRequest;
@@ -206,6 +206,12 @@ pub struct rt2_context_desc {
     pub threads: u32,
 }
 
+impl super::ffi::Versioned for rt2_context_desc {
+    const NAME: &'static str = "rt2_context_desc";
+}
+
+const _: () = assert!(std::mem::offset_of!(rt2_context_desc, struct_size) == 0);
+
 /// A context descriptor with the defaults filled in.
 #[no_mangle]
 pub extern "C" fn rt2_context_desc_default() -> rt2_context_desc {
@@ -242,6 +248,12 @@ pub struct rt2_material {
     pub checker_scale: f32,
 }
 
+impl super::ffi::Versioned for rt2_material {
+    const NAME: &'static str = "rt2_material";
+}
+
+const _: () = assert!(std::mem::offset_of!(rt2_material, struct_size) == 0);
+
 impl From<&Material> for rt2_material {
     fn from(m: &Material) -> Self {
         let c = m.checker.unwrap_or(Checker {
@@ -267,7 +279,6 @@ impl From<&Material> for rt2_material {
 
 impl rt2_material {
     pub(crate) fn to_material(self) -> Result<Material> {
-        check_struct_size::<rt2_material>(self.struct_size, "rt2_material")?;
         let m = Material {
             color: Vec3::from(self.color),
             ambient: self.ambient,
@@ -317,6 +328,12 @@ pub struct rt2_build_options {
     pub ropes: u32,
 }
 
+impl super::ffi::Versioned for rt2_build_options {
+    const NAME: &'static str = "rt2_build_options";
+}
+
+const _: () = assert!(std::mem::offset_of!(rt2_build_options, struct_size) == 0);
+
 impl From<&BuildOptions> for rt2_build_options {
     fn from(o: &BuildOptions) -> Self {
         rt2_build_options {
@@ -340,7 +357,6 @@ impl From<&BuildOptions> for rt2_build_options {
 
 impl rt2_build_options {
     pub(crate) fn to_options(self) -> Result<BuildOptions> {
-        check_struct_size::<rt2_build_options>(self.struct_size, "rt2_build_options")?;
         let bad = Error::invalid_argument;
         let builder = match self.builder {
             0 => Builder::Sah,
@@ -417,9 +433,14 @@ pub struct rt2_render_options {
     pub offset_mode: u32,
 }
 
+impl super::ffi::Versioned for rt2_render_options {
+    const NAME: &'static str = "rt2_render_options";
+}
+
+const _: () = assert!(std::mem::offset_of!(rt2_render_options, struct_size) == 0);
+
 impl rt2_render_options {
     pub(crate) fn to_options(self) -> Result<RenderOptions> {
-        check_struct_size::<rt2_render_options>(self.struct_size, "rt2_render_options")?;
         let bad = Error::invalid_argument;
         if !(1..=64).contains(&self.max_depth) {
             return Err(bad(format!(

@@ -2,7 +2,7 @@
 //! `../shared/raysets` (like Embree's rtcIntersect1M), run by the context's thread pool.
 
 use super::context::rt2_context;
-use super::ffi::{check_struct_size, guard, handle, slice, slice_mut, write_out};
+use super::ffi::{guard, handle, read_versioned, slice, slice_mut, write_out};
 use super::options::{
     intersector_from, intersector_to, query_mode_from, traversal_from, Rt2QueryMode,
 };
@@ -55,6 +55,12 @@ pub struct rt2_query_options {
     pub intersector: u32,
 }
 
+impl super::ffi::Versioned for rt2_query_options {
+    const NAME: &'static str = "rt2_query_options";
+}
+
+const _: () = assert!(std::mem::offset_of!(rt2_query_options, struct_size) == 0);
+
 /// Work done by a query (the thesis' table 1 counters), summed over the batch.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -90,8 +96,7 @@ unsafe fn query_options(opt: *const rt2_query_options) -> crate::error::Result<Q
     if opt.is_null() {
         return Ok(QueryOptions::default());
     }
-    let o = *opt;
-    check_struct_size::<rt2_query_options>(o.struct_size, "rt2_query_options")?;
+    let o = read_versioned(opt)?;
     if !(1..=64).contains(&o.short_stack_size) {
         return Err(Error::invalid_argument(format!(
             "short_stack_size is {} (must be in 1..=64)",
@@ -131,6 +136,9 @@ unsafe fn run_query<T>(
         let q = query_options(opt)?;
         let rays = slice(rays, count, "rays")?;
         let out = slice_mut(out, count, out_name)?;
+        // Refused options are refused before the scene gains ropes or exact vertices: a failed
+        // call leaves the scene as it was.
+        crate::context::check_query(&q)?;
         if q.traversal.is_some_and(|t| t.needs_ropes()) {
             s.write().ensure_ropes()?;
         }

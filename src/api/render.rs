@@ -2,7 +2,7 @@
 
 use super::camera::rt2_camera;
 use super::context::rt2_context;
-use super::ffi::{guard, handle, handle_mut};
+use super::ffi::{guard, handle, handle_mut, read_versioned};
 use super::frame::rt2_frame;
 use super::options::rt2_render_options;
 use super::scene::rt2_scene;
@@ -31,9 +31,12 @@ pub unsafe extern "C" fn rt2_render(
         let opts = if options.is_null() {
             RenderOptions::default()
         } else {
-            (*options).to_options()?
+            read_versioned(options)?.to_options()?
         };
         let f = handle_mut(frame, "frame")?;
+        // Refused options are refused before the scene gains ropes or exact vertices: a failed
+        // call leaves the scene as it was.
+        crate::cpu::whitted::check_schedule(&opts)?;
         if opts.traversal.is_some_and(|t| t.needs_ropes()) {
             s.write().ensure_ropes()?;
         }

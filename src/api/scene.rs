@@ -3,7 +3,9 @@
 //! rendered and queried from many threads at once; an edit waits for running renders.
 
 use super::context::rt2_context;
-use super::ffi::{array, check_out, destroy, guard, handle, path_arg, slice, write_out, Handle};
+use super::ffi::{
+    array, check_out, destroy, guard, handle, path_arg, read_versioned, slice, write_out, Handle,
+};
 use super::options::{rt2_build_options, rt2_material};
 use crate::context::Context;
 use crate::error::{Error, Result, Rt2Status};
@@ -102,7 +104,7 @@ pub unsafe extern "C" fn rt2_scene_add_material(
         if material.is_null() {
             return Err(Error::invalid_argument("material is NULL"));
         }
-        s.add_material((*material).to_material()?)
+        s.add_material(read_versioned(material)?.to_material()?)
     })
 }
 
@@ -296,7 +298,7 @@ pub unsafe extern "C" fn rt2_scene_set_build_options(
         if options.is_null() {
             return Err(Error::invalid_argument("options is NULL"));
         }
-        let o = (*options).to_options()?;
+        let o = read_versioned(options)?.to_options()?;
         s.write().set_build_options(o);
         Ok(())
     })
