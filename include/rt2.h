@@ -760,7 +760,9 @@ struct rt2_query_options rt2_query_options_default(void);
 
 /**
  * Closest hits of `count` rays into `hits`. `opt` may be NULL (defaults); `stats` may be NULL
- * (not collected). On failure `hits` may be partly written only if the failure is internal.
+ * (not collected). Rays are traced in steps of 2^20: on failure `hits` is untouched unless the
+ * backend failed part-way (internal error, GPU lost or out of memory), which leaves the
+ * earlier steps' hits written.
  *
  * # Safety
  * Handles are live; `rays` and `hits` hold `count` elements (may be NULL when count is 0).
@@ -775,7 +777,7 @@ enum rt2_status rt2_intersect(const rt2_context *ctx,
 
 /**
  * Any-hit queries: `occluded[i]` becomes 1 when something lies in ray i's `[tmin, tmax)`,
- * else 0 (shadow rays).
+ * else 0 (shadow rays). Failures leave `occluded` as `rt2_intersect` leaves `hits`.
  *
  * # Safety
  * Handles are live; `rays` and `occluded` hold `count` elements (may be NULL when count is 0).

@@ -130,3 +130,91 @@ fn every_query_mode_gives_the_same_hits_and_bad_values_are_rejected() {
         rt2_context_destroy(ctx);
     }
 }
+
+/// A query of more rays than the API traces in one step (2^20, `QUERY_CHUNK`): every ray's
+/// answer still lands at its own index, across the steps, in every mode.
+#[test]
+fn a_query_longer_than_one_step_answers_every_ray_in_place() {
+    unsafe {
+        let mut ctx = null_mut();
+        assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
+        let mut scene = null_mut();
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let centre = [0.0f32; 3];
+        let mut id = 0;
+        assert_eq!(
+            rt2_scene_add_sphere(scene, centre.as_ptr(), 1.0, 0, &mut id),
+            Rt2Status::Ok
+        );
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        // Every third ray goes through the unit sphere's centre (hit at t = 9), the others pass
+        // 5 units beside it (miss).
+        let n = (1 << 20) + 3;
+        let hits_sphere = |i: usize| i.is_multiple_of(3);
+        let rays: Vec<rt2_ray> = (0..n)
+            .map(|i| rt2_ray {
+                org: [if hits_sphere(i) { 0.0 } else { 5.0 }, 0.0, 10.0],
+                tmin: 0.0,
+                dir: [0.0, 0.0, -1.0],
+                tmax: f32::INFINITY,
+            })
+            .collect();
+        for mode in [Rt2QueryMode::Single, Rt2QueryMode::Stream] {
+            let mut opt = rt2_query_options_default();
+            opt.mode = mode as u32;
+            let mut hits = vec![
+                rt2_hit {
+                    t: -1.0,
+                    u: 0.0,
+                    v: 0.0,
+                    object: 7,
+                    prim: 7
+                };
+                n
+            ];
+            let status = rt2_intersect(
+                ctx,
+                scene,
+                rays.as_ptr(),
+                n,
+                hits.as_mut_ptr(),
+                &opt,
+                null_mut(),
+            );
+            assert_eq!(status, Rt2Status::Ok);
+            for (i, h) in hits.iter().enumerate() {
+                if hits_sphere(i) {
+                    assert!(
+                        h.object == id && (h.t - 9.0).abs() < 1e-5,
+                        "{mode:?}: ray {i} should hit at t = 9, got t = {} object {}",
+                        h.t,
+                        h.object
+                    );
+                } else {
+                    assert!(
+                        h.object == RT2_INVALID_ID && h.t == f32::INFINITY,
+                        "{mode:?}: ray {i} should miss, got t = {} object {}",
+                        h.t,
+                        h.object
+                    );
+                }
+            }
+            let mut occluded = vec![7u8; n];
+            let status = rt2_occluded(
+                ctx,
+                scene,
+                rays.as_ptr(),
+                n,
+                occluded.as_mut_ptr(),
+                &opt,
+                null_mut(),
+            );
+            assert_eq!(status, Rt2Status::Ok);
+            for (i, &o) in occluded.iter().enumerate() {
+                assert_eq!(o, hits_sphere(i) as u8, "{mode:?}: ray {i} occluded flag");
+            }
+        }
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}

@@ -111,8 +111,15 @@ unsafe fn query_options(opt: *const rt2_query_options) -> crate::error::Result<Q
     })
 }
 
-/// Shared prologue of both queries: checks, ropes on demand, the committed scene. It takes
-/// the C call's arguments as they are, hence their number.
+/// Rays converted and traced per step of a C query. The library's own copies (rays in its
+/// layout, hits before they are written out) then stay bounded whatever `count` the caller
+/// passes: for a billion rays, whole copies would be tens of GB, and a failed allocation
+/// aborts the process.
+const QUERY_CHUNK: usize = 1 << 20;
+
+/// Shared prologue of both queries: checks, ropes on demand, the committed scene; then the
+/// rays in steps of [`QUERY_CHUNK`]. It takes the C call's arguments as they are, hence their
+/// number.
 #[allow(clippy::too_many_arguments)]
 unsafe fn run_query<T>(
     ctx: *const rt2_context,
@@ -122,7 +129,7 @@ unsafe fn run_query<T>(
     (out, out_name): (*mut T, &str),
     opt: *const rt2_query_options,
     stats: *mut rt2_query_stats,
-    f: impl FnOnce(
+    f: impl Fn(
         &crate::context::Context,
         &crate::scene::Committed,
         &[Ray],
@@ -147,8 +154,11 @@ unsafe fn run_query<T>(
         }
         let guard = s.read();
         let committed = guard.committed()?;
-        let rays: Vec<Ray> = rays.iter().map(Ray::from).collect();
-        let st = f(&c.inner, committed, &rays, out, &q)?;
+        let mut st = TraversalStats::default();
+        for (rays, out) in rays.chunks(QUERY_CHUNK).zip(out.chunks_mut(QUERY_CHUNK)) {
+            let rays: Vec<Ray> = rays.iter().map(Ray::from).collect();
+            st.add(&f(&c.inner, committed, &rays, out, &q)?);
+        }
         if !stats.is_null() {
             write_out(
                 stats,
@@ -165,7 +175,9 @@ unsafe fn run_query<T>(
 }
 
 /// Closest hits of `count` rays into `hits`. `opt` may be NULL (defaults); `stats` may be NULL
-/// (not collected). On failure `hits` may be partly written only if the failure is internal.
+/// (not collected). Rays are traced in steps of 2^20: on failure `hits` is untouched unless the
+/// backend failed part-way (internal error, GPU lost or out of memory), which leaves the
+/// earlier steps' hits written.
 ///
 /// # Safety
 /// Handles are live; `rays` and `hits` hold `count` elements (may be NULL when count is 0).
@@ -216,7 +228,7 @@ pub unsafe extern "C" fn rt2_intersect(
 }
 
 /// Any-hit queries: `occluded[i]` becomes 1 when something lies in ray i's `[tmin, tmax)`,
-/// else 0 (shadow rays).
+/// else 0 (shadow rays). Failures leave `occluded` as `rt2_intersect` leaves `hits`.
 ///
 /// # Safety
 /// Handles are live; `rays` and `occluded` hold `count` elements (may be NULL when count is 0).
