@@ -80,6 +80,10 @@ int main(int argc, char **argv) {
     expect(rt2_context_create(&desc, &ctx), RT2_STATUS_INVALID_ARGUMENT, "struct_size", "rt2_context_create(wrong struct_size)");
     report(ctx == (rt2_context *)SENTINEL, "  ... *out untouched", NULL);
     desc = rt2_context_desc_default();
+    desc.threads = 1025;
+    expect(rt2_context_create(&desc, &ctx), RT2_STATUS_INVALID_ARGUMENT, "threads", "rt2_context_create(threads 1025)");
+    report(ctx == (rt2_context *)SENTINEL, "  ... *out untouched", NULL);
+    desc = rt2_context_desc_default();
     desc.backend = 99; /* unknown enum value */
     expect(rt2_context_create(&desc, &ctx), RT2_STATUS_INVALID_ARGUMENT, "99", "rt2_context_create(backend = 99)");
     report(ctx == (rt2_context *)SENTINEL, "  ... *out untouched", NULL);

@@ -309,7 +309,7 @@ typedef struct rt2_context_desc {
    */
   uint32_t backend;
   /**
-   * Worker threads; 0 (default) uses every core.
+   * Worker threads; 0 (default) uses every core; at most 1024.
    */
   uint32_t threads;
 } rt2_context_desc;

@@ -56,10 +56,14 @@ thread_local! {
     static IN_WORKER: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
+/// Most worker threads a context may ask for: far above any machine's cores, low enough that
+/// a garbage count is an error rather than an attempt to start millions of threads.
+pub const MAX_THREADS: u32 = 1024;
+
 impl Context {
-    /// `threads == 0` uses every core. The pool is the context's own: the host program's
-    /// global rayon pool is never touched. GPU adapters follow `RT2_ADAPTER` and
-    /// `RT2_GPU_DEVICES` (see [`GpuOptions::from_env`]).
+    /// `threads == 0` uses every core, at most [`MAX_THREADS`]. The pool is the context's own:
+    /// the host program's global rayon pool is never touched. GPU adapters follow
+    /// `RT2_ADAPTER` and `RT2_GPU_DEVICES` (see [`GpuOptions::from_env`]).
     pub fn new(request: BackendRequest, threads: u32) -> Result<Self> {
         Self::with_gpu_options(request, threads, &GpuOptions::from_env())
     }
@@ -70,6 +74,11 @@ impl Context {
         threads: u32,
         gpu_opts: &GpuOptions,
     ) -> Result<Self> {
+        if threads > MAX_THREADS {
+            return Err(Error::invalid_argument(format!(
+                "threads is {threads} (at most {MAX_THREADS}; 0 uses every core)"
+            )));
+        }
         let env = std::env::var("RT2_BACKEND").ok();
         let (decision, gpu) = dispatch::decide_backend(request, env.as_deref(), gpu_opts)?;
         let workers = Workers::default();
@@ -96,9 +105,11 @@ impl Context {
             })
             .build()
             .map_err(|e| {
+                // The system refused a thread (a process or memory limit): a resource
+                // failure, not a bug.
                 Error::new(
-                    crate::error::Rt2Status::Internal,
-                    format!("cannot start threads: {e}"),
+                    crate::error::Rt2Status::OutOfMemory,
+                    format!("cannot start {threads} worker threads: {e}"),
                 )
             })?;
         Ok(Context {

@@ -202,7 +202,7 @@ pub struct rt2_context_desc {
     pub struct_size: u32,
     /// An `rt2_backend` value. Default AUTO; the `RT2_BACKEND` environment variable overrides.
     pub backend: u32,
-    /// Worker threads; 0 (default) uses every core.
+    /// Worker threads; 0 (default) uses every core; at most 1024.
     pub threads: u32,
 }
 
