@@ -418,7 +418,8 @@ typedef struct rt2_build_options {
    */
   uint32_t max_depth;
   /**
-   * Midpoint builder: stop splitting at this many primitives (>= 1).
+   * Midpoint builder: stop splitting at this many primitives (>= 1), or before where a split
+   * would leave every primitive in both children.
    */
   uint32_t leaf_size;
   /**

@@ -118,3 +118,128 @@ fn failed_edits_leave_the_scene_as_it_was() {
         rt2_scene_destroy(scene);
     }
 }
+
+/// Closest hit of one ray through the C API.
+unsafe fn hit_of(
+    ctx: *mut rt2_context,
+    scene: *mut rt2_scene,
+    org: [f32; 3],
+    dir: [f32; 3],
+) -> rt2_hit {
+    let ray = rt2_ray {
+        org,
+        tmin: 0.0,
+        dir,
+        tmax: f32::INFINITY,
+    };
+    let mut hit = std::mem::zeroed::<rt2_hit>();
+    assert_eq!(
+        rt2_intersect(ctx, scene, &ray, 1, &mut hit, null(), null_mut()),
+        Rt2Status::Ok
+    );
+    hit
+}
+
+/// Objects that do not fit in f32 once placed in world space are rejected when added or moved
+/// (they were counted but never hit: their bounds overflowed and the tree left them out), and
+/// shapes whose size is extreme but representable are hit.
+#[test]
+fn objects_beyond_the_f32_range_are_errors_and_extreme_valid_ones_are_hit() {
+    unsafe {
+        let (mut ctx, mut scene) = (null_mut(), null_mut());
+        assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let mut id = 77u32;
+        let far = [3e38f32, 0.0, 0.0];
+        assert_eq!(
+            rt2_scene_add_sphere(scene, far.as_ptr(), 1e38, 0, &mut id),
+            Rt2Status::InvalidArgument
+        );
+        assert!(
+            last_error().contains("does not fit in f32"),
+            "{}",
+            last_error()
+        );
+        assert_eq!(id, 77, "no id written on failure");
+        let huge = [1e30f32; 3];
+        assert_eq!(
+            rt2_scene_add_ellipsoid(scene, far.as_ptr(), huge.as_ptr(), 0, &mut id),
+            Rt2Status::InvalidArgument
+        );
+        // A triangle whose edge overflows although its corners are finite.
+        let wide = [-3e38f32, 0.0, 0.0, 3e38, 0.0, 0.0, 0.0, 1.0, 0.0];
+        let tri = [0u32, 1, 2];
+        assert_eq!(
+            rt2_scene_add_mesh(scene, wide.as_ptr(), 3, tri.as_ptr(), 1, 0, &mut id),
+            Rt2Status::InvalidArgument
+        );
+        assert!(last_error().contains("triangle 0"), "{}", last_error());
+
+        // Valid: a triangle in z = 0, then a move past the f32 range, which is refused.
+        let small = [-1.0f32, -1.0, 0.0, 1.0, -1.0, 0.0, 0.0, 1.0, 0.0];
+        assert_eq!(
+            rt2_scene_add_mesh(scene, small.as_ptr(), 3, tri.as_ptr(), 1, 0, &mut id),
+            Rt2Status::Ok
+        );
+        assert_eq!(id, 0, "nothing was added by the failures");
+        // x scaled by 1e38 and moved by 3e38: the corner at x = 1 lands at 4e38.
+        let beyond = [
+            1e38f32, 0.0, 0.0, 3e38, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0,
+        ];
+        assert_eq!(
+            rt2_scene_set_transform(scene, 0, beyond.as_ptr()),
+            Rt2Status::InvalidArgument
+        );
+        assert!(
+            last_error().contains("does not fit in f32"),
+            "{}",
+            last_error()
+        );
+        // Extreme but representable: ellipsoid radii 1e13 and 1e-16 (determinants 1e39 and
+        // 1e-48), plane normals of length 1e20 and 1e-23 ("any length").
+        let (c1, r1) = ([0.0f32, 0.0, 1e14], [1e13f32; 3]);
+        let (c2, r2) = ([0.0f32, 0.0, -10.0], [1e-16f32; 3]);
+        for (c, r) in [(c1, r1), (c2, r2)] {
+            assert_eq!(
+                rt2_scene_add_ellipsoid(scene, c.as_ptr(), r.as_ptr(), 0, null_mut()),
+                Rt2Status::Ok
+            );
+        }
+        let (n1, n2) = ([1e20f32, 0.0, 0.0], [0.0f32, 1e-23, 0.0]);
+        assert_eq!(
+            rt2_scene_add_plane(scene, n1.as_ptr(), 1e21, 0, &mut id),
+            Rt2Status::Ok
+        );
+        assert_eq!(id, 3);
+        assert_eq!(
+            rt2_scene_add_plane(scene, n2.as_ptr(), 4e-23, 0, &mut id),
+            Rt2Status::Ok
+        );
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        let mut st = std::mem::zeroed::<rt2_scene_statistics>();
+        st.struct_size = std::mem::size_of::<rt2_scene_statistics>() as u32;
+        assert_eq!(rt2_scene_stats(scene, &mut st), Rt2Status::Ok);
+        assert_eq!(
+            (st.object_count, st.triangle_count, st.ellipsoid_count),
+            (5, 1, 2)
+        );
+
+        // The triangle kept its place: hit at z = 0 from z = 5.
+        let h = hit_of(ctx, scene, [0.0, 0.0, 5.0], [0.0, 0.0, -1.0]);
+        assert_eq!((h.object, h.t), (0, 5.0));
+        // The big ellipsoid's near side is at z = 9e13.
+        let h = hit_of(ctx, scene, [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]);
+        assert_eq!(h.object, 1);
+        assert!((h.t / 9e13 - 1.0).abs() < 1e-5, "{}", h.t);
+        // The tiny one at z = -10, seen from 1e-15 away.
+        let h = hit_of(ctx, scene, [0.0, 0.0, -10.0 + 1e-6], [0.0, 0.0, -1.0]);
+        assert_eq!(h.object, 2, "t {}", h.t);
+        // Plane x = 10 (normal 1e20, offset 1e21) and y = 4 (normal 1e-23, offset 4e-23).
+        let h = hit_of(ctx, scene, [5.0, 0.0, 0.0], [1.0, 0.0, 0.0]);
+        assert_eq!((h.object, h.t), (3, 5.0));
+        let h = hit_of(ctx, scene, [0.0, 1.0, 0.0], [0.0, 1.0, 0.0]);
+        assert_eq!((h.object, h.t), (4, 3.0));
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}

@@ -3,7 +3,10 @@
 //! it does not trust the library's own walk.
 
 use glam::{Mat3, Vec3};
-use rt2::geometry::{Aabb, Ellipsoid, PrimitiveSet, Sphere, Triangle, INVALID};
+use rt2::cpu::traverse::{intersect, Traversal, TraverseOptions};
+use rt2::geometry::{
+    Aabb, Ellipsoid, PrimitiveSet, Ray, Sphere, TraversalStats, Triangle, INVALID,
+};
 use rt2::kdtree::{build, BuildOptions, Builder, KdNode, KdTree, Layout};
 
 /// SplitMix64: a small deterministic generator, so every run sees the same scenes.
@@ -388,6 +391,69 @@ fn degenerate_scenes_give_valid_trees() {
     }
 }
 
+/// Overlapping primitives that no split can separate (coincident spheres, coincident
+/// triangles) end the midpoint recursion in a leaf instead of being copied into both children
+/// down to the depth limit: at leaf size 1 that was 2^depth nodes, an allocation failure
+/// (abort) at the allowed depth 64. Depth 16 comes first so that a regression fails the node
+/// count here instead of exhausting memory.
+#[test]
+fn midpoint_stops_where_no_split_separates() {
+    let mut set = PrimitiveSet::default();
+    for _ in 0..2 {
+        set.spheres.push(Sphere {
+            center: [0.0; 3],
+            radius: 1.0,
+        });
+        set.triangles.push(Triangle::from_vertices(
+            Vec3::new(4.0, -1.0, 0.0),
+            Vec3::new(6.0, -1.0, 0.0),
+            Vec3::new(5.0, 1.0, 0.0),
+        ));
+    }
+    // A sphere apart from the rest, so that the root does split.
+    set.spheres.push(Sphere {
+        center: [0.0, 5.0, 0.0],
+        radius: 0.5,
+    });
+    for depth in [16, 64] {
+        for layout in [Layout::DepthFirst, Layout::VanEmdeBoas] {
+            let opts = BuildOptions {
+                builder: Builder::Midpoint,
+                leaf_size: 1,
+                max_depth: Some(depth),
+                ..options(Builder::Midpoint, layout)
+            };
+            let tree = build(&set, &opts);
+            assert!(
+                tree.nodes.len() <= 64,
+                "depth {depth}: {} nodes for 5 primitives",
+                tree.nodes.len()
+            );
+            check_tree(&set, &tree, &format!("coincident, depth {depth}"));
+            // The closest hit is the lower index of each coincident pair. Triangles come first
+            // in the global index: triangles 0, 1, then spheres 2, 3, 4.
+            for (org, dir, prim, t) in [
+                (Vec3::new(-5.0, 0.0, 0.0), Vec3::X, 2, 4.0),
+                (Vec3::new(5.0, 0.0, -3.0), Vec3::Z, 0, 3.0),
+                (Vec3::new(0.0, 9.0, 0.0), -Vec3::Y, 4, 3.5),
+            ] {
+                for how in Traversal::ALL {
+                    let ray = Ray::new(org, dir, 0.0, f32::INFINITY);
+                    let mut st = TraversalStats::default();
+                    let hit =
+                        intersect(&tree, &set, &ray, how, &TraverseOptions::default(), &mut st);
+                    assert_eq!(hit.prim, prim, "depth {depth} {how:?} {org}");
+                    assert!(
+                        (hit.t - t).abs() < 1e-5,
+                        "depth {depth} {how:?}: t {}",
+                        hit.t
+                    );
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn empty_scene_is_one_empty_leaf() {
     let tree = build(&PrimitiveSet::default(), &BuildOptions::default());
@@ -531,10 +597,34 @@ fn stats_match_the_tree() {
         let refs = tree.prim_indices.len() as f32 / (voxels.len() - empty) as f32;
         assert!((s.avg_prims_per_leaf - refs).abs() < 1e-3);
         assert!(s.sah_cost > 0.0 && s.build_ms >= 0.0);
-        // A midpoint tree stops at leaf_size unless the depth limit stopped it first.
+        // A midpoint tree stops at leaf_size unless the depth limit stopped it first or the
+        // split of the voxel would separate nothing: every primitive reaches both halves.
         if opts.builder == Builder::Midpoint {
             for v in &voxels {
-                assert!(count(v) <= opts.leaf_size as usize || v.2 == s.max_depth);
+                if count(v) <= opts.leaf_size as usize || v.2 == s.max_depth {
+                    continue;
+                }
+                let voxel = v.1;
+                let axis = (0..3)
+                    .find(|&a| voxel.extent()[a] == voxel.extent().max_element())
+                    .unwrap();
+                let split = voxel.center()[axis];
+                let (mut below, mut above) = (voxel, voxel);
+                below.max[axis] = split;
+                above.min[axis] = split;
+                for &p in tree.leaf_prims(tree.nodes[v.0 as usize]) {
+                    for half in [below, above] {
+                        assert!(
+                            !set.clipped_bounds(p as usize, &half).is_empty(),
+                            "{:?}: leaf {} of {} prims above leaf size at depth {}: \
+                             prim {p} does not reach {half:?}",
+                            opts.builder,
+                            v.0,
+                            count(v),
+                            v.2
+                        );
+                    }
+                }
             }
         }
     }

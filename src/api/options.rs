@@ -316,7 +316,8 @@ pub struct rt2_build_options {
     pub layout: u32,
     /// Maximum tree depth, at most 64; 0 (default) picks one from the primitive count.
     pub max_depth: u32,
-    /// Midpoint builder: stop splitting at this many primitives (>= 1).
+    /// Midpoint builder: stop splitting at this many primitives (>= 1), or before where a split
+    /// would leave every primitive in both children.
     pub leaf_size: u32,
     /// SAH cost of a traversal step relative to a primitive test (> 0, default 3): larger values
     /// give a smaller tree, built faster, with fewer and fuller leaves; smaller ones (down to

@@ -82,17 +82,29 @@ pub struct Ellipsoid {
 }
 
 impl Ellipsoid {
-    /// `m` maps the unit sphere onto the ellipsoid (columns = semi-axes). `None` when singular.
+    /// `m` maps the unit sphere onto the ellipsoid (columns = semi-axes). `None` when it is
+    /// singular or its inverse or bounds do not fit in `f32`.
+    ///
+    /// The inverse is taken of `m` with unit-length columns and scaled back: the determinant
+    /// and cofactors of `m` itself overflow or underflow for semi-axes far from 1 (radii 1e13
+    /// have determinant 1e39), although the ellipsoid and its inverse are representable.
     pub fn new(center: Vec3, m: Mat3) -> Option<Self> {
-        let det = m.determinant();
+        let lengths = Vec3::new(m.x_axis.length(), m.y_axis.length(), m.z_axis.length());
+        if !(lengths.min_element() > 0.0 && lengths.is_finite()) {
+            return None;
+        }
+        let unit = m * Mat3::from_diagonal(lengths.recip());
+        let det = unit.determinant();
         if det == 0.0 || !det.is_finite() {
             return None;
         }
+        // M = U D, so M⁻¹ = D⁻¹ U⁻¹: row i of U⁻¹ divided by the length of column i.
+        let inv = Mat3::from_diagonal(lengths.recip()) * unit.inverse();
         // Extent along axis i is the length of row i of M.
         let half = Vec3::new(m.row(0).length(), m.row(1).length(), m.row(2).length());
-        Some(Ellipsoid {
+        (inv.is_finite() && half.is_finite() && center.is_finite()).then(|| Ellipsoid {
             center: center.to_array(),
-            inv: m.inverse().to_cols_array(),
+            inv: inv.to_cols_array(),
             half: half.to_array(),
         })
     }

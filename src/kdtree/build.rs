@@ -46,7 +46,8 @@ pub struct BuildOptions {
     /// Maximum depth; `None` picks `8 + 1.3 log2 N` (Havran's rule) for SAH, 20 for midpoint.
     /// Clamped to [`MAX_DEPTH_LIMIT`].
     pub max_depth: Option<u32>,
-    /// Midpoint trees stop splitting at this many primitives.
+    /// Midpoint trees stop splitting at this many primitives (or before, where a split would
+    /// leave every primitive in both children).
     pub leaf_size: u32,
     /// SAH cost of one traversal step, relative to one primitive test (1.0). Larger values make
     /// fewer, fuller leaves: a smaller tree built faster, slower coherent single rays. The

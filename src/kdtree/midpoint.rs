@@ -1,6 +1,7 @@
 //! Midpoint builder of the vectorised-traversal paper (Noguera & Ureña): every voxel is split
-//! at its centre along its longest axis until it holds at most `leaf_size` primitives or the
-//! depth limit is reached. Cheap to build and the natural tree for breadth-first ray streams.
+//! at its centre along its longest axis until it holds at most `leaf_size` primitives, the
+//! depth limit is reached or no split separates its primitives (see `Midpoint::split`). Cheap
+//! to build and the natural tree for breadth-first ray streams.
 
 use super::split::{child_voxels, classify, clip, fork, BuildNode, Side};
 use super::BuildInput;
@@ -22,6 +23,9 @@ pub(super) fn build(
     .node(prims, voxel, 0)
 }
 
+/// (index, bounds inside the child voxel) pairs below and above a split plane.
+type Sides = [Vec<(u32, Aabb)>; 2];
+
 struct Midpoint<'a> {
     input: &'a dyn BuildInput,
     max_depth: u32,
@@ -30,28 +34,11 @@ struct Midpoint<'a> {
 
 impl Midpoint<'_> {
     fn node(&self, prims: Vec<(u32, Aabb)>, voxel: Aabb, depth: u32) -> BuildNode {
-        let Some((axis, split)) = self.plane(&prims, &voxel, depth) else {
+        let Some((axis, split, [below, above])) = self.split(&prims, &voxel, depth) else {
             return BuildNode::leaf(prims.into_iter().map(|(p, _)| p).collect());
         };
-        let voxels = child_voxels(&voxel, axis, split);
-        let mut sides: [Vec<(u32, Aabb)>; 2] = Default::default();
-        for (p, b) in prims {
-            // A primitive in the plane touches both closed child voxels: it is clipped like a
-            // straddling one, which keeps it in both.
-            match classify(b.min[axis], b.max[axis], split) {
-                Side::Below => sides[0].push((p, b)),
-                Side::Above => sides[1].push((p, b)),
-                Side::Both => {
-                    for (side, v) in sides.iter_mut().zip(&voxels) {
-                        if let Some(c) = clip(self.input, p, v) {
-                            side.push((p, c));
-                        }
-                    }
-                }
-            }
-        }
-        let [below, above] = sides;
-        let [vb, va] = voxels;
+        drop(prims);
+        let [vb, va] = child_voxels(&voxel, axis, split);
         let n = below.len() + above.len();
         let children = fork(
             depth,
@@ -66,9 +53,23 @@ impl Midpoint<'_> {
         }
     }
 
-    /// The split plane, or `None` for a leaf: few primitives, depth limit, or a voxel too
-    /// small to be halved in `f32` (a point-like or rounding-limited voxel).
-    fn plane(&self, prims: &[(u32, Aabb)], voxel: &Aabb, depth: u32) -> Option<(usize, f32)> {
+    /// The split plane and the primitives of each side, or `None` for a leaf: few primitives,
+    /// depth limit, a voxel too small to be halved in `f32` (point-like or rounding-limited),
+    /// or a split that separates nothing.
+    ///
+    /// A split that leaves every primitive in both children only doubles the references:
+    /// overlapping primitives (two coincident spheres, coplanar triangles) would stay together
+    /// down to the depth limit, 2^depth nodes (at the allowed depth 64, an allocation failure
+    /// and an abort). Such a voxel becomes a leaf, the usual kd-tree termination rule (SAH gets
+    /// it from its cost). Only the longest axis is tried, as in the paper: primitives that all
+    /// span the voxel's longest axis but could be told apart on another one (long thin
+    /// parallel ones) stay in one leaf, a slower leaf but never a wrong one.
+    fn split(
+        &self,
+        prims: &[(u32, Aabb)],
+        voxel: &Aabb,
+        depth: u32,
+    ) -> Option<(usize, f32, Sides)> {
         if prims.len() <= self.leaf_size || depth >= self.max_depth {
             return None;
         }
@@ -81,6 +82,35 @@ impl Midpoint<'_> {
             2
         };
         let split = voxel.center()[axis];
-        (split > voxel.min[axis] && split < voxel.max[axis]).then_some((axis, split))
+        if !(split > voxel.min[axis] && split < voxel.max[axis]) {
+            return None;
+        }
+        let sides = self.partition(prims, voxel, axis, split);
+        // Each primitive is at most once on each side: a side shorter than `prims` misses one.
+        let separates = sides.iter().any(|s| s.len() < prims.len());
+        separates.then_some((axis, split, sides))
+    }
+
+    /// The primitives of each child voxel of the split at `axis = split`, with their bounds
+    /// inside it.
+    fn partition(&self, prims: &[(u32, Aabb)], voxel: &Aabb, axis: usize, split: f32) -> Sides {
+        let voxels = child_voxels(voxel, axis, split);
+        let mut sides: Sides = Default::default();
+        for &(p, b) in prims {
+            // A primitive in the plane touches both closed child voxels: it is clipped like a
+            // straddling one, which keeps it in both.
+            match classify(b.min[axis], b.max[axis], split) {
+                Side::Below => sides[0].push((p, b)),
+                Side::Above => sides[1].push((p, b)),
+                Side::Both => {
+                    for (side, v) in sides.iter_mut().zip(&voxels) {
+                        if let Some(c) = clip(self.input, p, v) {
+                            side.push((p, c));
+                        }
+                    }
+                }
+            }
+        }
+        sides
     }
 }

@@ -271,6 +271,7 @@ impl Scene {
                 "a scene holds fewer than 2^30 primitives",
             ));
         }
+        object::check(&shape, &Affine3A::IDENTITY)?;
         self.prim_count += shape.prim_count();
         self.objects.push(Object {
             shape,
@@ -297,6 +298,7 @@ impl Scene {
             ));
         }
         obj.shape.accepts(&t)?;
+        object::check(&obj.shape, &t)?;
         self.objects[object as usize].transform = t;
         self.dirty = true;
         Ok(())
@@ -314,7 +316,7 @@ impl Scene {
         // One origin list per kind, concatenated in the order of the global index.
         let mut by_kind: Vec<Vec<PrimOrigin>> = vec![Vec::new(); 5];
         for (id, obj) in self.objects.iter().enumerate() {
-            object::place(obj, id as u32, &mut prims, &mut by_kind);
+            object::place(obj, id as u32, &mut prims, &mut by_kind)?;
         }
         let mut origins: Vec<PrimOrigin> = by_kind.concat();
         let mut tree = kdtree::build(&prims, &self.build);

@@ -73,17 +73,19 @@ pub struct PrimOrigin {
 
 /// The world-space corners of a mesh object's triangles, in file order (none for other shapes).
 fn world_triangles(obj: &Object) -> Vec<[Vec3; 3]> {
+    shape_triangles(&obj.shape, &obj.transform)
+}
+
+/// The corners of `shape`'s triangles placed by `t`, in file order (none for other shapes).
+fn shape_triangles(shape: &Shape, t: &Affine3A) -> Vec<[Vec3; 3]> {
     let Shape::Mesh {
         positions,
         triangles,
-    } = &obj.shape
+    } = shape
     else {
         return Vec::new();
     };
-    let world: Vec<Vec3> = positions
-        .iter()
-        .map(|&p| obj.transform.transform_point3(p))
-        .collect();
+    let world: Vec<Vec3> = positions.iter().map(|&p| t.transform_point3(p)).collect();
     triangles
         .iter()
         .map(|tri| tri.map(|i| world[i as usize]))
@@ -102,21 +104,42 @@ pub fn triangle_corners(objects: &[Object]) -> Vec<[[f32; 3]; 3]> {
 
 /// Appends the world-space primitives of `obj` to `set`; `origins` receives one entry per
 /// bounded primitive, `plane_origins` per plane (they are indexed after the bounded ones).
+///
+/// Fails, appending nothing, when a primitive cannot be represented in world space (see
+/// [`check`]); the scene checks every object when it is added or moved, so a commit never
+/// meets one.
 pub fn place(
     obj: &Object,
     object_id: u32,
     set: &mut PrimitiveSet,
     origins: &mut [Vec<PrimOrigin>],
-) {
-    let t = obj.transform;
+) -> Result<()> {
+    place_shape(&obj.shape, &obj.transform, object_id, set, origins)
+}
+
+fn place_shape(
+    shape: &Shape,
+    t: &Affine3A,
+    object_id: u32,
+    set: &mut PrimitiveSet,
+    origins: &mut [Vec<PrimOrigin>],
+) -> Result<()> {
     let lin = Mat3::from(t.matrix3);
     let one = PrimOrigin {
         object: object_id,
         prim: 0,
     };
-    match &obj.shape {
+    match shape {
         Shape::Mesh { .. } => {
-            for (k, [a, b, c]) in world_triangles(obj).into_iter().enumerate() {
+            let triangles = shape_triangles(shape, t);
+            if let Some(k) = triangles.iter().position(|t| !triangle_fits(t)) {
+                return Err(Error::invalid_argument(format!(
+                    "triangle {k} of the mesh does not fit in f32 in world space: its \
+                     corners {:?} or edges overflow",
+                    triangles[k]
+                )));
+            }
+            for (k, [a, b, c]) in triangles.into_iter().enumerate() {
                 set.triangles.push(Triangle::from_vertices(a, b, c));
                 origins[0].push(PrimOrigin {
                     object: object_id,
@@ -127,44 +150,129 @@ pub fn place(
         Shape::Sphere { center, radius } => {
             let c = t.transform_point3(*center);
             let cols = [lin.x_axis, lin.y_axis, lin.z_axis].map(|v| v.length());
-            let similarity = (lin.transpose() * lin
-                - Mat3::from_diagonal(Vec3::splat(cols[0] * cols[0])))
-            .to_cols_array()
-            .iter()
-            .all(|e| e.abs() <= 1e-6 * cols[0] * cols[0]);
+            // Compared at unit scale, so that a large scale does not overflow the test.
+            let unit = lin * (1.0 / cols[0]);
+            let similarity = (unit.transpose() * unit - Mat3::IDENTITY)
+                .to_cols_array()
+                .iter()
+                .all(|e| e.abs() <= 1e-6);
             if similarity {
-                set.spheres.push(Sphere {
+                let sphere = Sphere {
                     center: c.to_array(),
                     radius: radius * cols[0],
-                });
+                };
+                // The intersection squares the radius: it must neither overflow nor vanish.
+                let r2 = sphere.radius * sphere.radius;
+                if !(r2.is_normal() && finite_bounds(&sphere.bounds())) {
+                    return Err(Error::invalid_argument(format!(
+                        "the sphere does not fit in f32 in world space: centre {c}, radius {} \
+                         (its bounds and the square of its radius must be finite and non-zero)",
+                        sphere.radius
+                    )));
+                }
+                set.spheres.push(sphere);
                 origins[1].push(one);
-            } else if let Some(e) = Ellipsoid::new(c, lin * *radius) {
-                set.ellipsoids.push(e);
+            } else {
+                set.ellipsoids.push(ellipsoid(c, lin * *radius, "sphere")?);
                 origins[2].push(one);
             }
         }
         Shape::Ellipsoid { center, radii } => {
-            if let Some(e) = Ellipsoid::new(
-                t.transform_point3(*center),
-                lin * Mat3::from_diagonal(*radii),
-            ) {
-                set.ellipsoids.push(e);
-                origins[2].push(one);
-            }
+            let m = lin * Mat3::from_diagonal(*radii);
+            set.ellipsoids
+                .push(ellipsoid(t.transform_point3(*center), m, "ellipsoid")?);
+            origins[2].push(one);
         }
         Shape::Box { min, max } => {
             let (a, b) = (t.transform_point3(*min), t.transform_point3(*max));
-            set.boxes.push(Aabb::new(a.min(b), a.max(b)));
+            let bounds = Aabb::new(a.min(b), a.max(b));
+            if !finite_bounds(&bounds) {
+                return Err(Error::invalid_argument(format!(
+                    "the box does not fit in f32 in world space: corners {a} and {b}"
+                )));
+            }
+            set.boxes.push(bounds);
             origins[3].push(one);
         }
         Shape::Plane { normal, offset } => {
-            let n = (lin.inverse().transpose() * *normal).normalize();
-            let p0 = t.transform_point3(*normal * (*offset / normal.length_squared()));
-            set.planes.push(Plane {
-                normal: n.to_array(),
-                offset: n.dot(p0),
-            });
+            set.planes.push(plane(t, *normal, *offset)?);
             origins[4].push(one);
         }
     }
+    Ok(())
+}
+
+/// Whether `shape` placed by `t` fits in world space: every primitive finite, so that the tree
+/// holds it and rays can hit it. Without this check an object the user added would be counted
+/// but left out of the tree (its bounds overflow) or never hit (a singular ellipsoid, a NaN
+/// plane), with no error.
+pub fn check(shape: &Shape, t: &Affine3A) -> Result<()> {
+    let mut origins = vec![Vec::new(); 5];
+    place_shape(shape, t, 0, &mut PrimitiveSet::default(), &mut origins)
+}
+
+fn finite_bounds(b: &Aabb) -> bool {
+    b.min.is_finite() && b.max.is_finite()
+}
+
+/// Whether a triangle's corners, the edges it stores and the corners rebuilt from them
+/// (its bounds) are finite.
+fn triangle_fits(&[a, b, c]: &[Vec3; 3]) -> bool {
+    let t = Triangle::from_vertices(a, b, c);
+    [t.e1, t.e2].iter().all(|e| Vec3::from(*e).is_finite()) && finite_bounds(&t.bounds())
+}
+
+fn ellipsoid(center: Vec3, m: Mat3, what: &str) -> Result<Ellipsoid> {
+    Ellipsoid::new(center, m)
+        .filter(|e| finite_bounds(&e.bounds()))
+        .ok_or_else(|| {
+            Error::invalid_argument(format!(
+                "the {what} does not fit in f32 in world space: centre {center}, semi-axes \
+                 {:?} (its inverse or its bounds overflow or underflow)",
+                m.to_cols_array_2d()
+            ))
+        })
+}
+
+/// `v` scaled to unit length, or `None` for a zero or non-finite vector. Divided by its largest
+/// component first, so that lengths beyond the `f32` range (1e20, 1e-23) normalise exactly as
+/// unit ones do.
+fn unit(v: Vec3) -> Option<Vec3> {
+    let m = v.abs().max_element();
+    if !(m > 0.0 && m.is_finite()) {
+        return None;
+    }
+    let u = (v / m).normalize();
+    u.is_finite().then_some(u)
+}
+
+/// The world-space plane of `normal · x = offset` under `t`. `normal` may have any non-zero
+/// finite length (as documented): plane equation and transform are scaled to unit size before
+/// anything is squared or inverted.
+fn plane(t: &Affine3A, normal: Vec3, offset: f32) -> Result<Plane> {
+    let fail = || {
+        Error::invalid_argument(format!(
+            "the plane normal {normal} . x = {offset} does not fit in f32 in world space"
+        ))
+    };
+    let m = normal.abs().max_element();
+    let (n, d) = (normal / m, offset / m);
+    let lin = Mat3::from(t.matrix3);
+    // The normal transforms by the inverse transpose, whose direction does not depend on the
+    // scale of `lin`.
+    let scale = lin
+        .to_cols_array()
+        .iter()
+        .fold(0.0f32, |a, e| a.max(e.abs()));
+    let lin = lin * (1.0 / scale);
+    let world = unit(lin.inverse().transpose() * n).ok_or_else(fail)?;
+    let p0 = t.transform_point3(n * (d / n.length_squared()));
+    let offset = world.dot(p0);
+    if !(d.is_finite() && p0.is_finite() && offset.is_finite()) {
+        return Err(fail());
+    }
+    Ok(Plane {
+        normal: world.to_array(),
+        offset,
+    })
 }
