@@ -207,6 +207,12 @@ int main(int argc, char **argv) {
            "rt2_scene_set_transform(object 5 does not exist)");
     expect(rt2_scene_set_transform(scene, first, singular), RT2_STATUS_INVALID_ARGUMENT, "singular",
            "rt2_scene_set_transform(singular matrix)");
+    {
+        /* Invertible on paper, but its determinant overflows float: its inverse is unusable. */
+        const float huge_scale[12] = {1e30f, 0, 0, 0, 0, 1e30f, 0, 0, 0, 0, 1e-30f, 0};
+        expect(rt2_scene_set_transform(scene, first, huge_scale), RT2_STATUS_INVALID_ARGUMENT, "out of range",
+               "rt2_scene_set_transform(scales 1e30, 1e30, 1e-30)");
+    }
     rt2_build_options bo = rt2_build_options_default();
     bo.builder = 42;
     expect(rt2_scene_set_build_options(scene, &bo), RT2_STATUS_INVALID_ARGUMENT, "42", "rt2_scene_set_build_options(builder 42)");

@@ -4,6 +4,12 @@
  * Rules: every fallible call returns rt2_status and on failure leaves its objects and
  * outputs unchanged; rt2_last_error_message() says what was wrong (per thread).
  * *_destroy(NULL) is a no-op. Scenes keep their context alive.
+ *
+ * Threads: a context may be used from any number of threads at once. A committed scene may
+ * be rendered and queried concurrently (each render into its own frame); edits and commits
+ * lock the scene and wait for running renders. A frame or a camera is used by one call at a
+ * time while it is being modified. The `rays` and `hits` (or `occluded`) arrays of one query
+ * must not overlap.
  */
 
 #ifndef RT2_H

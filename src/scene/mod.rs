@@ -293,9 +293,11 @@ impl Scene {
         check_finite("transform", &t.to_cols_array())?;
         let det = t.matrix3.determinant();
         if det == 0.0 || !det.is_finite() {
-            return Err(Error::invalid_argument(
-                "transform is singular (its 3x3 part has determinant 0)",
-            ));
+            // An overflowing determinant makes the inverse (normals, ellipsoids) unusable too.
+            return Err(Error::invalid_argument(format!(
+                "transform is singular or its scale is out of range (its 3x3 part has \
+                 determinant {det}, must be finite and non-zero)"
+            )));
         }
         obj.shape.accepts(&t)?;
         object::check(&obj.shape, &t)?;
