@@ -9,7 +9,9 @@
 //!
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
-use super::simd::{self, lanes_less, lanes_less_eq, prefetch, Kernel, LeafPrims, RayLanes, Width};
+use super::simd::{
+    self, lanes_less, lanes_less_eq, prefetch, Isa, Kernel, LeafPrims, RayLanes, Width,
+};
 use super::traverse::{
     any_among, any_in_subtree, clip_lanes, closest_among, closest_in_subtree, Entry,
 };
@@ -24,9 +26,12 @@ pub(crate) trait Answer {
     /// answers the ray (any-hit): it needs no traversal.
     fn planes(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool;
     /// Tests ray `i` against a leaf's prepared primitives; `t_exit` is where the ray leaves the
-    /// leaf. True when the ray is finished (the standard traversal's stop rule).
+    /// leaf. True when the ray is finished (the standard traversal's stop rule). (The leaf, the
+    /// ray and the width's proof: a struct bundling them would only rename the arguments.)
+    #[allow(clippy::too_many_arguments)]
     fn leaf<const N: usize>(
         &mut self,
+        isa: Isa<N>,
         prims: &PrimitiveSet,
         leaf: &LeafPrims<N>,
         i: usize,
@@ -37,8 +42,10 @@ pub(crate) trait Answer {
     /// Tests the rays `ids` (lanes `live`) against a leaf's primitives `leaf`, N rays per
     /// triangle, primitives in leaf order as the single-ray test; `t_exit` is where each ray
     /// leaves the leaf. Returns the lanes that are finished.
+    #[allow(clippy::too_many_arguments)]
     fn leaf_rays<const N: usize>(
         &mut self,
+        isa: Isa<N>,
         prims: &PrimitiveSet,
         leaf: &[u32],
         rays: &[Ray],
@@ -77,6 +84,7 @@ impl Answer for Closest<'_> {
     #[inline(always)]
     fn leaf<const N: usize>(
         &mut self,
+        isa: Isa<N>,
         prims: &PrimitiveSet,
         leaf: &LeafPrims<N>,
         i: usize,
@@ -88,7 +96,7 @@ impl Answer for Closest<'_> {
         stats.prim_tests += (leaf.count - leaf.others.len()) as u64;
         let hit = &mut self.0[i];
         for b in &leaf.blocks {
-            b.intersect(ray, hit);
+            b.intersect(isa, ray, hit);
         }
         closest_among(prims, ray, &RayTest::PLAIN, &leaf.others, hit, stats);
         // Strictly before the exit, as `traverse::common::Closest`.
@@ -98,6 +106,7 @@ impl Answer for Closest<'_> {
     #[inline(always)]
     fn leaf_rays<const N: usize>(
         &mut self,
+        isa: Isa<N>,
         prims: &PrimitiveSet,
         leaf: &[u32],
         rays: &[Ray],
@@ -120,7 +129,7 @@ impl Answer for Closest<'_> {
         for &p in leaf {
             if let Some(tri) = prims.triangles.get(p as usize) {
                 let (t, u, v) = lanes.triangle(tri, &bound);
-                let hits = lanes_less(&t, &[f32::INFINITY; N]);
+                let hits = lanes_less(isa, &t, &[f32::INFINITY; N]);
                 for_lanes(live & hits, |l| {
                     let hit = &mut self.0[ids[l] as usize];
                     hit.offer(t[l], u[l], v[l], p);
@@ -135,7 +144,7 @@ impl Answer for Closest<'_> {
             }
         }
         // Strictly before the exit, as `traverse::common::Closest`.
-        live & lanes_less(&hit_t, t_exit)
+        live & lanes_less(isa, &hit_t, t_exit)
     }
 
     #[inline(always)]
@@ -177,6 +186,7 @@ impl Answer for AnyHit<'_> {
     #[inline(always)]
     fn leaf<const N: usize>(
         &mut self,
+        isa: Isa<N>,
         prims: &PrimitiveSet,
         leaf: &LeafPrims<N>,
         i: usize,
@@ -186,7 +196,7 @@ impl Answer for AnyHit<'_> {
     ) -> bool {
         // The blocks' triangles here; the rest are counted by the single-ray leaf test.
         stats.prim_tests += (leaf.count - leaf.others.len()) as u64;
-        let found = leaf.blocks.iter().any(|b| b.occludes(ray))
+        let found = leaf.blocks.iter().any(|b| b.occludes(isa, ray))
             || any_among(prims, ray, &RayTest::PLAIN, &leaf.others, stats);
         self.0[i] = found;
         found
@@ -195,6 +205,7 @@ impl Answer for AnyHit<'_> {
     #[inline(always)]
     fn leaf_rays<const N: usize>(
         &mut self,
+        isa: Isa<N>,
         prims: &PrimitiveSet,
         leaf: &[u32],
         rays: &[Ray],
@@ -207,7 +218,7 @@ impl Answer for AnyHit<'_> {
         for &p in leaf {
             if let Some(tri) = prims.triangles.get(p as usize) {
                 let (t, _, _) = lanes.triangle(tri, &lanes.tmax);
-                found |= lanes_less(&t, &[f32::INFINITY; N]);
+                found |= lanes_less(isa, &t, &[f32::INFINITY; N]);
             } else {
                 for_lanes(live & !found, |l| {
                     let mut hit = Hit::MISS;
@@ -277,6 +288,7 @@ impl<'a, A: Answer> Batch<'a, A> {
     /// by ray, this setup cost a fifth of an 8-ray packet traversal's instructions.
     #[inline(always)]
     pub fn new<const N: usize>(
+        isa: Isa<N>,
         tree: &'a KdTree,
         prims: &'a PrimitiveSet,
         rays: &'a [Ray],
@@ -293,7 +305,7 @@ impl<'a, A: Answer> Batch<'a, A> {
             for a in 0..3 {
                 split[a].extend((0..(n - start).min(N)).map(|l| [r.org[a][l], inv[a][l]]));
             }
-            let valid = live & sound(&r);
+            let valid = live & sound(isa, &r);
             let mut todo = valid;
             if !prims.planes.is_empty() {
                 // The planes are outside the tree, tested before it as the single-ray query does.
@@ -306,7 +318,7 @@ impl<'a, A: Answer> Batch<'a, A> {
             if tree.nodes.is_empty() {
                 continue;
             }
-            let (t0, t1, inside) = clip_lanes(&tree.bounds, &r.org, &inv, r.tmin, r.tmax);
+            let (t0, t1, inside) = clip_lanes(isa, &tree.bounds, &r.org, &inv, r.tmin, r.tmax);
             for_lanes(todo & inside, |l| {
                 let i = start + l;
                 groups[octant(&rays[i])].push(Root {
@@ -344,6 +356,7 @@ impl<'a, A: Answer> Batch<'a, A> {
     #[inline(always)]
     pub fn visit_leaf_rays<const N: usize>(
         &mut self,
+        isa: Isa<N>,
         leaf: &[u32],
         ids: &[u32; N],
         live: u32,
@@ -354,7 +367,7 @@ impl<'a, A: Answer> Batch<'a, A> {
         self.stats.prim_tests += n * leaf.len() as u64;
         let done = self
             .answer
-            .leaf_rays(self.prims, leaf, self.rays, ids, live, t_exit);
+            .leaf_rays(isa, self.prims, leaf, self.rays, ids, live, t_exit);
         for_lanes(live, |l| self.done[ids[l] as usize] = done >> l & 1 == 1);
         self.finished += done.count_ones() as usize;
     }
@@ -377,12 +390,24 @@ impl<'a, A: Answer> Batch<'a, A> {
 
     /// Tests ray `i` against a prepared leaf and marks it done when finished.
     #[inline(always)]
-    pub fn visit_leaf<const N: usize>(&mut self, leaf: &LeafPrims<N>, i: u32, t_exit: f32) -> bool {
+    pub fn visit_leaf<const N: usize>(
+        &mut self,
+        isa: Isa<N>,
+        leaf: &LeafPrims<N>,
+        i: u32,
+        t_exit: f32,
+    ) -> bool {
         let i = i as usize;
         self.stats.leaves_visited += 1;
-        let done = self
-            .answer
-            .leaf(self.prims, leaf, i, &self.rays[i], t_exit, &mut self.stats);
+        let done = self.answer.leaf(
+            isa,
+            self.prims,
+            leaf,
+            i,
+            &self.rays[i],
+            t_exit,
+            &mut self.stats,
+        );
         self.done[i] = done;
         self.finished += done as usize;
         done
@@ -392,20 +417,20 @@ impl<'a, A: Answer> Batch<'a, A> {
 /// The lanes of rays that are not degenerate (`Ray::is_degenerate`, lane by lane): finite
 /// origin and direction, a direction other than zero, a window `tmin <= tmax` without NaN.
 #[inline(always)]
-fn sound<const N: usize>(r: &RayLanes<N>) -> u32 {
+fn sound<const N: usize>(isa: Isa<N>, r: &RayLanes<N>) -> u32 {
     let inf = [f32::INFINITY; N];
-    let mut ok = lanes_less_eq(&r.tmin, &r.tmax);
+    let mut ok = lanes_less_eq(isa, &r.tmin, &r.tmax);
     // Sum of the direction's magnitudes: above zero unless every component is ±0 (finite
     // components: a sum that overflows is infinite, still above zero).
     let mut length = [0.0f32; N];
     for a in 0..3 {
-        ok &= lanes_less(&r.org[a].map(f32::abs), &inf);
-        ok &= lanes_less(&r.dir[a].map(f32::abs), &inf);
+        ok &= lanes_less(isa, &r.org[a].map(f32::abs), &inf);
+        ok &= lanes_less(isa, &r.dir[a].map(f32::abs), &inf);
         for (length, d) in length.iter_mut().zip(&r.dir[a]) {
             *length += d.abs();
         }
     }
-    ok & lanes_less(&[0.0; N], &length)
+    ok & lanes_less(isa, &[0.0; N], &length)
 }
 
 /// Lane mask of the first `count` lanes of N (N ≤ 16).
@@ -441,7 +466,11 @@ pub(crate) fn octant(ray: &Ray) -> usize {
 /// octant groups of a prepared [`Batch`].
 pub(crate) trait Mode {
     type Out;
-    fn trace<const N: usize, A: Answer>(b: &mut Batch<A>, groups: &[Vec<Root>; 8]) -> Self::Out;
+    fn trace<const N: usize, A: Answer>(
+        isa: Isa<N>,
+        b: &mut Batch<A>,
+        groups: &[Vec<Root>; 8],
+    ) -> Self::Out;
 }
 
 /// Traces `rays` with mode `M` at the lane width `width` asks for (compiled for its instruction
@@ -463,9 +492,9 @@ pub(crate) fn run<M: Mode, A: Answer>(
     impl<A: Answer, M: Mode> Kernel for Job<'_, A, M> {
         type Out = M::Out;
         #[inline(always)]
-        fn run<const N: usize>(self) -> M::Out {
-            let (mut b, groups) = Batch::new::<N>(self.tree, self.prims, self.rays, self.answer);
-            M::trace::<N, A>(&mut b, &groups)
+        fn run<const N: usize>(self, isa: Isa<N>) -> M::Out {
+            let (mut b, groups) = Batch::new(isa, self.tree, self.prims, self.rays, self.answer);
+            M::trace(isa, &mut b, &groups)
         }
     }
     simd::dispatch(
@@ -504,6 +533,7 @@ impl<const N: usize> Split<N> {
     /// LLVM build the masks one lane at a time, 60 instructions per 8-ray packet step.
     #[inline(always)]
     pub fn new(
+        isa: Isa<N>,
         split: f32,
         org: &[f32; N],
         inv: &[f32; N],
@@ -520,11 +550,11 @@ impl<const N: usize> Split<N> {
             near_t1[l] = if ts[l] < t1[l] { ts[l] } else { t1[l] };
             far_t0[l] = if ts[l] > t0[l] { ts[l] } else { t0[l] };
         }
-        let near = lanes_less(t0, &ts);
+        let near = lanes_less(isa, t0, &ts);
         Split {
             near: near & live,
             near_t1,
-            far: (!near | lanes_less(&ts, t1)) & live,
+            far: (!near | lanes_less(isa, &ts, t1)) & live,
             far_t0,
         }
     }

@@ -7,7 +7,7 @@
 //! work: stop paying for lists when the rays no longer share nodes).
 
 use super::batch::{positive, run, Answer, Batch, Mode, Root, Split};
-use super::simd::{LeafPrims, Width};
+use super::simd::{Isa, LeafPrims, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
 
@@ -61,6 +61,7 @@ impl<const N: usize> Scratch<N> {
 /// children on a stack, stop a lane when its closest hit lies before the leaf's exit.
 #[inline(always)]
 pub(crate) fn traverse<const N: usize, A: Answer>(
+    isa: Isa<N>,
     b: &mut Batch<A>,
     s: &mut Scratch<N>,
     node: u32,
@@ -98,7 +99,7 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
             while m != 0 {
                 let l = m.trailing_zeros() as usize;
                 m &= m - 1;
-                if b.visit_leaf(&s.leaf, id[l], cur.t1[l]) {
+                if b.visit_leaf(isa, &s.leaf, id[l], cur.t1[l]) {
                     dead |= 1 << l;
                 }
             }
@@ -116,7 +117,7 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
                 near_t1,
                 far: fm,
                 far_t0,
-            } = Split::new(n.split, &org[axis], &inv[axis], &cur.t0, &cur.t1, live);
+            } = Split::new(isa, n.split, &org[axis], &inv[axis], &cur.t0, &cur.t1, live);
             let far_entry = Entry {
                 node: far,
                 t0: far_t0,
@@ -162,11 +163,15 @@ struct PacketMode;
 impl Mode for PacketMode {
     type Out = TraversalStats;
     #[inline(always)]
-    fn trace<const N: usize, A: Answer>(b: &mut Batch<A>, groups: &[Vec<Root>; 8]) -> Self::Out {
+    fn trace<const N: usize, A: Answer>(
+        isa: Isa<N>,
+        b: &mut Batch<A>,
+        groups: &[Vec<Root>; 8],
+    ) -> Self::Out {
         let mut s = Scratch::<N>::new();
         for (o, group) in groups.iter().enumerate() {
             for chunk in group.chunks(N) {
-                traverse(b, &mut s, 0, lanes_of(chunk), positive(o));
+                traverse(isa, b, &mut s, 0, lanes_of(chunk), positive(o));
             }
         }
         b.stats

@@ -21,7 +21,7 @@ use super::batch::{
     first, lanes_where, positive, run, Answer, AnyHit, Batch, Closest, Mode, Root, Split,
 };
 use super::packet::{self, Lanes};
-use super::simd::{self, Width};
+use super::simd::{self, Isa, Width};
 use super::traverse::Entry;
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
@@ -84,6 +84,7 @@ impl Lists {
     #[inline(always)]
     fn push<const N: usize>(
         &mut self,
+        isa: Isa<N>,
         at: &mut usize,
         keep: u32,
         id: &[u32; N],
@@ -93,6 +94,7 @@ impl Lists {
         let (t0, t1) = (t0.map(f32::to_bits), t1.map(f32::to_bits));
         let a = *at;
         simd::compress(
+            isa,
             keep,
             [id, &t0, &t1],
             [&mut self.id[a..], &mut self.t0[a..], &mut self.t1[a..]],
@@ -120,6 +122,7 @@ const SINGLE_MAX: usize = 2;
 /// Walks the tree once with all the rays of one octant group.
 #[inline(always)]
 fn traverse<const N: usize, A: Answer>(
+    isa: Isa<N>,
     b: &mut Batch<A>,
     lists: &mut Lists,
     frames: &mut Vec<Frame>,
@@ -146,7 +149,7 @@ fn traverse<const N: usize, A: Answer>(
             for k in (0..count).step_by(N) {
                 let (id, t0, t1) = lists.load::<N>(f.start + k);
                 let live = lanes_where::<N>(|l| !b.done[id[l] as usize]);
-                lists.push(&mut end, live & first::<N>(count - k), &id, &t0, &t1);
+                lists.push(isa, &mut end, live & first::<N>(count - k), &id, &t0, &t1);
             }
             count = end - f.start;
         }
@@ -175,7 +178,7 @@ fn traverse<const N: usize, A: Answer>(
                 t1,
                 mask: first::<N>(count),
             };
-            packet::traverse(b, scratch, f.node, p, positive);
+            packet::traverse(isa, b, scratch, f.node, p, positive);
             continue;
         }
         let n = b.tree.nodes[f.node as usize];
@@ -190,7 +193,7 @@ fn traverse<const N: usize, A: Answer>(
                     b.prefetch_leaf(i);
                 }
                 let (id, _, t1) = lists.load::<N>(at);
-                b.visit_leaf_rays(leaf, &id, first::<N>(count - k), &t1);
+                b.visit_leaf_rays(isa, leaf, &id, first::<N>(count - k), &t1);
             }
             continue;
         }
@@ -232,7 +235,7 @@ fn traverse<const N: usize, A: Answer>(
                 near_t1,
                 far: ef,
                 far_t0,
-            } = Split::new(n.split, &org, &inv, &t0, &t1, live);
+            } = Split::new(isa, n.split, &org, &inv, &t0, &t1, live);
             if whole != Side::Both {
                 // A lane entering one child only keeps its segment: near only means
                 // `ts >= t1` (so `near_t1 = t1`), far only `ts <= t0` (so `far_t0 = t0`).
@@ -253,8 +256,8 @@ fn traverse<const N: usize, A: Answer>(
                 }
                 whole = Side::Both;
             }
-            lists.push(&mut fc, ef, &id, &far_t0, &t1);
-            lists.push(&mut nc, en, &id, &t0, &near_t1);
+            lists.push(isa, &mut fc, ef, &id, &far_t0, &t1);
+            lists.push(isa, &mut nc, en, &id, &t0, &near_t1);
         }
         let (far_list, near_list) = match whole {
             Side::Near => ((far_start, far_start), (f.start, f.start + count)),
@@ -295,13 +298,25 @@ struct StreamMode;
 impl Mode for StreamMode {
     type Out = (TraversalStats, StreamMemory);
     #[inline(always)]
-    fn trace<const N: usize, A: Answer>(b: &mut Batch<A>, groups: &[Vec<Root>; 8]) -> Self::Out {
+    fn trace<const N: usize, A: Answer>(
+        isa: Isa<N>,
+        b: &mut Batch<A>,
+        groups: &[Vec<Root>; 8],
+    ) -> Self::Out {
         let mut lists = Lists::default();
         let mut frames = Vec::with_capacity(128);
         let mut scratch = packet::Scratch::<N>::new();
         for (o, group) in groups.iter().enumerate() {
             if !group.is_empty() {
-                traverse(b, &mut lists, &mut frames, &mut scratch, group, positive(o));
+                traverse(
+                    isa,
+                    b,
+                    &mut lists,
+                    &mut frames,
+                    &mut scratch,
+                    group,
+                    positive(o),
+                );
             }
         }
         let mem = StreamMemory {

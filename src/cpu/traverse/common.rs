@@ -6,7 +6,7 @@
 //! makes the seven traversals return bit-identical hits, because they then agree on every leaf's
 //! exit distance and on every side decision.
 
-use crate::cpu::simd::{lanes_less, lanes_less_eq, TriBlock};
+use crate::cpu::simd::{lanes_less, lanes_less_eq, Isa, TriBlock};
 use crate::geometry::{
     Aabb, Hit, PrimitiveSet, Ray, RayTest, TraversalStats, TriangleTest, INVALID,
 };
@@ -53,6 +53,7 @@ impl TRay {
 /// or `None` when the ray misses it: [`clip_lanes`] with one lane.
 pub(crate) fn clip(bounds: &Aabb, ray: &TRay) -> Option<(f32, f32)> {
     let (t0, t1, inside) = clip_lanes::<1>(
+        Isa::baseline(),
         bounds,
         &ray.org.map(|x| [x]),
         &ray.inv_dir.map(|x| [x]),
@@ -71,6 +72,7 @@ pub(crate) fn clip(bounds: &Aabb, ray: &TRay) -> Option<(f32, f32)> {
 /// operations.
 #[inline(always)]
 pub(crate) fn clip_lanes<const N: usize>(
+    isa: Isa<N>,
     bounds: &Aabb,
     org: &[[f32; N]; 3],
     inv: &[[f32; N]; 3],
@@ -95,7 +97,7 @@ pub(crate) fn clip_lanes<const N: usize>(
         }
     }
     // `t0 = inf` is a ray outside a slab it runs parallel to.
-    let inside = lanes_less_eq(&t0, &t1) & lanes_less(&t0, &[f32::INFINITY; N]);
+    let inside = lanes_less_eq(isa, &t0, &t1) & lanes_less(isa, &t0, &[f32::INFINITY; N]);
     (t0, t1, inside)
 }
 
@@ -236,7 +238,7 @@ pub(crate) fn closest_among(
     impl GroupTest for Offer<'_> {
         #[inline(always)]
         fn block(&mut self, b: &TriBlock<BLOCK>) -> bool {
-            b.intersect(self.ray, self.hit);
+            b.intersect(Isa::baseline(), self.ray, self.hit);
             false
         }
         #[inline(always)]
@@ -271,7 +273,7 @@ pub(crate) fn any_among(
     impl GroupTest for Any<'_> {
         #[inline(always)]
         fn block(&mut self, b: &TriBlock<BLOCK>) -> bool {
-            b.occludes(self.ray)
+            b.occludes(Isa::baseline(), self.ray)
         }
         #[inline(always)]
         fn one(&mut self, p: u32) -> bool {
