@@ -336,12 +336,16 @@ fn render_breadth_first(
     let size = Vec2::new(w as f32, h as f32);
     let tracer = Tracer::new(scene, opts, traversal);
     let (pixels, mask) = frame.pixels_and_mask_mut();
-    let traced: Vec<u32> = (0..w * h)
-        .filter(|&i| mask.is_none_or(|m| m[i as usize] != 0))
-        .collect();
+    // The traced pixels, taken a run at a time (a list of all of them would be 4 bytes per
+    // pixel: 4 GiB at the largest frame).
+    let mut traced = (0..w * h).filter(|&i| mask.is_none_or(|m| m[i as usize] != 0));
     let samples = opts.samples;
     let run = (WAVE_PATHS / samples as usize).max(1);
-    for pixels_run in traced.chunks(run) {
+    loop {
+        let pixels_run: Vec<u32> = traced.by_ref().take(run).collect();
+        if pixels_run.is_empty() {
+            break;
+        }
         let wave: Vec<WaveRay> = pixels_run
             .par_iter()
             .enumerate()
@@ -367,14 +371,22 @@ fn render_breadth_first(
     }
 }
 
+/// Most rays and shadow rays traced in one step of a wavefront. A hit on a material both
+/// reflective and transparent spawns two rays, so a wave can double at every depth (up to 512
+/// rays per path before the weight cut-off): traced whole, a 1024² frame at depth 12 asked for
+/// tens of GB and aborted. A wave larger than this is traced in slices, the newest first, and
+/// each slice's next wave before the slice after it, so at most one slice waits per depth.
+const WAVE_RAYS: usize = 1 << 18;
+
 /// Traces the wavefront `wave` of `pixels` pixels' samples and every wavefront it spawns, depth
-/// by depth; returns the radiance of each path (`WaveRay::path`).
+/// by depth in slices of at most [`WAVE_RAYS`] rays and shadow rays; returns the radiance of
+/// each path (`WaveRay::path`).
 fn trace_wavefronts(
     scene: &Committed,
     tracer: &Tracer,
     opts: &RenderOptions,
     traversal: Traversal,
-    mut wave: Vec<WaveRay>,
+    wave: Vec<WaveRay>,
     pixels: usize,
 ) -> Vec<Vec3> {
     let topts = tracer.traverse_options(INVALID);
@@ -383,7 +395,14 @@ fn trace_wavefronts(
     let mut hits = Vec::new();
     let mut shadows = Vec::new();
     let mut blocked = Vec::new();
-    while !wave.is_empty() {
+    // Each ray of a slice may add a shadow ray per light.
+    let slice = (WAVE_RAYS / (1 + scene.lights.len())).max(1);
+    let mut waiting = vec![wave];
+    while let Some(mut rest) = waiting.pop() {
+        let wave = rest.split_off(rest.len().saturating_sub(slice));
+        if !rest.is_empty() {
+            waiting.push(rest);
+        }
         let rays: Vec<Ray> = wave.iter().map(|r| r.ray).collect();
         hits.resize(rays.len(), Hit::MISS);
         query::intersect(
@@ -433,7 +452,9 @@ fn trace_wavefronts(
                 })
             });
         }
-        wave = next;
+        if !next.is_empty() {
+            waiting.push(next);
+        }
     }
     color
 }
