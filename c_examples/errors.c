@@ -5,6 +5,7 @@
  *
  *   ./errors [TMPDIR]   (a malformed .ply file is written there; default /tmp)
  */
+#define _POSIX_C_SOURCE 200809L /* setenv, unsetenv, strdup */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -71,6 +72,23 @@ int main(int argc, char **argv) {
     void *const SENTINEL = &sentinel_storage;
     const uint32_t ID_SENTINEL = 0xdeadbeefu;
     const float origin[3] = {0.0f, 0.0f, 0.0f}, white[3] = {1.0f, 1.0f, 1.0f};
+
+    /* ---- An environment variable that is set but unreadable is an error, not ignored ---- */
+    {
+        const char *saved = getenv("RT2_BACKEND");
+        char *copy = saved ? strdup(saved) : NULL;
+        setenv("RT2_BACKEND", "\xff\xfe", 1);
+        rt2_context *never = NULL;
+        expect(rt2_context_create(NULL, &never), RT2_STATUS_INVALID_ARGUMENT, "RT2_BACKEND",
+               "rt2_context_create(RT2_BACKEND not UTF-8)");
+        report(never == NULL, "  ... *out untouched", NULL);
+        if (copy) {
+            setenv("RT2_BACKEND", copy, 1);
+            free(copy);
+        } else {
+            unsetenv("RT2_BACKEND");
+        }
+    }
 
     /* ---- NULL outputs and handles at creation ---- */
     expect(rt2_context_create(NULL, NULL), RT2_STATUS_INVALID_ARGUMENT, "out", "rt2_context_create(out = NULL)");

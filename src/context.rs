@@ -65,7 +65,7 @@ impl Context {
     /// the host program's global rayon pool is never touched. GPU adapters follow
     /// `RT2_ADAPTER` and `RT2_GPU_DEVICES` (see [`GpuOptions::from_env`]).
     pub fn new(request: BackendRequest, threads: u32) -> Result<Self> {
-        Self::with_gpu_options(request, threads, &GpuOptions::from_env())
+        Self::with_gpu_options(request, threads, &GpuOptions::from_env()?)
     }
 
     /// [`Context::new`] with explicit GPU options (tests force two logical devices this way).
@@ -79,7 +79,7 @@ impl Context {
                 "threads is {threads} (at most {MAX_THREADS}; 0 uses every core)"
             )));
         }
-        let env = std::env::var("RT2_BACKEND").ok();
+        let env = crate::env::var("RT2_BACKEND")?;
         let (decision, gpu) = dispatch::decide_backend(request, env.as_deref(), gpu_opts)?;
         let workers = Workers::default();
         let handles = workers.threads.clone();

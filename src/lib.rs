@@ -12,6 +12,7 @@ pub mod camera;
 pub mod context;
 pub mod cpu;
 pub mod dispatch;
+mod env;
 pub mod error;
 pub mod frame;
 pub mod geometry;

@@ -28,16 +28,26 @@ pub struct GpuOptions {
 }
 
 impl GpuOptions {
-    /// The defaults with `RT2_ADAPTER` and `RT2_GPU_DEVICES` applied.
-    pub fn from_env() -> Self {
-        GpuOptions {
-            adapter: std::env::var("RT2_ADAPTER").ok().filter(|s| !s.is_empty()),
-            logical_devices: std::env::var("RT2_GPU_DEVICES")
-                .ok()
-                .and_then(|s| s.parse().ok())
-                .unwrap_or(0),
+    /// The defaults with `RT2_ADAPTER` and `RT2_GPU_DEVICES` applied; an error for a value
+    /// that is set but unreadable (see [`crate::env`]).
+    pub fn from_env() -> Result<Self> {
+        Ok(GpuOptions {
+            adapter: crate::env::var("RT2_ADAPTER")?.filter(|s| !s.is_empty()),
+            logical_devices: logical_devices(crate::env::var("RT2_GPU_DEVICES")?.as_deref())?,
             ..GpuOptions::default()
-        }
+        })
+    }
+}
+
+/// `RT2_GPU_DEVICES`: a count (0 or unset: one device per adapter, the default).
+fn logical_devices(value: Option<&str>) -> Result<usize> {
+    match value.map(str::trim) {
+        None | Some("") => Ok(0),
+        Some(v) => v.parse().map_err(|_| {
+            Error::invalid_argument(format!(
+                "RT2_GPU_DEVICES is '{v}' (expected a count of logical devices)"
+            ))
+        }),
     }
 }
 
@@ -697,5 +707,16 @@ mod tests {
             "{why}"
         );
         assert!(keep_opened::<u32>(Vec::new()).is_err());
+    }
+
+    #[test]
+    fn a_device_count_that_does_not_parse_is_an_error() {
+        assert_eq!(super::logical_devices(None).unwrap(), 0);
+        assert_eq!(super::logical_devices(Some("")).unwrap(), 0);
+        assert_eq!(super::logical_devices(Some(" 2 ")).unwrap(), 2);
+        for bad in ["two", "-1", "2x", "1e3"] {
+            let e = super::logical_devices(Some(bad)).unwrap_err();
+            assert!(e.message.contains(bad), "{bad}: {}", e.message);
+        }
     }
 }
