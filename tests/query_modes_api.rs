@@ -6,26 +6,39 @@ use rt2::api::*;
 use rt2::error::Rt2Status;
 use std::ptr::{null, null_mut};
 
+/// A context and a committed scene of the spheres `(centre, radius)`, with their object ids.
+unsafe fn sphere_scene(
+    spheres: impl Iterator<Item = ([f32; 3], f32)>,
+) -> (*mut rt2_context, *mut rt2_scene, Vec<u32>) {
+    let mut ctx = null_mut();
+    assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
+    let mut scene = null_mut();
+    assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+    let ids = spheres
+        .map(|(c, r)| {
+            let mut id = 0;
+            assert_eq!(
+                rt2_scene_add_sphere(scene, c.as_ptr(), r, 0, &mut id),
+                Rt2Status::Ok
+            );
+            id
+        })
+        .collect();
+    assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+    (ctx, scene, ids)
+}
+
 #[test]
 fn every_query_mode_gives_the_same_hits_and_bad_values_are_rejected() {
     unsafe {
-        let mut ctx = null_mut();
-        assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
-        let mut scene = null_mut();
-        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
-        for k in 0..50 {
+        let (ctx, scene, _) = sphere_scene((0..50).map(|k| {
             let c = [
                 (k % 7) as f32 - 3.0,
                 (k / 7) as f32 - 3.0,
                 0.2 * (k % 3) as f32,
             ];
-            let mut id = 0;
-            assert_eq!(
-                rt2_scene_add_sphere(scene, c.as_ptr(), 0.4, 0, &mut id),
-                Rt2Status::Ok
-            );
-        }
-        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+            (c, 0.4)
+        }));
         let rays: Vec<rt2_ray> = (0..4000)
             .map(|i| {
                 let a = i as f32 * 0.37;
@@ -136,17 +149,8 @@ fn every_query_mode_gives_the_same_hits_and_bad_values_are_rejected() {
 #[test]
 fn a_query_longer_than_one_step_answers_every_ray_in_place() {
     unsafe {
-        let mut ctx = null_mut();
-        assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
-        let mut scene = null_mut();
-        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
-        let centre = [0.0f32; 3];
-        let mut id = 0;
-        assert_eq!(
-            rt2_scene_add_sphere(scene, centre.as_ptr(), 1.0, 0, &mut id),
-            Rt2Status::Ok
-        );
-        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        let (ctx, scene, ids) = sphere_scene(std::iter::once(([0.0; 3], 1.0)));
+        let id = ids[0];
         // Every third ray goes through the unit sphere's centre (hit at t = 9), the others pass
         // 5 units beside it (miss).
         let n = (1 << 20) + 3;
