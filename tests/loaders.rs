@@ -872,6 +872,88 @@ fn missing_file_is_an_io_error_naming_the_path() {
     );
 }
 
+/// Loads `path` on a thread and waits at most `limit` for it, so that a load that blocks (a
+/// FIFO open) or reads without end (`/dev/zero`) fails the test instead of hanging it. A
+/// load still running is left behind; it ends with the test process.
+#[cfg(unix)]
+fn load_within(path: &std::path::Path, limit: std::time::Duration) -> Result<Mesh> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let owned = path.to_path_buf();
+    std::thread::spawn(move || {
+        let _ = tx.send(load_mesh(&owned));
+    });
+    rx.recv_timeout(limit)
+        .unwrap_or_else(|_| panic!("loading {} did not return within {limit:?}", path.display()))
+}
+
+/// Asserts an `Io` error that names `path` and says it is not a regular file.
+#[cfg(unix)]
+#[track_caller]
+fn assert_not_regular(result: Result<Mesh>, path: &std::path::Path, kind: &str) {
+    let err = result.expect_err("a special file must not load");
+    assert_eq!(err.status, Rt2Status::Io, "{}", err.message);
+    assert!(
+        err.message.contains(&path.display().to_string()),
+        "{}",
+        err.message
+    );
+    assert!(
+        err.message.contains("not a regular file"),
+        "{}",
+        err.message
+    );
+    assert!(err.message.contains(kind), "{}", err.message);
+}
+
+#[cfg(unix)]
+#[test]
+fn fifo_is_refused_promptly_not_waited_on() {
+    let path = std::env::temp_dir()
+        .join(format!("rt2-loaders-test-{}", std::process::id()))
+        .join("fifo.ply");
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let _ = std::fs::remove_file(&path);
+    match std::process::Command::new("mkfifo").arg(&path).status() {
+        Ok(st) => assert!(st.success(), "mkfifo {} failed: {st}", path.display()),
+        Err(e) => {
+            eprintln!("SKIPPED fifo_is_refused_promptly_not_waited_on: no mkfifo command ({e})");
+            return;
+        }
+    }
+    // Nobody ever opens the FIFO for writing: a plain open would block forever.
+    let result = load_within(&path, std::time::Duration::from_secs(5));
+    assert_not_regular(result, &path, "FIFO");
+}
+
+#[cfg(unix)]
+#[test]
+fn symlink_to_dev_zero_is_refused_promptly_not_read() {
+    let path = std::env::temp_dir()
+        .join(format!("rt2-loaders-test-{}", std::process::id()))
+        .join("zero.ply");
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let _ = std::fs::remove_file(&path);
+    std::os::unix::fs::symlink("/dev/zero", &path).unwrap();
+    // Read to the end, /dev/zero would fill memory; it must be refused without reading.
+    let result = load_within(&path, std::time::Duration::from_secs(5));
+    assert_not_regular(result, &path, "character device");
+}
+
+#[test]
+fn directory_is_an_io_error() {
+    let dir = std::env::temp_dir()
+        .join(format!("rt2-loaders-test-{}", std::process::id()))
+        .join("dir.obj");
+    std::fs::create_dir_all(&dir).unwrap();
+    let err = load_mesh(&dir).unwrap_err();
+    assert_eq!(err.status, Rt2Status::Io, "{}", err.message);
+    assert!(
+        err.message.contains(&dir.display().to_string()),
+        "{}",
+        err.message
+    );
+}
+
 // ---------------------------------------------------------------------------------------------
 // Round trip: one random mesh, four writers, identical results
 
