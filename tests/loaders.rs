@@ -291,6 +291,34 @@ fn ply_zero_faces_is_an_empty_mesh_not_an_error() {
     assert!(mesh.triangles.is_empty());
 }
 
+#[test]
+fn ply_header_with_many_elements_parses_in_linear_time() {
+    // 100,000 empty elements: checking each name against every earlier one took ~20 s here.
+    let mut text = String::from("ply\nformat ascii 1.0\n");
+    for i in 0..100_000 {
+        text += &format!("element e{i:07}xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx 0\n");
+    }
+    text += "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+        element face 1\nproperty list uchar int vertex_indices\nend_header\n\
+        0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+    let start = Instant::now();
+    let mesh = parse_ply(text.as_bytes(), "elements.ply").unwrap();
+    let elapsed = start.elapsed();
+    assert_eq!(mesh.triangles, vec![[0, 1, 2]]);
+    // Linear takes a few ms; generous so that a busy machine does not fail it.
+    assert!(
+        elapsed.as_secs_f64() < if cfg!(debug_assertions) { 20.0 } else { 5.0 },
+        "100,000 elements took {elapsed:?}"
+    );
+    // A name declared twice among many is still found.
+    let twice = text.replacen("e0099999", "e0000000", 1);
+    assert_parse_err(
+        parse_ply(twice.as_bytes(), "twice.ply"),
+        "twice.ply",
+        &["line 100002:", "declared twice"],
+    );
+}
+
 // ---------------------------------------------------------------------------------------------
 // OBJ content
 

@@ -5,6 +5,8 @@
 //! Errors in the header and in ASCII bodies name the 1-based line; errors in binary bodies name
 //! the byte offset from the start of the file, since a binary body has no lines.
 
+use std::collections::HashSet;
+
 use glam::Vec3;
 
 use super::{finite_coord, line_error, offset_error, Mesh, Quoted};
@@ -195,6 +197,7 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
     let mut line_no = 0usize;
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
+    let mut names: HashSet<&str> = HashSet::new();
     loop {
         line_no += 1;
         let rest = match bytes.get(pos..) {
@@ -264,7 +267,9 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                             Quoted(count)
                         ))
                     })?;
-                if elements.iter().any(|e| e.name == el_name) {
+                // A set, not a scan of the earlier elements: a header may declare any number
+                // of elements, and the scan made such a header take quadratic time.
+                if !names.insert(el_name) {
                     return Err(err(format!("element '{el_name}' declared twice")));
                 }
                 elements.push(Element {
