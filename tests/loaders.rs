@@ -282,13 +282,25 @@ fn ply_faces_may_come_before_vertices() {
 }
 
 #[test]
-fn ply_zero_faces_is_an_empty_mesh_not_an_error() {
+fn ply_without_faces_is_an_error_as_in_obj() {
+    // The same rule as an OBJ without 'f' lines: a mesh file that yields no triangle is
+    // almost surely not what the caller meant to load.
     let text = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
         property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n\
         1 2 3\n";
-    let mesh = parse_ply(text.as_bytes(), "nofaces.ply").unwrap();
-    assert_eq!(mesh.positions, vec![v(1.0, 2.0, 3.0)]);
-    assert!(mesh.triangles.is_empty());
+    assert_parse_err(
+        parse_ply(text.as_bytes(), "nofaces.ply"),
+        "nofaces.ply",
+        &["line 7:", "no faces"],
+    );
+    let empty = "ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\n\
+        property float y\nproperty float z\nelement face 0\n\
+        property list uchar int vertex_indices\nend_header\n";
+    assert_parse_err(
+        parse_ply(empty.as_bytes(), "empty.ply"),
+        "empty.ply",
+        &["line 7:", "no faces"],
+    );
 }
 
 #[test]
@@ -1110,6 +1122,17 @@ fn random_meshes_round_trip_identically_through_all_four_formats() {
     for round in 0..100 {
         let mesh = RandomMesh::new(&mut rng);
         let expected = mesh.expected();
+        if expected.triangles.is_empty() {
+            // A file without faces is an error by design, in every format.
+            assert!(
+                parse_ply(&mesh.ascii_ply(), "r.ply").is_err(),
+                "round {round}"
+            );
+            assert!(parse_ply(&mesh.binary_ply(false), "le.ply").is_err());
+            assert!(parse_ply(&mesh.binary_ply(true), "be.ply").is_err());
+            assert!(parse_obj(&mesh.obj(&mut rng), "r.obj").is_err());
+            continue;
+        }
         let ascii = parse_ply(&mesh.ascii_ply(), "r.ply").unwrap();
         let le = parse_ply(&mesh.binary_ply(false), "le.ply").unwrap();
         let be = parse_ply(&mesh.binary_ply(true), "be.ply").unwrap();
@@ -1123,11 +1146,8 @@ fn random_meshes_round_trip_identically_through_all_four_formats() {
                 b.to_array().map(f32::to_bits)
             );
         }
-        if !expected.triangles.is_empty() {
-            // An OBJ without faces is an error by design.
-            let obj = parse_obj(&mesh.obj(&mut rng), "r.obj").unwrap();
-            assert_eq!(obj, expected, "OBJ, round {round}");
-        }
+        let obj = parse_obj(&mesh.obj(&mut rng), "r.obj").unwrap();
+        assert_eq!(obj, expected, "OBJ, round {round}");
     }
 }
 

@@ -150,8 +150,8 @@ enum Role {
 /// by face index; for all-triangle files triangle i is face i).
 ///
 /// Rejects (with `Parse`) faces of fewer than 3 vertices, out-of-range indices, non-finite
-/// coordinates, element counts the file cannot hold, and trailing data after the last element
-/// (a sign of wrong counts).
+/// coordinates, element counts the file cannot hold, trailing data after the last element
+/// (a sign of wrong counts), and a file without faces (as the OBJ loader does).
 pub fn parse_ply(bytes: &[u8], name: &str) -> Result<Mesh> {
     let header = parse_header(bytes, name)?;
     let roles = plan(&header, name)?;
@@ -185,6 +185,22 @@ pub fn parse_ply(bytes: &[u8], name: &str) -> Result<Mesh> {
             };
             read_binary(&header, &roles, &mut cur, n_verts, &mut mesh)?;
         }
+    }
+    // As in OBJ: a mesh file that yields no triangle is refused rather than loaded as an
+    // object with nothing to hit. Checked after the body, so that a damaged body is reported
+    // as such. Every face gives at least one triangle, so no triangle means no face.
+    if mesh.triangles.is_empty() {
+        let line = header
+            .elements
+            .iter()
+            .zip(&roles)
+            .find(|(_, r)| matches!(r, Role::Face(_)))
+            .map_or(header.end_line, |(el, _)| el.line);
+        return Err(line_error(
+            name,
+            line,
+            "no faces in the file (element 'face' has 0 entries)",
+        ));
     }
     Ok(mesh)
 }
