@@ -10,7 +10,7 @@ use std::collections::HashSet;
 use glam::Vec3;
 
 use super::{finite_coord, line_error, offset_error, Mesh, Quoted};
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Rt2Status};
 
 /// The scalar types of the PLY spec, under either of their two spellings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -159,13 +159,24 @@ pub fn parse_ply(bytes: &[u8], name: &str) -> Result<Mesh> {
     check_counts(&header, body.len(), name)?;
 
     let mut mesh = Mesh::default();
-    // Both counts were just bounded by the body size, so these reservations are safe.
+    // Both counts were just bounded by the body size, so a reservation is at most a few times
+    // the file's size. A large file can still exhaust memory: that is reported as
+    // `OutOfMemory` rather than aborting the host program.
     for (el, role) in header.elements.iter().zip(&roles) {
-        match role {
-            Role::Vertex(_) => mesh.positions.reserve_exact(el.count),
-            Role::Face(_) => mesh.triangles.reserve(el.count),
-            Role::Skip => {}
-        }
+        let reserved = match role {
+            Role::Vertex(_) => mesh.positions.try_reserve_exact(el.count),
+            Role::Face(_) => mesh.triangles.try_reserve(el.count),
+            Role::Skip => Ok(()),
+        };
+        reserved.map_err(|_| {
+            Error::new(
+                Rt2Status::OutOfMemory,
+                format!(
+                    "{name}: cannot allocate memory for {} '{}' entries",
+                    el.count, el.name
+                ),
+            )
+        })?;
     }
     let n_verts = header
         .elements
