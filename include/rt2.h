@@ -916,7 +916,10 @@ enum rt2_status rt2_scene_add_plane(rt2_scene *scene,
 /**
  * Loads a triangle mesh from a `.ply` (ASCII or binary) or `.obj` file as one object.
  * Errors name the file and the line or byte offset at fault. Triangles keep the file's face
- * order (polygons are fan-triangulated).
+ * order (polygons are fan-triangulated); a file without faces is a PARSE error, whatever
+ * its format. Only regular files are read: a FIFO, device or directory is an IO error. The
+ * file is read and parsed before the scene is locked, so other calls on the scene do not
+ * wait for a slow file.
  *
  * # Safety
  * `scene` is a live scene; `path` is a NUL-terminated string.

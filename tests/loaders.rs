@@ -282,13 +282,53 @@ fn ply_faces_may_come_before_vertices() {
 }
 
 #[test]
-fn ply_zero_faces_is_an_empty_mesh_not_an_error() {
+fn ply_without_faces_is_an_error_as_in_obj() {
+    // The same rule as an OBJ without 'f' lines: a mesh file that yields no triangle is
+    // almost surely not what the caller meant to load.
     let text = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
         property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n\
         1 2 3\n";
-    let mesh = parse_ply(text.as_bytes(), "nofaces.ply").unwrap();
-    assert_eq!(mesh.positions, vec![v(1.0, 2.0, 3.0)]);
-    assert!(mesh.triangles.is_empty());
+    assert_parse_err(
+        parse_ply(text.as_bytes(), "nofaces.ply"),
+        "nofaces.ply",
+        &["line 7:", "no faces"],
+    );
+    let empty = "ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\n\
+        property float y\nproperty float z\nelement face 0\n\
+        property list uchar int vertex_indices\nend_header\n";
+    assert_parse_err(
+        parse_ply(empty.as_bytes(), "empty.ply"),
+        "empty.ply",
+        &["line 7:", "no faces"],
+    );
+}
+
+#[test]
+fn ply_header_with_many_elements_parses_in_linear_time() {
+    // 100,000 empty elements: checking each name against every earlier one took ~20 s here.
+    let mut text = String::from("ply\nformat ascii 1.0\n");
+    for i in 0..100_000 {
+        text += &format!("element e{i:07}xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx 0\n");
+    }
+    text += "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+        element face 1\nproperty list uchar int vertex_indices\nend_header\n\
+        0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+    let start = Instant::now();
+    let mesh = parse_ply(text.as_bytes(), "elements.ply").unwrap();
+    let elapsed = start.elapsed();
+    assert_eq!(mesh.triangles, vec![[0, 1, 2]]);
+    // Linear takes a few ms; generous so that a busy machine does not fail it.
+    assert!(
+        elapsed.as_secs_f64() < if cfg!(debug_assertions) { 20.0 } else { 5.0 },
+        "100,000 elements took {elapsed:?}"
+    );
+    // A name declared twice among many is still found.
+    let twice = text.replacen("e0099999", "e0000000", 1);
+    assert_parse_err(
+        parse_ply(twice.as_bytes(), "twice.ply"),
+        "twice.ply",
+        &["line 100002:", "declared twice"],
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -872,6 +912,88 @@ fn missing_file_is_an_io_error_naming_the_path() {
     );
 }
 
+/// Loads `path` on a thread and waits at most `limit` for it, so that a load that blocks (a
+/// FIFO open) or reads without end (`/dev/zero`) fails the test instead of hanging it. A
+/// load still running is left behind; it ends with the test process.
+#[cfg(unix)]
+fn load_within(path: &std::path::Path, limit: std::time::Duration) -> Result<Mesh> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let owned = path.to_path_buf();
+    std::thread::spawn(move || {
+        let _ = tx.send(load_mesh(&owned));
+    });
+    rx.recv_timeout(limit)
+        .unwrap_or_else(|_| panic!("loading {} did not return within {limit:?}", path.display()))
+}
+
+/// Asserts an `Io` error that names `path` and says it is not a regular file.
+#[cfg(unix)]
+#[track_caller]
+fn assert_not_regular(result: Result<Mesh>, path: &std::path::Path, kind: &str) {
+    let err = result.expect_err("a special file must not load");
+    assert_eq!(err.status, Rt2Status::Io, "{}", err.message);
+    assert!(
+        err.message.contains(&path.display().to_string()),
+        "{}",
+        err.message
+    );
+    assert!(
+        err.message.contains("not a regular file"),
+        "{}",
+        err.message
+    );
+    assert!(err.message.contains(kind), "{}", err.message);
+}
+
+#[cfg(unix)]
+#[test]
+fn fifo_is_refused_promptly_not_waited_on() {
+    let path = std::env::temp_dir()
+        .join(format!("rt2-loaders-test-{}", std::process::id()))
+        .join("fifo.ply");
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let _ = std::fs::remove_file(&path);
+    match std::process::Command::new("mkfifo").arg(&path).status() {
+        Ok(st) => assert!(st.success(), "mkfifo {} failed: {st}", path.display()),
+        Err(e) => {
+            eprintln!("SKIPPED fifo_is_refused_promptly_not_waited_on: no mkfifo command ({e})");
+            return;
+        }
+    }
+    // Nobody ever opens the FIFO for writing: a plain open would block forever.
+    let result = load_within(&path, std::time::Duration::from_secs(5));
+    assert_not_regular(result, &path, "FIFO");
+}
+
+#[cfg(unix)]
+#[test]
+fn symlink_to_dev_zero_is_refused_promptly_not_read() {
+    let path = std::env::temp_dir()
+        .join(format!("rt2-loaders-test-{}", std::process::id()))
+        .join("zero.ply");
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let _ = std::fs::remove_file(&path);
+    std::os::unix::fs::symlink("/dev/zero", &path).unwrap();
+    // Read to the end, /dev/zero would fill memory; it must be refused without reading.
+    let result = load_within(&path, std::time::Duration::from_secs(5));
+    assert_not_regular(result, &path, "character device");
+}
+
+#[test]
+fn directory_is_an_io_error() {
+    let dir = std::env::temp_dir()
+        .join(format!("rt2-loaders-test-{}", std::process::id()))
+        .join("dir.obj");
+    std::fs::create_dir_all(&dir).unwrap();
+    let err = load_mesh(&dir).unwrap_err();
+    assert_eq!(err.status, Rt2Status::Io, "{}", err.message);
+    assert!(
+        err.message.contains(&dir.display().to_string()),
+        "{}",
+        err.message
+    );
+}
+
 // ---------------------------------------------------------------------------------------------
 // Round trip: one random mesh, four writers, identical results
 
@@ -1000,6 +1122,17 @@ fn random_meshes_round_trip_identically_through_all_four_formats() {
     for round in 0..100 {
         let mesh = RandomMesh::new(&mut rng);
         let expected = mesh.expected();
+        if expected.triangles.is_empty() {
+            // A file without faces is an error by design, in every format.
+            assert!(
+                parse_ply(&mesh.ascii_ply(), "r.ply").is_err(),
+                "round {round}"
+            );
+            assert!(parse_ply(&mesh.binary_ply(false), "le.ply").is_err());
+            assert!(parse_ply(&mesh.binary_ply(true), "be.ply").is_err());
+            assert!(parse_obj(&mesh.obj(&mut rng), "r.obj").is_err());
+            continue;
+        }
         let ascii = parse_ply(&mesh.ascii_ply(), "r.ply").unwrap();
         let le = parse_ply(&mesh.binary_ply(false), "le.ply").unwrap();
         let be = parse_ply(&mesh.binary_ply(true), "be.ply").unwrap();
@@ -1013,11 +1146,8 @@ fn random_meshes_round_trip_identically_through_all_four_formats() {
                 b.to_array().map(f32::to_bits)
             );
         }
-        if !expected.triangles.is_empty() {
-            // An OBJ without faces is an error by design.
-            let obj = parse_obj(&mesh.obj(&mut rng), "r.obj").unwrap();
-            assert_eq!(obj, expected, "OBJ, round {round}");
-        }
+        let obj = parse_obj(&mesh.obj(&mut rng), "r.obj").unwrap();
+        assert_eq!(obj, expected, "OBJ, round {round}");
     }
 }
 

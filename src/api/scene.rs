@@ -240,7 +240,10 @@ pub unsafe extern "C" fn rt2_scene_add_plane(
 
 /// Loads a triangle mesh from a `.ply` (ASCII or binary) or `.obj` file as one object.
 /// Errors name the file and the line or byte offset at fault. Triangles keep the file's face
-/// order (polygons are fan-triangulated).
+/// order (polygons are fan-triangulated); a file without faces is a PARSE error, whatever
+/// its format. Only regular files are read: a FIFO, device or directory is an IO error. The
+/// file is read and parsed before the scene is locked, so other calls on the scene do not
+/// wait for a slow file.
 ///
 /// # Safety
 /// `scene` is a live scene; `path` is a NUL-terminated string.
@@ -251,15 +254,20 @@ pub unsafe extern "C" fn rt2_scene_load_file(
     material: u32,
     out_object: *mut u32,
 ) -> Rt2Status {
-    edit_with_id(scene, out_object, |s| {
+    guard(|| {
+        let s = handle(scene, "scene")?;
+        // Outside the write lock: reading a file can take any time (a slow disk, a network
+        // share), and renders and edits of the scene must not wait for it.
         let mesh = loaders::load_mesh(&path_arg(path, "path")?)?;
-        s.add_object(
-            Shape::Mesh {
-                positions: mesh.positions,
-                triangles: mesh.triangles,
-            },
-            material,
-        )
+        let shape = Shape::Mesh {
+            positions: mesh.positions,
+            triangles: mesh.triangles,
+        };
+        let id = s.write().add_object(shape, material)?;
+        if !out_object.is_null() {
+            out_object.write(id);
+        }
+        Ok(())
     })
 }
 

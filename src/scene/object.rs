@@ -71,35 +71,40 @@ pub struct PrimOrigin {
     pub prim: u32,
 }
 
-/// The world-space corners of a mesh object's triangles, in file order (none for other shapes).
-fn world_triangles(obj: &Object) -> Vec<[Vec3; 3]> {
-    shape_triangles(&obj.shape, &obj.transform)
-}
-
-/// The corners of `shape`'s triangles placed by `t`, in file order (none for other shapes).
-fn shape_triangles(shape: &Shape, t: &Affine3A) -> Vec<[Vec3; 3]> {
-    let Shape::Mesh {
-        positions,
-        triangles,
-    } = shape
-    else {
-        return Vec::new();
-    };
-    let world: Vec<Vec3> = positions.iter().map(|&p| t.transform_point3(p)).collect();
-    triangles
-        .iter()
-        .map(|tri| tri.map(|i| world[i as usize]))
-        .collect()
+/// The world-space corners of triangle `tri` of a mesh placed by `t`. Each corner is placed
+/// on its own (nothing is allocated): checking a mesh of any size then needs no memory, and
+/// the corners come out bit-identical to placing every vertex once.
+fn world_corners(positions: &[Vec3], tri: &[u32; 3], t: &Affine3A) -> [Vec3; 3] {
+    tri.map(|i| t.transform_point3(positions[i as usize]))
 }
 
 /// The exact corners of every triangle of `objects`, in the order [`place`] gives the
 /// triangles (`PrimitiveSet::vertices`, for the watertight test).
 pub fn triangle_corners(objects: &[Object]) -> Vec<[[f32; 3]; 3]> {
-    objects
-        .iter()
-        .flat_map(world_triangles)
-        .map(|t| t.map(|v| v.to_array()))
-        .collect()
+    let mut out = Vec::new();
+    for obj in objects {
+        if let Shape::Mesh {
+            positions,
+            triangles,
+        } = &obj.shape
+        {
+            out.extend(
+                triangles
+                    .iter()
+                    .map(|tri| world_corners(positions, tri, &obj.transform).map(|v| v.to_array())),
+            );
+        }
+    }
+    out
+}
+
+/// One world-space primitive, as [`place_shape`] hands it on.
+enum Placed {
+    Triangle(Triangle),
+    Sphere(Sphere),
+    Ellipsoid(Ellipsoid),
+    Box(Aabb),
+    Plane(Plane),
 }
 
 /// Appends the world-space primitives of `obj` to `set`; `origins` receives one entry per
@@ -114,37 +119,66 @@ pub fn place(
     set: &mut PrimitiveSet,
     origins: &mut [Vec<PrimOrigin>],
 ) -> Result<()> {
-    place_shape(&obj.shape, &obj.transform, object_id, set, origins)
+    // Only a mesh can fail after handing on primitives (at a later triangle); undo those.
+    let kept = (set.triangles.len(), origins[0].len());
+    let mut next_triangle = 0u32;
+    let placed = place_shape(&obj.shape, &obj.transform, |p| {
+        let (kind, prim) = match p {
+            Placed::Triangle(t) => {
+                set.triangles.push(t);
+                next_triangle += 1;
+                (0, next_triangle - 1)
+            }
+            Placed::Sphere(s) => {
+                set.spheres.push(s);
+                (1, 0)
+            }
+            Placed::Ellipsoid(e) => {
+                set.ellipsoids.push(e);
+                (2, 0)
+            }
+            Placed::Box(b) => {
+                set.boxes.push(b);
+                (3, 0)
+            }
+            Placed::Plane(p) => {
+                set.planes.push(p);
+                (4, 0)
+            }
+        };
+        origins[kind].push(PrimOrigin {
+            object: object_id,
+            prim,
+        });
+    });
+    if placed.is_err() {
+        set.triangles.truncate(kept.0);
+        origins[0].truncate(kept.1);
+    }
+    placed
 }
 
-fn place_shape(
-    shape: &Shape,
-    t: &Affine3A,
-    object_id: u32,
-    set: &mut PrimitiveSet,
-    origins: &mut [Vec<PrimOrigin>],
-) -> Result<()> {
+/// The one placement algorithm: hands each world-space primitive of `shape` placed by `t` to
+/// `emit`, in order (a mesh's triangles in file order), after checking that it fits. Stops at
+/// the first primitive that does not fit; primitives handed on before stay handed on.
+fn place_shape(shape: &Shape, t: &Affine3A, mut emit: impl FnMut(Placed)) -> Result<()> {
     let lin = Mat3::from(t.matrix3);
-    let one = PrimOrigin {
-        object: object_id,
-        prim: 0,
-    };
     match shape {
-        Shape::Mesh { .. } => {
-            let triangles = shape_triangles(shape, t);
-            if let Some(k) = triangles.iter().position(|t| !triangle_fits(t)) {
-                return Err(Error::invalid_argument(format!(
-                    "triangle {k} of the mesh does not fit in f32 in world space: its \
-                     corners {:?} or edges overflow",
-                    triangles[k]
-                )));
-            }
-            for (k, [a, b, c]) in triangles.into_iter().enumerate() {
-                set.triangles.push(Triangle::from_vertices(a, b, c));
-                origins[0].push(PrimOrigin {
-                    object: object_id,
-                    prim: k as u32,
-                });
+        Shape::Mesh {
+            positions,
+            triangles,
+        } => {
+            for (k, tri) in triangles.iter().enumerate() {
+                let [a, b, c] = world_corners(positions, tri, t);
+                let triangle = Triangle::from_vertices(a, b, c);
+                if !triangle_fits(&triangle) {
+                    return Err(Error::invalid_argument(format!(
+                        "triangle {k} of the mesh does not fit in f32 in world space: its \
+                         corners {:?} or edges overflow",
+                        [a, b, c]
+                    )));
+                }
+                emit(Placed::Triangle(triangle));
             }
         }
         Shape::Sphere { center, radius } => {
@@ -170,18 +204,18 @@ fn place_shape(
                         sphere.radius
                     )));
                 }
-                set.spheres.push(sphere);
-                origins[1].push(one);
+                emit(Placed::Sphere(sphere));
             } else {
-                set.ellipsoids.push(ellipsoid(c, lin * *radius, "sphere")?);
-                origins[2].push(one);
+                emit(Placed::Ellipsoid(ellipsoid(c, lin * *radius, "sphere")?));
             }
         }
         Shape::Ellipsoid { center, radii } => {
             let m = lin * Mat3::from_diagonal(*radii);
-            set.ellipsoids
-                .push(ellipsoid(t.transform_point3(*center), m, "ellipsoid")?);
-            origins[2].push(one);
+            emit(Placed::Ellipsoid(ellipsoid(
+                t.transform_point3(*center),
+                m,
+                "ellipsoid",
+            )?));
         }
         Shape::Box { min, max } => {
             let (a, b) = (t.transform_point3(*min), t.transform_point3(*max));
@@ -191,12 +225,10 @@ fn place_shape(
                     "the box does not fit in f32 in world space: corners {a} and {b}"
                 )));
             }
-            set.boxes.push(bounds);
-            origins[3].push(one);
+            emit(Placed::Box(bounds));
         }
         Shape::Plane { normal, offset } => {
-            set.planes.push(plane(t, *normal, *offset)?);
-            origins[4].push(one);
+            emit(Placed::Plane(plane(t, *normal, *offset)?));
         }
     }
     Ok(())
@@ -206,19 +238,21 @@ fn place_shape(
 /// holds it and rays can hit it. Without this check an object the user added would be counted
 /// but left out of the tree (its bounds overflow) or never hit (a singular ellipsoid, a NaN
 /// plane), with no error.
+///
+/// Runs the placement itself (one algorithm, so the check cannot drift from what a commit
+/// builds) but keeps nothing: primitives are checked one at a time, so checking a mesh needs
+/// no memory beyond the mesh (materialising it would double a large mesh's footprint).
 pub fn check(shape: &Shape, t: &Affine3A) -> Result<()> {
-    let mut origins = vec![Vec::new(); 5];
-    place_shape(shape, t, 0, &mut PrimitiveSet::default(), &mut origins)
+    place_shape(shape, t, |_| {})
 }
 
 fn finite_bounds(b: &Aabb) -> bool {
     b.min.is_finite() && b.max.is_finite()
 }
 
-/// Whether a triangle's corners, the edges it stores and the corners rebuilt from them
+/// Whether a triangle's stored corner, the edges it stores and the corners rebuilt from them
 /// (its bounds) are finite.
-fn triangle_fits(&[a, b, c]: &[Vec3; 3]) -> bool {
-    let t = Triangle::from_vertices(a, b, c);
+fn triangle_fits(t: &Triangle) -> bool {
     [t.e1, t.e2].iter().all(|e| Vec3::from(*e).is_finite()) && finite_bounds(&t.bounds())
 }
 

@@ -12,7 +12,7 @@ use std::path::Path;
 
 use glam::Vec3;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Rt2Status};
 
 mod obj;
 mod ply;
@@ -35,8 +35,9 @@ pub struct Mesh {
 /// Triangles follow the file's face order, polygons fan-triangulated in place (see
 /// [`parse_ply`] / [`parse_obj`]), because ray sets identify triangles by face index.
 ///
-/// Errors: `Unsupported` for other extensions, `Io` when the file cannot be read (the message
-/// names the path and the OS error), `Parse` for malformed content.
+/// Errors: `Unsupported` for other extensions, `Io` when the file cannot be read or is not a
+/// regular file (the message names the path and the OS error or the file's type),
+/// `OutOfMemory` when its bytes cannot be allocated, `Parse` for malformed content.
 pub fn load_mesh(path: &Path) -> Result<Mesh> {
     let name = path.display().to_string();
     let ext = path
@@ -52,9 +53,110 @@ pub fn load_mesh(path: &Path) -> Result<Mesh> {
             )))
         }
     };
-    let bytes =
-        std::fs::read(path).map_err(|e| Error::io(format!("{name}: cannot read file: {e}")))?;
+    let bytes = read_regular_file(path, &name)?;
     parse(&bytes, &name)
+}
+
+/// Reads a whole regular file, refusing anything else (FIFO, socket, device, directory) with
+/// an `Io` error.
+///
+/// `std::fs::read` would hang forever on a FIFO without a writer (even its `open` blocks) and
+/// read `/dev/zero` until memory runs out; a path under the caller's control may be either, or
+/// a symlink to one. So the path is checked before opening, opened non-blocking where the flag
+/// is known (a FIFO swapped in after the check then cannot block the open), checked again
+/// through the open handle (the file actually read), and read no further than the size that
+/// handle reported, so a file growing while it is read cannot make the read unbounded.
+/// Failing to allocate that size is `OutOfMemory`, not an abort.
+fn read_regular_file(path: &Path, name: &str) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let io = |e: std::io::Error| Error::io(format!("{name}: cannot read file: {e}"));
+    let not_regular = |meta: &std::fs::Metadata| {
+        Error::io(format!(
+            "{name}: cannot read file: not a regular file (it is a {})",
+            file_kind(&meta.file_type())
+        ))
+    };
+    let meta = std::fs::metadata(path).map_err(io)?;
+    if !meta.is_file() {
+        return Err(not_regular(&meta));
+    }
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(all(unix, any(target_os = "linux", target_os = "android")))]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(O_NONBLOCK);
+    }
+    let file = options.open(path).map_err(io)?;
+    let meta = file.metadata().map_err(io)?;
+    if !meta.is_file() {
+        return Err(not_regular(&meta));
+    }
+    let len = usize::try_from(meta.len()).map_err(|_| {
+        Error::new(
+            Rt2Status::OutOfMemory,
+            format!(
+                "{name}: the file ({} bytes) does not fit in memory",
+                meta.len()
+            ),
+        )
+    })?;
+    let mut bytes = Vec::new();
+    bytes.try_reserve_exact(len).map_err(|_| {
+        Error::new(
+            Rt2Status::OutOfMemory,
+            format!("{name}: cannot allocate {len} bytes to read the file"),
+        )
+    })?;
+    file.take(meta.len()).read_to_end(&mut bytes).map_err(io)?;
+    Ok(bytes)
+}
+
+/// `O_NONBLOCK` of Linux's generic ABI (x86, Arm, RISC-V, PowerPC, s390, LoongArch), without a
+/// libc dependency for one constant; on the few architectures where it differs (Alpha, MIPS,
+/// SPARC, PA-RISC) no flag is set and the check before opening is the only guard. It only
+/// changes opening FIFOs and devices, which are then refused; regular files read as usual.
+#[cfg(all(unix, any(target_os = "linux", target_os = "android")))]
+const O_NONBLOCK: i32 = if cfg!(any(
+    target_arch = "x86",
+    target_arch = "x86_64",
+    target_arch = "arm",
+    target_arch = "aarch64",
+    target_arch = "riscv32",
+    target_arch = "riscv64",
+    target_arch = "powerpc",
+    target_arch = "powerpc64",
+    target_arch = "s390x",
+    target_arch = "loongarch64"
+)) {
+    0o4000
+} else {
+    0
+};
+
+/// Names a file type for the "not a regular file" error.
+fn file_kind(t: &std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_fifo() {
+            return "FIFO";
+        }
+        if t.is_char_device() {
+            return "character device";
+        }
+        if t.is_block_device() {
+            return "block device";
+        }
+        if t.is_socket() {
+            return "socket";
+        }
+    }
+    if t.is_dir() {
+        "directory"
+    } else {
+        "special file"
+    }
 }
 
 /// Shows a token from the file in an error message: quoted, control characters escaped (so

@@ -6,7 +6,7 @@
 use glam::Vec3;
 
 use super::{finite_coord, line_error, Mesh, Quoted};
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Rt2Status};
 
 /// Parses an OBJ file held in memory; `name` is used in error messages.
 ///
@@ -58,6 +58,7 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
                         Quoted(extra)
                     )));
                 }
+                room_for_one(&mut mesh.positions, name)?;
                 mesh.positions.push(Vec3::from_array(xyz));
             }
             "f" => {
@@ -73,6 +74,7 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
                 let mut corners = 2;
                 for tok in toks {
                     let v = index(tok)?;
+                    room_for_one(&mut mesh.triangles, name)?;
                     mesh.triangles.push([v0, prev, v]);
                     prev = v;
                     corners += 1;
@@ -94,6 +96,21 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
         )));
     }
     Ok(mesh)
+}
+
+/// Makes room for one more element (growing as `push` would), so that running out of memory
+/// on a large file is an `OutOfMemory` error rather than an abort of the host program. OBJ
+/// gives no counts up front, so the arrays grow as lines are read.
+fn room_for_one<T>(v: &mut Vec<T>, name: &str) -> Result<()> {
+    if v.len() == v.capacity() {
+        v.try_reserve(1).map_err(|_| {
+            Error::new(
+                Rt2Status::OutOfMemory,
+                format!("{name}: cannot allocate memory for the mesh"),
+            )
+        })?;
+    }
+    Ok(())
 }
 
 /// Resolves one face vertex reference (`i`, `i/t`, `i//n`, `i/t/n`) to a 0-based index into

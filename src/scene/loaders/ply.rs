@@ -5,10 +5,12 @@
 //! Errors in the header and in ASCII bodies name the 1-based line; errors in binary bodies name
 //! the byte offset from the start of the file, since a binary body has no lines.
 
+use std::collections::HashSet;
+
 use glam::Vec3;
 
 use super::{finite_coord, line_error, offset_error, Mesh, Quoted};
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Rt2Status};
 
 /// The scalar types of the PLY spec, under either of their two spellings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -148,8 +150,8 @@ enum Role {
 /// by face index; for all-triangle files triangle i is face i).
 ///
 /// Rejects (with `Parse`) faces of fewer than 3 vertices, out-of-range indices, non-finite
-/// coordinates, element counts the file cannot hold, and trailing data after the last element
-/// (a sign of wrong counts).
+/// coordinates, element counts the file cannot hold, trailing data after the last element
+/// (a sign of wrong counts), and a file without faces (as the OBJ loader does).
 pub fn parse_ply(bytes: &[u8], name: &str) -> Result<Mesh> {
     let header = parse_header(bytes, name)?;
     let roles = plan(&header, name)?;
@@ -157,13 +159,24 @@ pub fn parse_ply(bytes: &[u8], name: &str) -> Result<Mesh> {
     check_counts(&header, body.len(), name)?;
 
     let mut mesh = Mesh::default();
-    // Both counts were just bounded by the body size, so these reservations are safe.
+    // Both counts were just bounded by the body size, so a reservation is at most a few times
+    // the file's size. A large file can still exhaust memory: that is reported as
+    // `OutOfMemory` rather than aborting the host program.
     for (el, role) in header.elements.iter().zip(&roles) {
-        match role {
-            Role::Vertex(_) => mesh.positions.reserve_exact(el.count),
-            Role::Face(_) => mesh.triangles.reserve(el.count),
-            Role::Skip => {}
-        }
+        let reserved = match role {
+            Role::Vertex(_) => mesh.positions.try_reserve_exact(el.count),
+            Role::Face(_) => mesh.triangles.try_reserve(el.count),
+            Role::Skip => Ok(()),
+        };
+        reserved.map_err(|_| {
+            Error::new(
+                Rt2Status::OutOfMemory,
+                format!(
+                    "{name}: cannot allocate memory for {} '{}' entries",
+                    el.count, el.name
+                ),
+            )
+        })?;
     }
     let n_verts = header
         .elements
@@ -184,6 +197,22 @@ pub fn parse_ply(bytes: &[u8], name: &str) -> Result<Mesh> {
             read_binary(&header, &roles, &mut cur, n_verts, &mut mesh)?;
         }
     }
+    // As in OBJ: a mesh file that yields no triangle is refused rather than loaded as an
+    // object with nothing to hit. Checked after the body, so that a damaged body is reported
+    // as such. Every face gives at least one triangle, so no triangle means no face.
+    if mesh.triangles.is_empty() {
+        let line = header
+            .elements
+            .iter()
+            .zip(&roles)
+            .find(|(_, r)| matches!(r, Role::Face(_)))
+            .map_or(header.end_line, |(el, _)| el.line);
+        return Err(line_error(
+            name,
+            line,
+            "no faces in the file (element 'face' has 0 entries)",
+        ));
+    }
     Ok(mesh)
 }
 
@@ -195,6 +224,7 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
     let mut line_no = 0usize;
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
+    let mut names: HashSet<&str> = HashSet::new();
     loop {
         line_no += 1;
         let rest = match bytes.get(pos..) {
@@ -264,7 +294,9 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                             Quoted(count)
                         ))
                     })?;
-                if elements.iter().any(|e| e.name == el_name) {
+                // A set, not a scan of the earlier elements: a header may declare any number
+                // of elements, and the scan made such a header take quadratic time.
+                if !names.insert(el_name) {
                     return Err(err(format!("element '{el_name}' declared twice")));
                 }
                 elements.push(Element {
