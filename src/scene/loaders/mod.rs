@@ -62,8 +62,8 @@ pub fn load_mesh(path: &Path) -> Result<Mesh> {
 ///
 /// `std::fs::read` would hang forever on a FIFO without a writer (even its `open` blocks) and
 /// read `/dev/zero` until memory runs out; a path under the caller's control may be either, or
-/// a symlink to one. So the path is checked before opening, opened non-blocking where the flag
-/// is known (a FIFO swapped in after the check then cannot block the open), checked again
+/// a symlink to one. So the path is checked before opening, opened non-blocking on Unix (a FIFO
+/// swapped in after the check then cannot block the open), checked again
 /// through the open handle (the file actually read), and read no further than the size that
 /// handle reported, so a file growing while it is read cannot make the read unbounded.
 /// Failing to allocate that size is `OutOfMemory`, not an abort.
@@ -82,10 +82,10 @@ fn read_regular_file(path: &Path, name: &str) -> Result<Vec<u8>> {
     }
     let mut options = std::fs::OpenOptions::new();
     options.read(true);
-    #[cfg(all(unix, any(target_os = "linux", target_os = "android")))]
+    #[cfg(unix)]
     {
         use std::os::unix::fs::OpenOptionsExt;
-        options.custom_flags(O_NONBLOCK);
+        options.custom_flags(libc::O_NONBLOCK);
     }
     let file = options.open(path).map_err(io)?;
     let meta = file.metadata().map_err(io)?;
@@ -111,28 +111,6 @@ fn read_regular_file(path: &Path, name: &str) -> Result<Vec<u8>> {
     file.take(meta.len()).read_to_end(&mut bytes).map_err(io)?;
     Ok(bytes)
 }
-
-/// `O_NONBLOCK` of Linux's generic ABI (x86, Arm, RISC-V, PowerPC, s390, LoongArch), without a
-/// libc dependency for one constant; on the few architectures where it differs (Alpha, MIPS,
-/// SPARC, PA-RISC) no flag is set and the check before opening is the only guard. It only
-/// changes opening FIFOs and devices, which are then refused; regular files read as usual.
-#[cfg(all(unix, any(target_os = "linux", target_os = "android")))]
-const O_NONBLOCK: i32 = if cfg!(any(
-    target_arch = "x86",
-    target_arch = "x86_64",
-    target_arch = "arm",
-    target_arch = "aarch64",
-    target_arch = "riscv32",
-    target_arch = "riscv64",
-    target_arch = "powerpc",
-    target_arch = "powerpc64",
-    target_arch = "s390x",
-    target_arch = "loongarch64"
-)) {
-    0o4000
-} else {
-    0
-};
 
 /// Names a file type for the "not a regular file" error.
 fn file_kind(t: &std::fs::FileType) -> &'static str {
