@@ -854,10 +854,17 @@ fn malformed_obj_errors_name_file_and_line() {
 // ---------------------------------------------------------------------------------------------
 // Files, extensions, I/O errors
 
-fn temp_file(file_name: &str, content: &[u8]) -> PathBuf {
+/// A path named `file_name` in this run's scratch directory (created), nothing at it yet.
+fn temp_path(file_name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("rt2-loaders-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join(file_name);
+    let _ = std::fs::remove_file(&path);
+    path
+}
+
+fn temp_file(file_name: &str, content: &[u8]) -> PathBuf {
+    let path = temp_path(file_name);
     std::fs::write(&path, content).unwrap();
     path
 }
@@ -948,11 +955,7 @@ fn assert_not_regular(result: Result<Mesh>, path: &std::path::Path, kind: &str) 
 #[cfg(unix)]
 #[test]
 fn fifo_is_refused_promptly_not_waited_on() {
-    let path = std::env::temp_dir()
-        .join(format!("rt2-loaders-test-{}", std::process::id()))
-        .join("fifo.ply");
-    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-    let _ = std::fs::remove_file(&path);
+    let path = temp_path("fifo.ply");
     match std::process::Command::new("mkfifo").arg(&path).status() {
         Ok(st) => assert!(st.success(), "mkfifo {} failed: {st}", path.display()),
         Err(e) => {
@@ -968,11 +971,7 @@ fn fifo_is_refused_promptly_not_waited_on() {
 #[cfg(unix)]
 #[test]
 fn symlink_to_dev_zero_is_refused_promptly_not_read() {
-    let path = std::env::temp_dir()
-        .join(format!("rt2-loaders-test-{}", std::process::id()))
-        .join("zero.ply");
-    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-    let _ = std::fs::remove_file(&path);
+    let path = temp_path("zero.ply");
     std::os::unix::fs::symlink("/dev/zero", &path).unwrap();
     // Read to the end, /dev/zero would fill memory; it must be refused without reading.
     let result = load_within(&path, std::time::Duration::from_secs(5));
@@ -981,9 +980,7 @@ fn symlink_to_dev_zero_is_refused_promptly_not_read() {
 
 #[test]
 fn directory_is_an_io_error() {
-    let dir = std::env::temp_dir()
-        .join(format!("rt2-loaders-test-{}", std::process::id()))
-        .join("dir.obj");
+    let dir = temp_path("dir.obj");
     std::fs::create_dir_all(&dir).unwrap();
     let err = load_mesh(&dir).unwrap_err();
     assert_eq!(err.status, Rt2Status::Io, "{}", err.message);
