@@ -191,7 +191,7 @@ int main(int argc, char **argv) {
            "rt2_scene_add_mesh(index 3 of 3 vertices)");
     const float tri_nan[9] = {0, 0, 0, 1, NAN, 0, 0, 1, 0};
     const uint32_t idx[3] = {0, 1, 2};
-    expect(rt2_scene_add_mesh(scene, tri_nan, 3, idx, 1, 0, &id), RT2_STATUS_INVALID_ARGUMENT, "positions",
+    expect(rt2_scene_add_mesh(scene, tri_nan, 3, idx, 1, 0, &id), RT2_STATUS_INVALID_ARGUMENT, "positions[vertex 1][1]",
            "rt2_scene_add_mesh(a NaN coordinate)");
     expect(rt2_scene_add_mesh(scene, NULL, 3, idx, 1, 0, &id), RT2_STATUS_INVALID_ARGUMENT, "positions",
            "rt2_scene_add_mesh(positions = NULL, 3 vertices)");

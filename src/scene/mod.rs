@@ -164,8 +164,9 @@ impl Shape {
                 positions,
                 triangles,
             } => {
-                for (i, p) in positions.iter().enumerate() {
-                    check_finite(&format!("positions[vertex {i}]"), &p.to_array())?;
+                // The name is formatted only for the vertex at fault (not once per vertex).
+                if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+                    check_finite(&format!("positions[vertex {i}]"), &positions[i].to_array())?;
                 }
                 for (t, tri) in triangles.iter().enumerate() {
                     if let Some(k) = tri.iter().position(|&v| v as usize >= positions.len()) {
