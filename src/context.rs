@@ -217,6 +217,7 @@ impl Context {
         opts: &RenderOptions,
         frame: &mut Frame,
     ) -> Result<()> {
+        opts.validate()?;
         cpu::whitted::check_schedule(opts)?;
         self.job(
             frame,

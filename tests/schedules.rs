@@ -61,3 +61,61 @@ fn breadth_first_matches_depth_first() {
         assert!(differing <= allowed, "{name}: {differing} pixels differ");
     }
 }
+
+/// Out-of-range render options are refused by the context itself, so the CLI and Rust callers
+/// get the C API's errors; the frame is left untouched. (`max_depth` 2^32 - 1 used to abort on
+/// a 400 GB allocation, 2^32 - 1 samples to run for ever, 0 samples to draw black.)
+#[test]
+fn render_options_out_of_range_are_refused_by_the_context() {
+    let mut b = builtin::by_name("spheres2").unwrap();
+    b.scene.commit().unwrap();
+    let ctx = Context::new(BackendRequest::Cpu, 2).unwrap();
+    let d = RenderOptions::default();
+    for (what, opts) in [
+        ("max_depth", RenderOptions { max_depth: 0, ..d }),
+        ("max_depth", RenderOptions { max_depth: 65, ..d }),
+        (
+            "max_depth",
+            RenderOptions {
+                max_depth: u32::MAX,
+                ..d
+            },
+        ),
+        ("samples", RenderOptions { samples: 0, ..d }),
+        (
+            "samples",
+            RenderOptions {
+                samples: u32::MAX,
+                ..d
+            },
+        ),
+        (
+            "short_stack_size",
+            RenderOptions {
+                short_stack_size: 0,
+                ..d
+            },
+        ),
+        (
+            "background",
+            RenderOptions {
+                background: glam::Vec3::NAN,
+                ..d
+            },
+        ),
+    ] {
+        for schedule in [Schedule::DepthFirst, Schedule::BreadthFirst] {
+            let opts = RenderOptions { schedule, ..opts };
+            let mut frame = Frame::new(8, 8).unwrap();
+            let e = ctx
+                .render(b.scene.committed().unwrap(), &b.camera, &opts, &mut frame)
+                .expect_err(what);
+            assert_eq!(e.status, rt2::error::Rt2Status::InvalidArgument, "{what}");
+            assert!(e.message.contains(what), "{what}: {}", e.message);
+            assert!(
+                frame.pixels().iter().all(|&p| p == 0),
+                "{what}: frame written"
+            );
+        }
+    }
+}

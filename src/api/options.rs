@@ -442,36 +442,11 @@ const _: () = assert!(std::mem::offset_of!(rt2_render_options, struct_size) == 0
 
 impl rt2_render_options {
     pub(crate) fn to_options(self) -> Result<RenderOptions> {
-        let bad = Error::invalid_argument;
-        if !(1..=64).contains(&self.max_depth) {
-            return Err(bad(format!(
-                "max_depth is {} (must be in 1..=64)",
-                self.max_depth
-            )));
-        }
-        if !(1..=1024).contains(&self.samples) {
-            return Err(bad(format!(
-                "samples is {} (must be in 1..=1024)",
-                self.samples
-            )));
-        }
-        if !(1..=64).contains(&self.short_stack_size) {
-            return Err(bad(format!(
-                "short_stack_size is {} (must be in 1..=64)",
-                self.short_stack_size
-            )));
-        }
         let transparency = match self.transparency {
             0 => Transparency::Straight,
             1 => Transparency::Refract,
             v => return Err(enum_error("rt2_transparency", v)),
         };
-        let background = Vec3::from(self.background);
-        if !background.is_finite() || background.min_element() < 0.0 {
-            return Err(bad(format!(
-                "background is {background} (must be finite and >= 0)"
-            )));
-        }
         let schedule = match self.schedule {
             0 => Schedule::DepthFirst,
             1 => Schedule::BreadthFirst,
@@ -483,7 +458,7 @@ impl rt2_render_options {
             2 => GpuPathRequest::Wavefront,
             v => return Err(enum_error("rt2_gpu_path", v)),
         };
-        Ok(RenderOptions {
+        let options = RenderOptions {
             gpu_path,
             schedule,
             max_depth: self.max_depth,
@@ -491,10 +466,12 @@ impl rt2_render_options {
             traversal: traversal_from(self.traversal)?,
             short_stack_size: self.short_stack_size as usize,
             transparency,
-            background,
+            background: Vec3::from(self.background),
             intersector: intersector_from(self.intersector)?,
             offset_mode: offset_mode_from(self.offset_mode)?,
-        })
+        };
+        options.validate()?;
+        Ok(options)
     }
 }
 

@@ -39,16 +39,28 @@ impl GpuOptions {
     }
 }
 
-/// `RT2_GPU_DEVICES`: a count (0 or unset: one device per adapter, the default).
+/// Most logical devices `RT2_GPU_DEVICES` may ask for: a test knob (frames split across
+/// devices), where a typo of 100000 took minutes opening devices and would overflow the band
+/// arithmetic.
+const MAX_LOGICAL_DEVICES: usize = 64;
+
+/// `RT2_GPU_DEVICES`: a count up to [`MAX_LOGICAL_DEVICES`] (0 or unset: one device per
+/// adapter, the default).
 fn logical_devices(value: Option<&str>) -> Result<usize> {
-    match value.map(str::trim) {
-        None | Some("") => Ok(0),
-        Some(v) => v.parse().map_err(|_| {
-            Error::invalid_argument(format!(
-                "RT2_GPU_DEVICES is '{v}' (expected a count of logical devices)"
-            ))
-        }),
-    }
+    let n = match value.map(str::trim) {
+        None | Some("") => 0,
+        Some(v) => v
+            .parse()
+            .ok()
+            .filter(|&n| n <= MAX_LOGICAL_DEVICES)
+            .ok_or_else(|| {
+                Error::invalid_argument(format!(
+                    "RT2_GPU_DEVICES is '{v}' (expected a count of logical devices, at most \
+                 {MAX_LOGICAL_DEVICES})"
+                ))
+            })?,
+    };
+    Ok(n)
 }
 
 /// The pipelines of one module, in the order of its entry-point list.
@@ -714,7 +726,8 @@ mod tests {
         assert_eq!(super::logical_devices(None).unwrap(), 0);
         assert_eq!(super::logical_devices(Some("")).unwrap(), 0);
         assert_eq!(super::logical_devices(Some(" 2 ")).unwrap(), 2);
-        for bad in ["two", "-1", "2x", "1e3"] {
+        assert_eq!(super::logical_devices(Some("64")).unwrap(), 64);
+        for bad in ["two", "-1", "2x", "1e3", "65", "100000"] {
             let e = super::logical_devices(Some(bad)).unwrap_err();
             assert!(e.message.contains(bad), "{bad}: {}", e.message);
         }

@@ -157,7 +157,13 @@ fn replace_section(path: &Path, name: &str, text: &str) -> Result<()> {
         format!("<!-- bench:{name} -->"),
         format!("<!-- /bench:{name} -->"),
     );
-    let old = std::fs::read_to_string(path).unwrap_or_else(|_| "# Benchmarks\n".into());
+    // Only a missing file starts empty: any other failure (not UTF-8, unreadable) must not
+    // lead to overwriting the file with one section.
+    let old = match std::fs::read_to_string(path) {
+        Ok(old) => old,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => "# Benchmarks\n".into(),
+        Err(e) => return Err(Error::io(format!("cannot read {}: {e}", path.display()))),
+    };
     let block = format!("{open}\n{text}\n{close}");
     let new = match (old.find(&open), old.find(&close)) {
         (Some(a), Some(b)) if b > a => format!("{}{block}{}", &old[..a], &old[b + close.len()..]),
@@ -858,4 +864,25 @@ fn gpu(a: &Args) -> Result<String> {
          `--runs` frames after one warm-up frame (which also compiles the kernels).\n",
     );
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    /// A benchmark file that cannot be read as text is an error and stays as it was; a
+    /// missing one is started.
+    #[test]
+    fn replace_section_never_overwrites_a_file_it_could_not_read() {
+        let dir = std::env::temp_dir().join(format!("rt2-bench-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let binary = dir.join("binary.md");
+        std::fs::write(&binary, b"\xff\xfe not UTF-8").unwrap();
+        assert!(super::replace_section(&binary, "x", "new").is_err());
+        assert_eq!(std::fs::read(&binary).unwrap(), b"\xff\xfe not UTF-8");
+
+        let missing = dir.join("missing.md");
+        let _ = std::fs::remove_file(&missing);
+        super::replace_section(&missing, "x", "new").unwrap();
+        let text = std::fs::read_to_string(&missing).unwrap();
+        assert!(text.starts_with("# Benchmarks") && text.contains("<!-- bench:x -->\nnew\n"));
+    }
 }
