@@ -35,6 +35,12 @@ impl GpuPath {
     }
 }
 
+/// Most pixels of one chunk of rows, whatever the adapter's binding limit allows: each chunk's
+/// pixels are read back through two host copies, which then stay small next to the frame (a
+/// whole 4 GiB frame in one chunk needed several times the frame in host memory). 8192² and
+/// smaller frames are still one chunk.
+const CHUNK_PIXELS: u64 = 1 << 26;
+
 /// Items of one chunk's wave queue per pixel: a pixel's ray tree may widen (refraction plus
 /// reflection); wider waves make the chunk fall back to the megakernel.
 const QUEUE_PER_PIXEL: u64 = 2;
@@ -146,9 +152,17 @@ impl Job<'_> {
             GpuPath::Megakernel => 4,
             GpuPath::Wavefront => 2 * QUEUE_PER_PIXEL * std::mem::size_of::<GpuItem>() as u64,
         };
-        let chunk_px = (dev.max_binding() / per_pixel).min(dev.max_threads() / 4);
+        let chunk_px = (dev.max_binding() / per_pixel)
+            .min(CHUNK_PIXELS)
+            .min(dev.max_threads() / 4);
         let chunk_rows = (chunk_px / w).max(1) as u32;
-        let mut out = Vec::with_capacity(((b - a) as u64 * w) as usize);
+        let band = ((b - a) as u64 * w) as usize;
+        let mut out = Vec::new();
+        // The band's pixels on the host: a failed allocation is OUT_OF_MEMORY (AUTO falls back
+        // to the CPU), never an abort (a 32768² frame is 4 GiB).
+        out.try_reserve_exact(band).map_err(|_| {
+            GpuError::OutOfMemory(format!("{} bytes for the frame's read-back", 4 * band))
+        })?;
         let mut row = a;
         while row < b {
             let rows = chunk_rows.min(b - row);
