@@ -144,6 +144,14 @@ int main(int argc, char **argv) {
     report(rt2_frame_pixels(NULL) == NULL && rt2_last_error_message()[0] != '\0', "rt2_frame_pixels(NULL) is NULL with a message",
            NULL);
     expect(rt2_frame_save_png(frame, NULL), RT2_STATUS_INVALID_ARGUMENT, "path", "rt2_frame_save_png(path = NULL)");
+    {
+        char jpg[512], nofolder[512];
+        snprintf(jpg, sizeof jpg, "%s/errors-frame.jpg", tmpdir);
+        snprintf(nofolder, sizeof nofolder, "%s/no-such-folder/errors-frame.png", tmpdir);
+        expect(rt2_frame_save_png(frame, jpg), RT2_STATUS_INVALID_ARGUMENT, ".png", "rt2_frame_save_png(a .jpg name)");
+        expect(rt2_frame_save_png(frame, nofolder), RT2_STATUS_IO, "folder", "rt2_frame_save_png(a missing folder)");
+        expect(rt2_frame_save_png(frame, tmpdir), RT2_STATUS_INVALID_ARGUMENT, ".png", "rt2_frame_save_png(a directory)");
+    }
 
     /* ---- Camera ---- */
     rt2_camera *camera = NULL;

@@ -84,7 +84,9 @@ impl Frame {
         Ok(())
     }
 
+    /// Writes the frame as a PNG at `path`, which [`check_png_path`] must accept.
     pub fn save_png(&self, path: &Path) -> Result<()> {
+        check_png_path(path)?;
         image::save_buffer(
             path,
             &self.pixels,
@@ -94,4 +96,30 @@ impl Frame {
         )
         .map_err(|e| Error::io(format!("cannot write {}: {e}", path.display())))
     }
+}
+
+/// Whether a PNG can be written at `path`, checked before any work is done (the CLI checks its
+/// `-o` before rendering): the name ends in `.png` (any case), it is not a directory, and its
+/// folder exists. `Io` errors name the path; the write itself can still fail (permissions).
+pub fn check_png_path(path: &Path) -> Result<()> {
+    let is_png = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    if !is_png {
+        return Err(Error::invalid_argument(format!(
+            "{}: the output must be a .png file",
+            path.display()
+        )));
+    }
+    if path.is_dir() {
+        return Err(Error::io(format!("{}: is a directory", path.display())));
+    }
+    let folder = path.parent().filter(|p| !p.as_os_str().is_empty());
+    if folder.is_some_and(|f| !f.is_dir()) {
+        return Err(Error::io(format!(
+            "{}: its folder does not exist",
+            path.display()
+        )));
+    }
+    Ok(())
 }

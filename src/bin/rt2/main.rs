@@ -177,6 +177,8 @@ fn render(args: &[String]) -> Result<()> {
             }
         }
     }
+    // Before any work: a bad output path found after a long render wastes the render.
+    rt2::frame::check_png_path(Path::new(&output))?;
     let ctx = Context::new(backend, threads)?;
     let t0 = Instant::now();
     let mut loaded = load_scene(&name)?;
