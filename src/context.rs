@@ -218,7 +218,6 @@ impl Context {
         frame: &mut Frame,
     ) -> Result<()> {
         opts.validate()?;
-        cpu::whitted::check_schedule(opts)?;
         self.job(
             frame,
             gpu_lacks(opts.intersector, opts.offset_mode),
@@ -256,7 +255,7 @@ impl Context {
         hits: &mut [Hit],
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
-        check_query(q)?;
+        q.validate()?;
         self.job(
             hits,
             gpu_lacks(q.intersector, OffsetMode::Epsilon),
@@ -279,7 +278,7 @@ impl Context {
         out: &mut [bool],
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
-        check_query(q)?;
+        q.validate()?;
         self.job(
             out,
             gpu_lacks(q.intersector, OffsetMode::Epsilon),
@@ -359,18 +358,6 @@ fn gpu_lacks(intersector: Intersector, offset: OffsetMode) -> Option<&'static st
     }
 }
 
-/// Packets and streams test triangles with Möller–Trumbore (their SIMD test); the watertight
-/// test runs one ray at a time.
-pub(crate) fn check_query(q: &QueryOptions) -> Result<()> {
-    if q.mode != cpu::query::QueryMode::Single && q.intersector != Intersector::MollerTrumbore {
-        return Err(Error::unsupported(
-            "packet and stream queries test triangles with Möller–Trumbore only: use single-ray \
-             mode for the watertight test",
-        ));
-    }
-    Ok(())
-}
-
 /// Options of batch ray queries.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct QueryOptions {
@@ -381,6 +368,30 @@ pub struct QueryOptions {
     pub mode: cpu::query::QueryMode,
     /// The ray–triangle test (`crate::precision`).
     pub intersector: crate::precision::Intersector,
+}
+
+impl QueryOptions {
+    /// The short stack's range, and the combinations packets and streams cannot honour (they
+    /// test triangles with Möller–Trumbore, their SIMD test; the watertight test runs one ray
+    /// at a time). Checked by `Context::intersect` / `occluded`; the C API checks first, before
+    /// it builds ropes or exact vertices.
+    pub fn validate(&self) -> Result<()> {
+        if !(1..=64).contains(&self.short_stack_size) {
+            return Err(Error::invalid_argument(format!(
+                "short_stack_size is {} (must be in 1..=64)",
+                self.short_stack_size
+            )));
+        }
+        if self.mode != cpu::query::QueryMode::Single
+            && self.intersector != Intersector::MollerTrumbore
+        {
+            return Err(Error::unsupported(
+                "packet and stream queries test triangles with Möller–Trumbore only: use \
+                 single-ray mode for the watertight test",
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl Default for QueryOptions {

@@ -8,7 +8,7 @@ use super::options::{
 };
 use super::scene::rt2_scene;
 use crate::context::QueryOptions;
-use crate::error::{Error, Rt2Status};
+use crate::error::Rt2Status;
 use crate::geometry::{Hit, Ray, TraversalStats};
 use glam::Vec3;
 
@@ -97,18 +97,14 @@ unsafe fn query_options(opt: *const rt2_query_options) -> crate::error::Result<Q
         return Ok(QueryOptions::default());
     }
     let o = read_versioned(opt)?;
-    if !(1..=64).contains(&o.short_stack_size) {
-        return Err(Error::invalid_argument(format!(
-            "short_stack_size is {} (must be in 1..=64)",
-            o.short_stack_size
-        )));
-    }
-    Ok(QueryOptions {
+    let q = QueryOptions {
         traversal: traversal_from(o.traversal)?,
         short_stack_size: o.short_stack_size as usize,
         mode: query_mode_from(o.mode)?,
         intersector: intersector_from(o.intersector)?,
-    })
+    };
+    q.validate()?;
+    Ok(q)
 }
 
 /// Rays converted and traced per step of a C query. The library's own copies (rays in its
@@ -143,9 +139,8 @@ unsafe fn run_query<T>(
         let q = query_options(opt)?;
         let rays = slice(rays, count, "rays")?;
         let out = slice_mut(out, count, out_name)?;
-        // Refused options are refused before the scene gains ropes or exact vertices: a failed
-        // call leaves the scene as it was.
-        crate::context::check_query(&q)?;
+        // `query_options` validated the options (defaults are valid): refused ones never reach
+        // the ropes or exact vertices below, so a failed call leaves the scene as it was.
         if q.traversal.is_some_and(|t| t.needs_ropes()) {
             s.write().ensure_ropes()?;
         }

@@ -34,9 +34,8 @@ pub unsafe extern "C" fn rt2_render(
             read_versioned(options)?.to_options()?
         };
         let f = handle_mut(frame, "frame")?;
-        // Refused options are refused before the scene gains ropes or exact vertices: a failed
-        // call leaves the scene as it was.
-        crate::cpu::whitted::check_schedule(&opts)?;
+        // `to_options` validated the options (defaults are valid): refused ones never reach
+        // the ropes or exact vertices below, so a failed call leaves the scene as it was.
         if opts.traversal.is_some_and(|t| t.needs_ropes()) {
             s.write().ensure_ropes()?;
         }

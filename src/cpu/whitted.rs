@@ -323,7 +323,7 @@ const WAVE_PATHS: usize = 1 << 20;
 /// terms (same rays, same hits, same shading) summed in another order; float addition is not
 /// associative, so a pixel may round to the next 1/255 step. The stream queries carry no
 /// per-ray excluded primitive, so `OffsetMode::ExcludePrim` is refused before rendering
-/// ([`check_schedule`]). The traced pixels go in runs of at most [`WAVE_PATHS`] samples.
+/// (`RenderOptions::validate`). The traced pixels go in runs of at most [`WAVE_PATHS`] samples.
 fn render_breadth_first(
     scene: &Committed,
     camera: &Camera,
@@ -457,20 +457,4 @@ fn trace_wavefronts(
         }
     }
     color
-}
-
-/// Options the breadth-first schedule cannot honour: its stream queries test triangles with
-/// Möller–Trumbore and carry no per-ray excluded primitive.
-pub fn check_schedule(opts: &RenderOptions) -> crate::error::Result<()> {
-    use crate::precision::Intersector;
-    if opts.schedule == Schedule::BreadthFirst
-        && (opts.offset_mode == OffsetMode::ExcludePrim
-            || opts.intersector != Intersector::MollerTrumbore)
-    {
-        return Err(crate::error::Error::unsupported(
-            "the breadth-first schedule traces ray streams with Möller–Trumbore and no excluded \
-             primitive: use the depth-first schedule for the watertight test or exclude-prim offsets",
-        ));
-    }
-    Ok(())
 }
