@@ -98,9 +98,10 @@ pub fn triangle_corners(objects: &[Object]) -> Vec<[[f32; 3]; 3]> {
     out
 }
 
-/// One world-space primitive, as [`place_shape`] hands it on.
+/// One world-space primitive, as [`place_shape`] hands it on (a triangle with its index in
+/// the mesh).
 enum Placed {
-    Triangle(Triangle),
+    Triangle(u32, Triangle),
     Sphere(Sphere),
     Ellipsoid(Ellipsoid),
     Box(Aabb),
@@ -110,24 +111,20 @@ enum Placed {
 /// Appends the world-space primitives of `obj` to `set`; `origins` receives one entry per
 /// bounded primitive, `plane_origins` per plane (they are indexed after the bounded ones).
 ///
-/// Fails, appending nothing, when a primitive cannot be represented in world space (see
-/// [`check`]); the scene checks every object when it is added or moved, so a commit never
-/// meets one.
+/// Fails when a primitive cannot be represented in world space (see [`check`]), having
+/// appended the primitives before it: the commit then drops the whole set. The scene checks
+/// every object when it is added or moved, so a commit never meets one.
 pub fn place(
     obj: &Object,
     object_id: u32,
     set: &mut PrimitiveSet,
     origins: &mut [Vec<PrimOrigin>],
 ) -> Result<()> {
-    // Only a mesh can fail after handing on primitives (at a later triangle); undo those.
-    let kept = (set.triangles.len(), origins[0].len());
-    let mut next_triangle = 0u32;
-    let placed = place_shape(&obj.shape, &obj.transform, |p| {
+    place_shape(&obj.shape, &obj.transform, |p| {
         let (kind, prim) = match p {
-            Placed::Triangle(t) => {
+            Placed::Triangle(k, t) => {
                 set.triangles.push(t);
-                next_triangle += 1;
-                (0, next_triangle - 1)
+                (0, k)
             }
             Placed::Sphere(s) => {
                 set.spheres.push(s);
@@ -150,12 +147,7 @@ pub fn place(
             object: object_id,
             prim,
         });
-    });
-    if placed.is_err() {
-        set.triangles.truncate(kept.0);
-        origins[0].truncate(kept.1);
-    }
-    placed
+    })
 }
 
 /// The one placement algorithm: hands each world-space primitive of `shape` placed by `t` to
@@ -178,7 +170,7 @@ fn place_shape(shape: &Shape, t: &Affine3A, mut emit: impl FnMut(Placed)) -> Res
                         [a, b, c]
                     )));
                 }
-                emit(Placed::Triangle(triangle));
+                emit(Placed::Triangle(k as u32, triangle));
             }
         }
         Shape::Sphere { center, radius } => {
