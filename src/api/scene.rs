@@ -47,9 +47,21 @@ unsafe fn edit_with_id(
     out_id: *mut u32,
     f: impl FnOnce(&mut Scene) -> Result<u32>,
 ) -> Rt2Status {
+    prepare_and_edit(scene, out_id, || Ok(()), |s, ()| f(s))
+}
+
+/// [`edit_with_id`] with a `prepare` step run before the scene is locked (reading a file can
+/// take any time, and renders and edits of the scene must not wait for it).
+unsafe fn prepare_and_edit<P>(
+    scene: *mut rt2_scene,
+    out_id: *mut u32,
+    prepare: impl FnOnce() -> Result<P>,
+    f: impl FnOnce(&mut Scene, P) -> Result<u32>,
+) -> Rt2Status {
     guard(|| {
         let s = handle(scene, "scene")?;
-        let id = f(&mut s.write())?;
+        let prepared = prepare()?;
+        let id = f(&mut s.write(), prepared)?;
         if !out_id.is_null() {
             out_id.write(id);
         }
@@ -254,21 +266,18 @@ pub unsafe extern "C" fn rt2_scene_load_file(
     material: u32,
     out_object: *mut u32,
 ) -> Rt2Status {
-    guard(|| {
-        let s = handle(scene, "scene")?;
-        // Outside the write lock: reading a file can take any time (a slow disk, a network
-        // share), and renders and edits of the scene must not wait for it.
-        let mesh = loaders::load_mesh(&path_arg(path, "path")?)?;
-        let shape = Shape::Mesh {
-            positions: mesh.positions,
-            triangles: mesh.triangles,
-        };
-        let id = s.write().add_object(shape, material)?;
-        if !out_object.is_null() {
-            out_object.write(id);
-        }
-        Ok(())
-    })
+    prepare_and_edit(
+        scene,
+        out_object,
+        || loaders::load_mesh(&path_arg(path, "path")?),
+        |s, mesh| {
+            let shape = Shape::Mesh {
+                positions: mesh.positions,
+                triangles: mesh.triangles,
+            };
+            s.add_object(shape, material)
+        },
+    )
 }
 
 /// Sets an object's object-to-world transform: a row-major 3×4 matrix `[R | t]` (12 floats),
