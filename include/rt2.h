@@ -682,8 +682,9 @@ void rt2_context_destroy(rt2_context *ctx);
 
 /**
  * Reports the backend tracing runs on and why, why the last job ran on the CPU instead
- * (`fallback`, NULL when it did not), and what AUTO chose for that job (`auto_choice`). On
- * failure `*out` is untouched.
+ * (`fallback`, NULL when it did not), and what AUTO chose for that job (`auto_choice`). A query
+ * of more than 2^20 rays runs as several jobs (see `rt2_intersect`): this reports its last.
+ * On failure `*out` is untouched.
  *
  * # Safety
  * `ctx` is a live context; `out` points to an `rt2_context_properties` whose `struct_size` is set.

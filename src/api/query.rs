@@ -150,9 +150,11 @@ unsafe fn run_query<T>(
         let guard = s.read();
         let committed = guard.committed()?;
         let mut st = TraversalStats::default();
+        let mut step = Vec::new();
         for (rays, out) in rays.chunks(QUERY_CHUNK).zip(out.chunks_mut(QUERY_CHUNK)) {
-            let rays: Vec<Ray> = rays.iter().map(Ray::from).collect();
-            st.add(&f(&c.inner, committed, &rays, out, &q)?);
+            step.clear();
+            step.extend(rays.iter().map(Ray::from));
+            st.add(&f(&c.inner, committed, &step, out, &q)?);
         }
         if !stats.is_null() {
             write_out(
