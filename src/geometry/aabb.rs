@@ -47,6 +47,11 @@ impl Aabb {
         self.min.cmpgt(self.max).any()
     }
 
+    /// True when both corners are finite (a box the tree can hold).
+    pub fn is_finite(&self) -> bool {
+        self.min.is_finite() && self.max.is_finite()
+    }
+
     pub fn extent(&self) -> Vec3 {
         (self.max - self.min).max(Vec3::ZERO)
     }

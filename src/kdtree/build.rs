@@ -100,7 +100,7 @@ pub fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
     let start = Instant::now();
     let prims: Vec<(u32, Aabb)> = (0..input.prim_count())
         .map(|p| (p as u32, input.bounds(p)))
-        .filter(|(_, b)| !b.is_empty() && b.min.is_finite() && b.max.is_finite())
+        .filter(|(_, b)| !b.is_empty() && b.is_finite())
         .collect();
     let bounds = prims.iter().fold(Aabb::EMPTY, |acc, (_, b)| acc.union(*b));
     let max_depth = opts.depth_limit(prims.len());

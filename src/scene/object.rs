@@ -189,7 +189,7 @@ fn place_shape(shape: &Shape, t: &Affine3A, mut emit: impl FnMut(Placed)) -> Res
                 };
                 // The intersection squares the radius: it must neither overflow nor vanish.
                 let r2 = sphere.radius * sphere.radius;
-                if !(r2.is_normal() && finite_bounds(&sphere.bounds())) {
+                if !(r2.is_normal() && sphere.bounds().is_finite()) {
                     return Err(Error::invalid_argument(format!(
                         "the sphere does not fit in f32 in world space: centre {c}, radius {} \
                          (its bounds and the square of its radius must be finite and non-zero)",
@@ -212,7 +212,7 @@ fn place_shape(shape: &Shape, t: &Affine3A, mut emit: impl FnMut(Placed)) -> Res
         Shape::Box { min, max } => {
             let (a, b) = (t.transform_point3(*min), t.transform_point3(*max));
             let bounds = Aabb::new(a.min(b), a.max(b));
-            if !finite_bounds(&bounds) {
+            if !bounds.is_finite() {
                 return Err(Error::invalid_argument(format!(
                     "the box does not fit in f32 in world space: corners {a} and {b}"
                 )));
@@ -238,19 +238,15 @@ pub fn check(shape: &Shape, t: &Affine3A) -> Result<()> {
     place_shape(shape, t, |_| {})
 }
 
-fn finite_bounds(b: &Aabb) -> bool {
-    b.min.is_finite() && b.max.is_finite()
-}
-
 /// Whether a triangle's stored corner, the edges it stores and the corners rebuilt from them
 /// (its bounds) are finite.
 fn triangle_fits(t: &Triangle) -> bool {
-    [t.e1, t.e2].iter().all(|e| Vec3::from(*e).is_finite()) && finite_bounds(&t.bounds())
+    [t.e1, t.e2].iter().all(|e| Vec3::from(*e).is_finite()) && t.bounds().is_finite()
 }
 
 fn ellipsoid(center: Vec3, m: Mat3, what: &str) -> Result<Ellipsoid> {
     Ellipsoid::new(center, m)
-        .filter(|e| finite_bounds(&e.bounds()))
+        .filter(|e| e.bounds().is_finite())
         .ok_or_else(|| {
             Error::invalid_argument(format!(
                 "the {what} does not fit in f32 in world space: centre {center}, semi-axes \
