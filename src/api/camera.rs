@@ -1,7 +1,7 @@
 //! `rt2_camera`: look-at pinhole or thin-lens camera. Calls on one camera must not overlap
 //! with edits of it from another thread; a camera may be read by concurrent renders.
 
-use super::ffi::{array, check_out, destroy, guard, handle_mut, write_out, Handle};
+use super::ffi::{array, check_out, destroy, guard, handle_mut, handle_type, write_out, Handle};
 use crate::camera::Camera;
 use crate::error::Rt2Status;
 use glam::Vec3;
@@ -15,12 +15,7 @@ pub struct rt2_camera {
     pub(crate) camera: Camera,
 }
 
-impl Handle for rt2_camera {
-    const MAGIC: u64 = 0x7274_325f_6361_6d00;
-    const NAME: &'static str = "rt2_camera";
-}
-
-const _: () = assert!(std::mem::offset_of!(rt2_camera, magic) == 0);
+handle_type!(rt2_camera, 0x7274_325f_6361_6d00);
 
 /// Creates a camera with the defaults.
 ///

@@ -4,7 +4,8 @@
 //! after all when an AUTO context's GPU could not take it, and what AUTO chose for that job.
 
 use super::ffi::{
-    check_out, check_struct_size, destroy, guard, handle, read_versioned, write_out, Handle,
+    check_out, check_struct_size, destroy, guard, handle, handle_type, read_versioned, write_out,
+    Handle,
 };
 use super::options::{backend_from, rt2_context_desc, Rt2Backend};
 use crate::context::Context;
@@ -30,12 +31,7 @@ pub struct rt2_context {
     reason: CString,
 }
 
-impl Handle for rt2_context {
-    const MAGIC: u64 = 0x7274_325f_6374_7800;
-    const NAME: &'static str = "rt2_context";
-}
-
-const _: () = assert!(std::mem::offset_of!(rt2_context, magic) == 0);
+handle_type!(rt2_context, 0x7274_325f_6374_7800);
 
 /// What a context decided (`rt2_context_info`).
 #[repr(C)]

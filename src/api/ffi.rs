@@ -39,9 +39,9 @@ pub(crate) fn guard_ptr<T>(f: impl FnOnce() -> Result<*const T>) -> *const T {
 }
 
 /// A boxed object handed to C. `MAGIC` tells handles of this type from anything else. Every
-/// handle is `#[repr(C)]` with its magic as the first field (a `u64` at offset 0, asserted
-/// at compile time beside each type), so the magic is read through the raw pointer before any
-/// reference to the handle exists.
+/// handle is `#[repr(C)]` with its magic as the first field (a `u64` at offset 0, asserted by
+/// [`handle_type!`]), so the magic is read through the raw pointer before any reference to the
+/// handle exists.
 pub(crate) trait Handle: Sized {
     const MAGIC: u64;
     const NAME: &'static str;
@@ -192,10 +192,35 @@ pub(crate) unsafe fn path_arg(p: *const c_char, arg: &str) -> Result<std::path::
 }
 
 /// A versioned C input struct: `#[repr(C)]`, starting with its `struct_size` (a `u32` at
-/// offset 0, asserted at compile time beside each type).
+/// offset 0). Implemented through [`versioned!`], which asserts that layout at compile time.
 pub(crate) trait Versioned: Copy {
     const NAME: &'static str;
 }
+
+/// Implements [`Versioned`] for a struct and asserts that its `struct_size` is at offset 0,
+/// which [`read_versioned`] relies on.
+macro_rules! versioned {
+    ($t:ident) => {
+        impl $crate::api::ffi::Versioned for $t {
+            const NAME: &'static str = stringify!($t);
+        }
+        const _: () = assert!(std::mem::offset_of!($t, struct_size) == 0);
+    };
+}
+pub(crate) use versioned;
+
+/// Implements [`Handle`] for a handle type and asserts that its `magic` is at offset 0, which
+/// [`handle`] and [`destroy`] rely on.
+macro_rules! handle_type {
+    ($t:ident, $magic:expr) => {
+        impl $crate::api::ffi::Handle for $t {
+            const MAGIC: u64 = $magic;
+            const NAME: &'static str = stringify!($t);
+        }
+        const _: () = assert!(std::mem::offset_of!($t, magic) == 0);
+    };
+}
+pub(crate) use handle_type;
 
 /// Copies the versioned input at `p` (non-NULL) once its `struct_size` is checked. The size is
 /// read alone first: a caller built against an older, smaller struct gets the error instead of

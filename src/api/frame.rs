@@ -2,7 +2,8 @@
 //! used by one call at a time.
 
 use super::ffi::{
-    check_out, destroy, guard, guard_ptr, handle, handle_mut, path_arg, slice, write_out, Handle,
+    check_out, destroy, guard, guard_ptr, handle, handle_mut, handle_type, path_arg, slice,
+    write_out, Handle,
 };
 use crate::error::Rt2Status;
 use crate::frame::Frame;
@@ -16,12 +17,7 @@ pub struct rt2_frame {
     pub(crate) frame: Frame,
 }
 
-impl Handle for rt2_frame {
-    const MAGIC: u64 = 0x7274_325f_6672_6d00;
-    const NAME: &'static str = "rt2_frame";
-}
-
-const _: () = assert!(std::mem::offset_of!(rt2_frame, magic) == 0);
+handle_type!(rt2_frame, 0x7274_325f_6672_6d00);
 
 /// Creates a frame; each side must be in 1..=32768.
 ///

@@ -2,7 +2,7 @@
 //! change fields, so fields can be added later. Enum-typed fields are `uint32_t` on the wire
 //! and checked, because an out-of-range C enum value must be an error, not undefined behaviour.
 
-use super::ffi::enum_error;
+use super::ffi::{enum_error, versioned};
 use crate::cpu::query::QueryMode;
 use crate::cpu::traverse::Traversal;
 use crate::dispatch::BackendRequest;
@@ -206,11 +206,7 @@ pub struct rt2_context_desc {
     pub threads: u32,
 }
 
-impl super::ffi::Versioned for rt2_context_desc {
-    const NAME: &'static str = "rt2_context_desc";
-}
-
-const _: () = assert!(std::mem::offset_of!(rt2_context_desc, struct_size) == 0);
+versioned!(rt2_context_desc);
 
 /// A context descriptor with the defaults filled in.
 #[no_mangle]
@@ -248,11 +244,7 @@ pub struct rt2_material {
     pub checker_scale: f32,
 }
 
-impl super::ffi::Versioned for rt2_material {
-    const NAME: &'static str = "rt2_material";
-}
-
-const _: () = assert!(std::mem::offset_of!(rt2_material, struct_size) == 0);
+versioned!(rt2_material);
 
 impl From<&Material> for rt2_material {
     fn from(m: &Material) -> Self {
@@ -329,11 +321,7 @@ pub struct rt2_build_options {
     pub ropes: u32,
 }
 
-impl super::ffi::Versioned for rt2_build_options {
-    const NAME: &'static str = "rt2_build_options";
-}
-
-const _: () = assert!(std::mem::offset_of!(rt2_build_options, struct_size) == 0);
+versioned!(rt2_build_options);
 
 impl From<&BuildOptions> for rt2_build_options {
     fn from(o: &BuildOptions) -> Self {
@@ -434,11 +422,7 @@ pub struct rt2_render_options {
     pub offset_mode: u32,
 }
 
-impl super::ffi::Versioned for rt2_render_options {
-    const NAME: &'static str = "rt2_render_options";
-}
-
-const _: () = assert!(std::mem::offset_of!(rt2_render_options, struct_size) == 0);
+versioned!(rt2_render_options);
 
 impl rt2_render_options {
     pub(crate) fn to_options(self) -> Result<RenderOptions> {

@@ -2,7 +2,7 @@
 //! `../shared/raysets` (like Embree's rtcIntersect1M), run by the context's thread pool.
 
 use super::context::rt2_context;
-use super::ffi::{guard, handle, read_versioned, slice, slice_mut, write_out};
+use super::ffi::{guard, handle, read_versioned, slice, slice_mut, versioned, write_out};
 use super::options::{
     intersector_from, intersector_to, query_mode_from, traversal_from, Rt2QueryMode,
 };
@@ -55,11 +55,7 @@ pub struct rt2_query_options {
     pub intersector: u32,
 }
 
-impl super::ffi::Versioned for rt2_query_options {
-    const NAME: &'static str = "rt2_query_options";
-}
-
-const _: () = assert!(std::mem::offset_of!(rt2_query_options, struct_size) == 0);
+versioned!(rt2_query_options);
 
 /// Work done by a query (the thesis' table 1 counters), summed over the batch.
 #[repr(C)]

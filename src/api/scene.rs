@@ -4,7 +4,8 @@
 
 use super::context::rt2_context;
 use super::ffi::{
-    array, check_out, destroy, guard, handle, path_arg, read_versioned, slice, write_out, Handle,
+    array, check_out, destroy, guard, handle, handle_type, path_arg, read_versioned, slice,
+    write_out, Handle,
 };
 use super::options::{rt2_build_options, rt2_material};
 use crate::context::Context;
@@ -22,12 +23,7 @@ pub struct rt2_scene {
     scene: RwLock<Scene>,
 }
 
-impl Handle for rt2_scene {
-    const MAGIC: u64 = 0x7274_325f_7363_6e00;
-    const NAME: &'static str = "rt2_scene";
-}
-
-const _: () = assert!(std::mem::offset_of!(rt2_scene, magic) == 0);
+handle_type!(rt2_scene, 0x7274_325f_7363_6e00);
 
 impl rt2_scene {
     /// A panic while holding the lock leaves the scene as it was before the failed edit (all
