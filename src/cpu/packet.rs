@@ -41,16 +41,26 @@ pub(crate) struct Entry<const N: usize> {
     mask: u32,
 }
 
+/// Slots of the packet stack: one pending far child per level of the deepest tree, and the
+/// slot a step writes before it knows whether the far child is pending.
+const STACK_SLOTS: usize = crate::kdtree::MAX_DEPTH_LIMIT as usize + 2;
+
 /// Reused buffers of one thread: the packet stack and the leaf's gathered triangles.
 pub(crate) struct Scratch<const N: usize> {
-    pub stack: Vec<Entry<N>>,
+    stack: Vec<Entry<N>>,
     pub leaf: LeafPrims<N>,
 }
 
 impl<const N: usize> Scratch<N> {
     pub fn new() -> Self {
+        let empty = Entry {
+            node: 0,
+            t0: [0.0; N],
+            t1: [0.0; N],
+            mask: 0,
+        };
         Scratch {
-            stack: Vec::with_capacity(64),
+            stack: vec![empty; STACK_SLOTS],
             leaf: LeafPrims::default(),
         }
     }
@@ -59,6 +69,11 @@ impl<const N: usize> Scratch<N> {
 /// Traverses the subtree of `node` with the packet `p` (all lanes of octant `positive`), front
 /// to back, as the standard traversal does for each lane: descend to the nearest leaf, keep far
 /// children on a stack, stop a lane when its closest hit lies before the leaf's exit.
+///
+/// An inner step has no branch on where the lanes go: the far child is always written to the
+/// top stack slot and kept (the stack pointer moved) only when both children have lanes, and
+/// the next node is picked by a select. Which children a packet enters is close to random, so
+/// branching on it mispredicted at most steps.
 #[inline(always)]
 pub(crate) fn traverse<const N: usize, A: Answer>(
     isa: Isa<N>,
@@ -76,7 +91,8 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
         }
     }
     let tree = b.tree;
-    let base = s.stack.len();
+    let stack = &mut s.stack[..];
+    let mut sp = 0;
     let mut dead = 0u32;
     let id = p.id;
     let mut cur = Entry {
@@ -89,22 +105,7 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
         let n = tree.nodes[cur.node as usize];
         let live = cur.mask;
         b.stats.nodes_visited += live.count_ones() as u64;
-        let next = if n.is_leaf() {
-            s.leaf.gather(
-                &b.prims.triangles,
-                tree.leaf_prims(n),
-                live.count_ones() as usize,
-            );
-            let mut m = live;
-            while m != 0 {
-                let l = m.trailing_zeros() as usize;
-                m &= m - 1;
-                if b.visit_leaf(isa, &s.leaf, id[l], cur.t1[l]) {
-                    dead |= 1 << l;
-                }
-            }
-            None
-        } else {
+        if !n.is_leaf() {
             let axis = n.axis();
             let (below, above) = (n.index(), n.index() + 1);
             let (near, far) = if positive[axis] {
@@ -118,40 +119,50 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
                 far: fm,
                 far_t0,
             } = Split::new(isa, n.split, &org[axis], &inv[axis], &cur.t0, &cur.t1, live);
+            // Every live lane enters near or far (`Split`), so the next node has lanes.
             let far_entry = Entry {
                 node: far,
                 t0: far_t0,
                 mask: fm,
                 ..cur
             };
-            let near_entry = Entry {
-                node: near,
-                t1: near_t1,
-                mask: nm,
-                ..cur
+            stack[sp] = far_entry;
+            sp += usize::from(nm != 0 && fm != 0);
+            cur = if nm != 0 {
+                Entry {
+                    node: near,
+                    t1: near_t1,
+                    mask: nm,
+                    ..cur
+                }
+            } else {
+                far_entry
             };
-            match (nm != 0, fm != 0) {
-                (true, true) => {
-                    s.stack.push(far_entry);
-                    Some(near_entry)
-                }
-                (true, false) => Some(near_entry),
-                (false, true) => Some(far_entry),
-                (false, false) => None,
+            continue;
+        }
+        s.leaf.gather(
+            &b.prims.triangles,
+            tree.leaf_prims(n),
+            live.count_ones() as usize,
+        );
+        let mut m = live;
+        while m != 0 {
+            let l = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if b.visit_leaf(isa, &s.leaf, id[l], cur.t1[l]) {
+                dead |= 1 << l;
             }
-        };
-        cur = match next {
-            Some(e) => e,
-            None => loop {
-                if s.stack.len() == base {
-                    return;
-                }
-                let mut e = s.stack.pop().expect("the stack is above its base");
-                e.mask &= !dead;
-                if e.mask != 0 {
-                    break e;
-                }
-            },
+        }
+        cur = loop {
+            if sp == 0 {
+                return;
+            }
+            sp -= 1;
+            let mut e = stack[sp];
+            e.mask &= !dead;
+            if e.mask != 0 {
+                break e;
+            }
         };
     }
 }
