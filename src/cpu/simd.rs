@@ -38,9 +38,15 @@ impl Width {
         match self {
             Width::W4 => true,
             #[cfg(target_arch = "x86_64")]
-            Width::W8 => std::arch::is_x86_feature_detected!("avx2"),
+            Width::W8 => {
+                std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("popcnt")
+            }
             #[cfg(target_arch = "x86_64")]
-            Width::W16 => std::arch::is_x86_feature_detected!("avx512f"),
+            Width::W16 => {
+                std::arch::is_x86_feature_detected!("avx512f")
+                    && std::arch::is_x86_feature_detected!("popcnt")
+            }
             #[cfg(not(target_arch = "x86_64"))]
             _ => false,
         }
@@ -90,11 +96,11 @@ pub fn dispatch<K: Kernel>(width: Width, k: K) -> K::Out {
     #[cfg(target_arch = "x86_64")]
     {
         if width == Width::W16 && width.supported() {
-            // SAFETY: the CPU has AVX-512F (checked just above).
+            // SAFETY: the CPU has AVX-512F and POPCNT (checked just above).
             return unsafe { run_avx512(k) };
         }
         if width == Width::W8 && width.supported() {
-            // SAFETY: the CPU has AVX2 (checked just above).
+            // SAFETY: the CPU has AVX2 and POPCNT (checked just above).
             return unsafe { run_avx2(k) };
         }
     }
@@ -103,14 +109,14 @@ pub fn dispatch<K: Kernel>(width: Width, k: K) -> K::Out {
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,popcnt")]
 unsafe fn run_avx2<K: Kernel>(k: K) -> K::Out {
     // The caller checked AVX2: the proof for 8 lanes.
     k.run::<8>(Isa(()))
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2")]
+#[target_feature(enable = "avx512f,avx2,popcnt")]
 unsafe fn run_avx512<K: Kernel>(k: K) -> K::Out {
     // The caller checked AVX-512F: the proof for 16 lanes.
     k.run::<16>(Isa(()))
