@@ -70,10 +70,11 @@ impl<const N: usize> Scratch<N> {
 /// to back, as the standard traversal does for each lane: descend to the nearest leaf, keep far
 /// children on a stack, stop a lane when its closest hit lies before the leaf's exit.
 ///
-/// An inner step has no branch on where the lanes go: the far child is always written to the
-/// top stack slot and kept (the stack pointer moved) only when both children have lanes, and
-/// the next node is picked by a select. Which children a packet enters is close to random, so
-/// branching on it mispredicted at most steps.
+/// An inner step branches only on whether the near child has lanes, which it has at most steps
+/// (a well-predicted branch): the far child is always written to the top stack slot, and kept
+/// (the stack pointer moved) when the near child has lanes too. A branch on which of the three
+/// cases a step meets (near, far, both) mispredicted often: a packet's crossings are close to
+/// random.
 #[inline(always)]
 pub(crate) fn traverse<const N: usize, A: Answer>(
     isa: Isa<N>,
