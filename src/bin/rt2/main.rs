@@ -177,8 +177,13 @@ fn render(args: &[String]) -> Result<()> {
             }
         }
     }
-    // Before any work: a bad output path found after a long render wastes the render.
+    // Before any work: a bad output path or option found after a long load, commit or render
+    // wastes it (the render checks the options again, with the scene's depth).
     rt2::frame::check_png_path(Path::new(&output))?;
+    if let Some(d) = depth {
+        opts.max_depth = d;
+    }
+    opts.validate()?;
     let ctx = Context::new(backend, threads)?;
     let t0 = Instant::now();
     let mut loaded = load_scene(&name)?;
