@@ -295,6 +295,10 @@ impl<'a, A: Answer> Batch<'a, A> {
         mut answer: A,
     ) -> (Self, [Vec<Root>; 8]) {
         let n = rays.len();
+        assert!(
+            u32::try_from(n).is_ok(),
+            "a packet or stream batch holds at most u32::MAX rays, not {n}"
+        );
         let mut split = [(); 3].map(|_| Vec::with_capacity(n));
         let mut groups: [Vec<Root>; 8] = Default::default();
         answer.reset();

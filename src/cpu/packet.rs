@@ -204,6 +204,9 @@ pub(crate) fn lanes_of<const N: usize>(roots: &[Root]) -> Lanes<N> {
 }
 
 /// Closest hits of `rays` with N-ray packets (one thread).
+///
+/// # Panics
+/// With more than `u32::MAX` rays (ray indices are 32-bit): `query` cuts batches smaller.
 pub fn intersect(
     tree: &KdTree,
     prims: &PrimitiveSet,
@@ -215,6 +218,9 @@ pub fn intersect(
 }
 
 /// Any-hit queries of `rays` with N-ray packets (one thread).
+///
+/// # Panics
+/// With more than `u32::MAX` rays (ray indices are 32-bit): `query` cuts batches smaller.
 pub fn occluded(
     tree: &KdTree,
     prims: &PrimitiveSet,

@@ -187,19 +187,20 @@ fn streamed<T: Copy + Send + Sync>(
     for o in 0..8 {
         start[o + 1] += start[o];
     }
-    let mut order = vec![0u32; rays.len()];
+    // Ray indices as `usize`: a Rust caller may pass more than 2^32 rays.
+    let mut order = vec![0usize; rays.len()];
     let mut next = start;
     for (i, &o) in octants.iter().enumerate() {
-        order[next[o as usize]] = i as u32;
+        order[next[o as usize]] = i;
         next[o as usize] += 1;
     }
-    let parts: Vec<&[u32]> = (0..8)
+    let parts: Vec<&[usize]> = (0..8)
         .flat_map(|o| order[start[o]..start[o + 1]].chunks(size))
         .collect();
     let answers: Vec<(TraversalStats, Vec<T>)> = parts
         .par_iter()
         .map(|part| {
-            let part_rays: Vec<Ray> = part.iter().map(|&i| rays[i as usize]).collect();
+            let part_rays: Vec<Ray> = part.iter().map(|&i| rays[i]).collect();
             let mut answers = vec![empty; part.len()];
             (trace(&part_rays, &mut answers), answers)
         })
@@ -208,7 +209,7 @@ fn streamed<T: Copy + Send + Sync>(
     for (part, (s, answers)) in parts.iter().zip(answers) {
         stats.add(&s);
         for (&i, a) in part.iter().zip(answers) {
-            out[i as usize] = a;
+            out[i] = a;
         }
     }
     stats

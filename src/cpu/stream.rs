@@ -328,6 +328,9 @@ impl Mode for StreamMode {
 }
 
 /// Closest hits of `rays` with the n-ray traversal (one thread).
+///
+/// # Panics
+/// With more than `u32::MAX` rays (ray indices are 32-bit): `query` cuts batches smaller.
 pub fn intersect(
     tree: &KdTree,
     prims: &PrimitiveSet,
@@ -339,6 +342,9 @@ pub fn intersect(
 }
 
 /// Any-hit queries of `rays` with the n-ray traversal (one thread).
+///
+/// # Panics
+/// With more than `u32::MAX` rays (ray indices are 32-bit): `query` cuts batches smaller.
 pub fn occluded(
     tree: &KdTree,
     prims: &PrimitiveSet,
