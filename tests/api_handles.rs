@@ -174,6 +174,14 @@ fn objects_beyond_the_f32_range_are_errors_and_extreme_valid_ones_are_hit() {
             Rt2Status::InvalidArgument
         );
         assert!(last_error().contains("triangle 0"), "{}", last_error());
+        // Finite corners and edges (2e19), but the edges' product, which Möller–Trumbore's
+        // determinant is, overflows: never hit, so refused.
+        let vast = [-1e19f32, -1e19, 0.0, 1e19, -1e19, 0.0, 0.0, 1e19, 0.0];
+        assert_eq!(
+            rt2_scene_add_mesh(scene, vast.as_ptr(), 3, tri.as_ptr(), 1, 0, &mut id),
+            Rt2Status::InvalidArgument
+        );
+        assert!(last_error().contains("triangle 0"), "{}", last_error());
 
         // Valid: a triangle in z = 0, then a move past the f32 range, which is refused.
         let small = [-1.0f32, -1.0, 0.0, 1.0, -1.0, 0.0, 0.0, 1.0, 0.0];
