@@ -142,6 +142,10 @@ pub unsafe extern "C" fn rt2_scene_add_point_light(
 /// Adds a triangle mesh: `vertex_count` xyz positions and `triangle_count` index triples.
 /// The data is copied. `*out_object` (may be NULL) receives the object id.
 ///
+/// `RT2_STATUS_INVALID_ARGUMENT` (and nothing added) for a non-finite position, an index past
+/// `vertex_count`, or a triangle that does not fit in f32 in world space: its corners, edges
+/// or the product of its edges overflow (README, "Range").
+///
 /// # Safety
 /// `positions` holds 3 × vertex_count floats, `indices` 3 × triangle_count integers.
 #[no_mangle]
