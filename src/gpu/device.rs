@@ -12,6 +12,7 @@ use crate::cpu::traverse::Traversal;
 use crate::error::{Error, Result, Rt2Status};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
+use std::thread::ThreadId;
 
 /// How the GPU backend picks and uses adapters.
 #[derive(Clone, Debug, Default)]
@@ -101,25 +102,56 @@ pub struct Device {
 /// What wgpu's callbacks reported about a device since the last [`Device::check`].
 #[derive(Default)]
 struct Faults {
-    /// Error messages, in order.
-    errors: Vec<String>,
-    /// Whether one of them was an out-of-memory error (the rest are often its consequences:
-    /// a bind group of a buffer that was never allocated).
-    out_of_memory: bool,
+    /// Errors, in order, each with the thread it belongs to.
+    errors: Vec<Fault>,
     /// Why the device was lost; a lost device stays lost.
     lost: Option<String>,
 }
 
+/// One error wgpu reported outside error scopes.
+struct Fault {
+    /// The thread whose wgpu call failed: wgpu calls the error handler on it, at once (as it
+    /// keeps error scopes per thread). Jobs may share a device (a context serves many threads),
+    /// and each job makes its calls and its checks on one thread, so a job takes only its own
+    /// errors and another job's out-of-memory does not fail it. `None`: a fault injected by a
+    /// test, which the next check on any thread takes.
+    thread: Option<ThreadId>,
+    message: String,
+    /// An out-of-memory error (the others are often its consequences: a bind group of a buffer
+    /// that was never allocated).
+    out_of_memory: bool,
+}
+
 impl Faults {
-    fn record(&mut self, e: wgpu::Error) {
-        match e {
+    fn record(&mut self, e: wgpu::Error, thread: Option<ThreadId>) {
+        let (message, out_of_memory) = match e {
             // Its Display is only "Out of Memory"; the source says which allocation failed.
-            wgpu::Error::OutOfMemory { source } => {
-                self.out_of_memory = true;
-                self.errors.push(source.to_string());
-            }
-            e => self.errors.push(e.to_string()),
-        }
+            wgpu::Error::OutOfMemory { source } => (source.to_string(), true),
+            e => (e.to_string(), false),
+        };
+        self.errors.push(Fault {
+            thread,
+            message,
+            out_of_memory,
+        });
+    }
+
+    /// Takes the errors of the calling thread and the injected ones, leaving other threads'.
+    fn take_mine(&mut self) -> Vec<Fault> {
+        self.take_where(|t| t.is_none_or(|t| t == std::thread::current().id()))
+    }
+
+    /// Takes the errors of the calling thread only.
+    fn take_mine_only(&mut self) -> Vec<Fault> {
+        self.take_where(|t| t == Some(std::thread::current().id()))
+    }
+
+    fn take_where(&mut self, mine: impl Fn(Option<ThreadId>) -> bool) -> Vec<Fault> {
+        let (taken, kept) = std::mem::take(&mut self.errors)
+            .into_iter()
+            .partition(|f| mine(f.thread));
+        self.errors = kept;
+        taken
     }
 }
 
@@ -268,7 +300,7 @@ fn open_device(adapter: &wgpu::Adapter, opts: &GpuOptions) -> std::result::Resul
     let sink = faults.clone();
     device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
         if let Ok(mut f) = sink.lock() {
-            f.record(e);
+            f.record(e, Some(std::thread::current().id()));
         }
     }));
     // wgpu reports a lost device only here, never to the error handler.
@@ -618,9 +650,10 @@ impl Device {
         Ok(out)
     }
 
-    /// Turns what wgpu reported outside error scopes into the job's error: out of memory and
-    /// a lost device are [`GpuError::OutOfMemory`] and [`GpuError::Lost`] (AUTO runs the job
-    /// on the CPU), anything else (a validation error of a job: a bug) an internal error.
+    /// Turns what wgpu reported outside error scopes, for this thread's calls, into the job's
+    /// error: out of memory and a lost device are [`GpuError::OutOfMemory`] and
+    /// [`GpuError::Lost`] (AUTO runs the job on the CPU), anything else (a validation error of
+    /// a job: a bug) an internal error.
     pub(crate) fn check(&self) -> GpuResult<()> {
         let pending = self.faults.lock().map_err(|_| poisoned())?.errors.len();
         if pending > 0 {
@@ -629,8 +662,13 @@ impl Device {
             let _ = self.device.poll(wgpu::PollType::Poll);
         }
         let mut f = self.faults.lock().map_err(|_| poisoned())?;
-        let errors = std::mem::take(&mut f.errors).join("; ");
-        let out_of_memory = std::mem::take(&mut f.out_of_memory);
+        let mine = f.take_mine();
+        let out_of_memory = mine.iter().any(|e| e.out_of_memory);
+        let errors = mine
+            .into_iter()
+            .map(|e| e.message)
+            .collect::<Vec<_>>()
+            .join("; ");
         if let Some(why) = &f.lost {
             return Err(GpuError::Lost(format!(
                 "the GPU device {} was lost ({why})",
@@ -650,9 +688,11 @@ impl Device {
     }
 
     /// Fails at once on a lost device, before a job records work it cannot run (wgpu ignores
-    /// calls on a lost device rather than reporting them).
+    /// calls on a lost device rather than reporting them). Starts the job: errors of this
+    /// thread still pending belong to an earlier job that failed before its check.
     pub(crate) fn check_alive(&self) -> GpuResult<()> {
-        let f = self.faults.lock().map_err(|_| poisoned())?;
+        let mut f = self.faults.lock().map_err(|_| poisoned())?;
+        drop(f.take_mine_only());
         match &f.lost {
             Some(why) => Err(GpuError::Lost(format!(
                 "the GPU device {} was lost ({why})",
@@ -671,7 +711,7 @@ impl Device {
             InjectedFault::OutOfMemory => {
                 let source = "injected by a test: the allocation failed".into();
                 if let Ok(mut f) = self.faults.lock() {
-                    f.record(wgpu::Error::OutOfMemory { source });
+                    f.record(wgpu::Error::OutOfMemory { source }, None);
                 }
             }
             InjectedFault::Lost => self.device.destroy(),
@@ -693,6 +733,63 @@ fn poisoned() -> Error {
 #[cfg(test)]
 mod tests {
     use super::keep_opened;
+
+    /// A device shared by jobs on several threads: each thread's check reports the errors of
+    /// its own wgpu calls only (wgpu reports them on the calling thread), so one job's failure
+    /// is not another's; a job that starts drops what its thread's failed job left; an
+    /// injected fault goes to the next check on any thread.
+    #[test]
+    fn each_thread_checks_its_own_errors() {
+        let gpu = match super::open(&Default::default(), true) {
+            Ok(g) => g,
+            Err(why) => {
+                assert!(
+                    std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
+                    "{why}"
+                );
+                eprintln!("SKIPPED (no GPU adapter): {why}");
+                return;
+            }
+        };
+        let dev = &gpu.devices[0];
+        // A validation error: mappable for reading and a storage buffer at once.
+        let bad = || {
+            dev.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("bad usage"),
+                size: 64,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            })
+        };
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                let _b = bad();
+            })
+            .join()
+            .unwrap();
+        });
+        // The spawned thread's error stays with it (it never checked): not this thread's.
+        assert!(dev.check().is_ok());
+        let _b = bad();
+        let e = dev
+            .check()
+            .expect_err("this thread's own error")
+            .into_error();
+        assert!(e.message.contains("bad usage"), "{}", e.message);
+        assert!(dev.check().is_ok(), "taken once");
+
+        let _b = bad();
+        dev.check_alive().unwrap();
+        assert!(
+            dev.check().is_ok(),
+            "a new job drops its thread's stale errors"
+        );
+
+        dev.inject_fault(super::InjectedFault::OutOfMemory);
+        let other = std::thread::scope(|s| s.spawn(|| dev.check().is_err()).join().unwrap());
+        assert!(other, "an injected fault goes to any thread");
+        assert!(dev.check().is_ok());
+    }
 
     /// Adapters that refuse a device are skipped with their reasons; only when none opens
     /// does opening fail, with every reason.
