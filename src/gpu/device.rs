@@ -136,6 +136,12 @@ impl Faults {
         });
     }
 
+    /// Whether the calling thread has errors pending, or a test injected one.
+    fn any_mine(&self) -> bool {
+        let me = std::thread::current().id();
+        self.errors.iter().any(|f| f.thread.is_none_or(|t| t == me))
+    }
+
     /// Takes the errors of the calling thread and the injected ones, leaving other threads'.
     fn take_mine(&mut self) -> Vec<Fault> {
         self.take_where(|t| t.is_none_or(|t| t == std::thread::current().id()))
@@ -152,6 +158,20 @@ impl Faults {
             .partition(|f| mine(f.thread));
         self.errors = kept;
         taken
+    }
+}
+
+/// A job's hold on its thread's faults ([`Device::begin_job`]). Dropped when the job ends, it
+/// drops what the job's wgpu calls reported but no check took (a job that failed before its
+/// check). A render band runs on a thread of its own, so what such a thread left would
+/// otherwise stay in the device's list for good.
+pub(crate) struct JobFaults<'a>(&'a Device);
+
+impl Drop for JobFaults<'_> {
+    fn drop(&mut self) {
+        if let Ok(mut f) = self.0.faults.lock() {
+            drop(f.take_mine_only());
+        }
     }
 }
 
@@ -655,8 +675,8 @@ impl Device {
     /// [`GpuError::Lost`] (AUTO runs the job on the CPU), anything else (a validation error of
     /// a job: a bug) an internal error.
     pub(crate) fn check(&self) -> GpuResult<()> {
-        let pending = self.faults.lock().map_err(|_| poisoned())?.errors.len();
-        if pending > 0 {
+        let pending = self.faults.lock().map_err(|_| poisoned())?.any_mine();
+        if pending {
             // wgpu reports a loss from `destroy` (or a driver) only when the device is polled,
             // and a call on the lost device before that is an error like any other.
             let _ = self.device.poll(wgpu::PollType::Poll);
@@ -687,10 +707,11 @@ impl Device {
         Err(gpu_error(format!("{}: {errors}", self.name)).into())
     }
 
-    /// Fails at once on a lost device, before a job records work it cannot run (wgpu ignores
-    /// calls on a lost device rather than reporting them). Starts the job: errors of this
-    /// thread still pending belong to an earlier job that failed before its check.
-    pub(crate) fn check_alive(&self) -> GpuResult<()> {
+    /// Starts a job on this thread: fails at once on a lost device, before the job records
+    /// work it cannot run (wgpu ignores calls on a lost device rather than reporting them).
+    /// Errors of this thread still pending belong to an earlier job that failed before its
+    /// check, and are dropped; so are the job's own when the returned guard is.
+    pub(crate) fn begin_job(&self) -> GpuResult<JobFaults<'_>> {
         let mut f = self.faults.lock().map_err(|_| poisoned())?;
         drop(f.take_mine_only());
         match &f.lost {
@@ -698,7 +719,7 @@ impl Device {
                 "the GPU device {} was lost ({why})",
                 self.name
             ))),
-            None => Ok(()),
+            None => Ok(JobFaults(self)),
         }
     }
 
@@ -736,8 +757,9 @@ mod tests {
 
     /// A device shared by jobs on several threads: each thread's check reports the errors of
     /// its own wgpu calls only (wgpu reports them on the calling thread), so one job's failure
-    /// is not another's; a job that starts drops what its thread's failed job left; an
-    /// injected fault goes to the next check on any thread.
+    /// is not another's; a job drops what its thread's failed job left when it starts, and its
+    /// own unchecked errors when it ends; an injected fault goes to the next check on any
+    /// thread.
     #[test]
     fn each_thread_checks_its_own_errors() {
         let gpu = match super::open(&Default::default(), true) {
@@ -779,10 +801,16 @@ mod tests {
         assert!(dev.check().is_ok(), "taken once");
 
         let _b = bad();
-        dev.check_alive().unwrap();
+        let job = dev.begin_job().unwrap();
         assert!(
             dev.check().is_ok(),
             "a new job drops its thread's stale errors"
+        );
+        let _b = bad();
+        drop(job);
+        assert!(
+            dev.check().is_ok(),
+            "and its own unchecked ones when it ends"
         );
 
         dev.inject_fault(super::InjectedFault::OutOfMemory);

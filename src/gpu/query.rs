@@ -19,7 +19,7 @@ pub(crate) fn run(
     mut hits: Option<&mut [Hit]>,
     mut occluded: Option<&mut [bool]>,
 ) -> GpuResult<TraversalStats> {
-    dev.check_alive()?;
+    let _job = dev.begin_job()?;
     let pipelines = dev.pipelines(traversal, Program::Query)?;
     let pipeline = &pipelines[if hits.is_some() { 0 } else { 1 }];
     let mut cache = dev.scene.lock().map_err(|_| poisoned())?;

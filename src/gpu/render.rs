@@ -135,7 +135,7 @@ impl Job<'_> {
     /// Rows `[a, b)` as packed RGBA8, in chunks that fit the device.
     fn rows(&self, a: u32, b: u32, path: GpuPath) -> GpuResult<Vec<u32>> {
         let dev = self.dev;
-        dev.check_alive()?;
+        let _job = dev.begin_job()?;
         let pipelines = dev.pipelines(self.traversal, Program::Render)?;
         let mut cache = dev.scene.lock().map_err(|_| GpuError::Other(panicked()))?;
         cache.sync(dev, self.scene)?;
