@@ -14,7 +14,7 @@ use rt2::geometry::{
     Aabb, Ellipsoid, Hit, Plane, PrimKind, PrimitiveSet, Ray, RayTest, Sphere, TraversalStats,
     Triangle, INVALID,
 };
-use rt2::kdtree::{build, BuildOptions, Builder, KdTree, Layout};
+use rt2::kdtree::{build, BuildOptions, Builder, KdTree, Layout, MAX_DEPTH_LIMIT};
 use rt2::precision::Intersector;
 
 /// SplitMix64: deterministic, no dependency.
@@ -848,6 +848,68 @@ fn degenerate_rays_miss_without_touching_the_tree() {
             assert!(stats.iter().all(|s| *s == TraversalStats::default()));
         }
     }
+}
+
+/// A tree as deep as the builders allow ([`MAX_DEPTH_LIMIT`]), which the packet stack is sized
+/// for: triangles halving in size and distance towards a corner make a midpoint tree split to
+/// the limit, and every traversal and mode (packets and streams at every width) answers as the
+/// standard traversal there.
+#[test]
+fn a_tree_at_the_depth_limit_is_traversed_in_every_mode() {
+    let mut prims = PrimitiveSet::default();
+    for k in 0..40 {
+        let s = 0.5f32.powi(k);
+        let c = Vec3::splat(s);
+        let d = 0.25 * s;
+        prims.triangles.push(Triangle::from_vertices(
+            c,
+            c + Vec3::new(d, 0.0, 0.0),
+            c + Vec3::new(0.0, d, d),
+        ));
+    }
+    let opts = BuildOptions {
+        builder: Builder::Midpoint,
+        max_depth: Some(MAX_DEPTH_LIMIT),
+        leaf_size: 1,
+        ..BuildOptions::default()
+    };
+    let tree = build(&prims, &opts);
+    assert_eq!(tree.stats.max_depth, MAX_DEPTH_LIMIT);
+    // Rays out of the corner, which cross the split of every level on the way: the packet
+    // stack holds a far child per level. Then rays at every triangle from all eight octants,
+    // and random ones.
+    let mut rng = Rng(64);
+    let mut rays: Vec<Ray> = (0..64)
+        .map(|_| {
+            let org = rng.vec(1.0, 2.0) * 0.5f32.powi(50);
+            Ray::new(org, rng.vec(0.5, 1.0).normalize(), 0.0, f32::INFINITY)
+        })
+        .collect();
+    rays.extend(random_rays(&mut rng, 200));
+    for t in &prims.triangles {
+        let centre = Vec3::from(t.v0) + (Vec3::from(t.e1) + Vec3::from(t.e2)) / 3.0;
+        for o in 0..8 {
+            let from = Vec3::new(
+                if o & 1 == 0 { -1.0 } else { 2.0 },
+                if o & 2 == 0 { -1.0 } else { 2.0 },
+                if o & 4 == 0 { -1.0 } else { 2.0 },
+            );
+            rays.push(Ray::new(
+                from,
+                (centre - from).normalize(),
+                0.0,
+                f32::INFINITY,
+            ));
+        }
+    }
+    check_rays(
+        "depth limit",
+        &prims,
+        &[("midpoint".into(), tree)],
+        &rays,
+        Check::SameCore,
+        default_options,
+    );
 }
 
 #[test]

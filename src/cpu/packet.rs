@@ -41,9 +41,11 @@ pub(crate) struct Entry<const N: usize> {
     mask: u32,
 }
 
-/// Slots of the packet stack: one pending far child per level of the deepest tree, and the
-/// slot a step writes before it knows whether the far child is pending.
-const STACK_SLOTS: usize = crate::kdtree::MAX_DEPTH_LIMIT as usize + 2;
+/// Slots of the packet stack. A step at an inner node of depth `d` has at most `d` far children
+/// pending (one per level above it) and writes slot `d` before it knows whether its own far
+/// child is pending; the builders make every node at depth `MAX_DEPTH_LIMIT` a leaf, so inner
+/// nodes lie at depth `MAX_DEPTH_LIMIT - 1` at most.
+const STACK_SLOTS: usize = crate::kdtree::MAX_DEPTH_LIMIT as usize;
 
 /// Reused buffers of one thread: the packet stack and the leaf's gathered triangles.
 pub(crate) struct Scratch<const N: usize> {
@@ -206,7 +208,9 @@ pub(crate) fn lanes_of<const N: usize>(roots: &[Root]) -> Lanes<N> {
 /// Closest hits of `rays` with N-ray packets (one thread).
 ///
 /// # Panics
-/// With more than `u32::MAX` rays (ray indices are 32-bit): `query` cuts batches smaller.
+/// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
+/// a tree deeper than `MAX_DEPTH_LIMIT` (the packet stack's size; `kdtree::build` never makes
+/// one).
 pub fn intersect(
     tree: &KdTree,
     prims: &PrimitiveSet,
@@ -220,7 +224,9 @@ pub fn intersect(
 /// Any-hit queries of `rays` with N-ray packets (one thread).
 ///
 /// # Panics
-/// With more than `u32::MAX` rays (ray indices are 32-bit): `query` cuts batches smaller.
+/// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
+/// a tree deeper than `MAX_DEPTH_LIMIT` (the packet stack's size; `kdtree::build` never makes
+/// one).
 pub fn occluded(
     tree: &KdTree,
     prims: &PrimitiveSet,

@@ -16,9 +16,9 @@ use crate::geometry::{Hit, PrimIndex, Ray, Triangle, INVALID};
 pub enum Width {
     /// SSE2, every x86-64 (and the portable fallback elsewhere).
     W4,
-    /// AVX2.
+    /// AVX2 (with POPCNT, which every AVX2 CPU has).
     W8,
-    /// AVX-512F.
+    /// AVX-512F (with POPCNT).
     W16,
 }
 
@@ -111,14 +111,14 @@ pub fn dispatch<K: Kernel>(width: Width, k: K) -> K::Out {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,popcnt")]
 unsafe fn run_avx2<K: Kernel>(k: K) -> K::Out {
-    // The caller checked AVX2: the proof for 8 lanes.
+    // The caller checked AVX2 and POPCNT: the proof for 8 lanes.
     k.run::<8>(Isa(()))
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2,popcnt")]
 unsafe fn run_avx512<K: Kernel>(k: K) -> K::Out {
-    // The caller checked AVX-512F: the proof for 16 lanes.
+    // The caller checked AVX-512F and POPCNT: the proof for 16 lanes.
     k.run::<16>(Isa(()))
 }
 

@@ -330,7 +330,9 @@ impl Mode for StreamMode {
 /// Closest hits of `rays` with the n-ray traversal (one thread).
 ///
 /// # Panics
-/// With more than `u32::MAX` rays (ray indices are 32-bit): `query` cuts batches smaller.
+/// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
+/// a tree deeper than `MAX_DEPTH_LIMIT` (the packet stack's size; `kdtree::build` never makes
+/// one).
 pub fn intersect(
     tree: &KdTree,
     prims: &PrimitiveSet,
@@ -344,7 +346,9 @@ pub fn intersect(
 /// Any-hit queries of `rays` with the n-ray traversal (one thread).
 ///
 /// # Panics
-/// With more than `u32::MAX` rays (ray indices are 32-bit): `query` cuts batches smaller.
+/// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
+/// a tree deeper than `MAX_DEPTH_LIMIT` (the packet stack's size; `kdtree::build` never makes
+/// one).
 pub fn occluded(
     tree: &KdTree,
     prims: &PrimitiveSet,
