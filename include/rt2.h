@@ -856,8 +856,8 @@ enum rt2_status rt2_scene_add_point_light(rt2_scene *scene,
  * The data is copied. `*out_object` (may be NULL) receives the object id.
  *
  * `RT2_STATUS_INVALID_ARGUMENT` (and nothing added) for a non-finite position, an index past
- * `vertex_count`, or a triangle that does not fit in f32 in world space: its corners, edges
- * or the product of its edges overflow (README, "Range").
+ * `vertex_count`, or a triangle that does not fit in f32 in world space: its corners, its
+ * edges or the product of its edge lengths overflow (README, "Range").
  *
  * # Safety
  * `positions` holds 3 × vertex_count floats, `indices` 3 × triangle_count integers.

@@ -174,9 +174,10 @@ fn objects_beyond_the_f32_range_are_errors_and_extreme_valid_ones_are_hit() {
             Rt2Status::InvalidArgument
         );
         assert!(last_error().contains("triangle 0"), "{}", last_error());
-        // Finite corners and edges (2e19), but the edges' product, which Möller–Trumbore's
-        // determinant is, overflows: never hit, so refused.
-        let vast = [-1e19f32, -1e19, 0.0, 1e19, -1e19, 0.0, 0.0, 1e19, 0.0];
+        // Finite corners, edges and edge cross product (every component 2.25e38), but the
+        // product of the edge lengths, which bounds Möller–Trumbore's determinant, overflows:
+        // missed by almost every ray, so refused.
+        let vast = [0.0f32, 0.0, 0.0, 1.5e19, -1.5e19, 0.0, 0.0, 1.5e19, -1.5e19];
         assert_eq!(
             rt2_scene_add_mesh(scene, vast.as_ptr(), 3, tri.as_ptr(), 1, 0, &mut id),
             Rt2Status::InvalidArgument
