@@ -42,10 +42,11 @@ fn readme_render_command_draws_the_default_scene() {
 fn bad_options_fail_before_any_work() {
     let dir = support::scratch("cli");
     let png = dir.join("never.png");
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 8] = [
         (&["render", "default", "--samples", "0"], "samples"),
         // Checked before the model is loaded: the missing file is never reached.
         (&["render", "missing.ply", "--samples", "0"], "samples"),
+        (&["render", "missing.ply", "--size", "0x10"], "size"),
         (&["render", "default", "--depth", "65"], "max_depth"),
         (&["render", "default", "--size", "0x10"], "size"),
         (&["render", "default", "--frobnicate"], "--frobnicate"),

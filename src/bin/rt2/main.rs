@@ -177,13 +177,14 @@ fn render(args: &[String]) -> Result<()> {
             }
         }
     }
-    // Before any work: a bad output path or option found after a long load, commit or render
-    // wastes it (the render checks the options again, with the scene's depth).
+    // Before any work: a bad output path, option or size found after a long load, commit or
+    // render wastes it (the render checks the options again, with the scene's depth).
     rt2::frame::check_png_path(Path::new(&output))?;
     if let Some(d) = depth {
         opts.max_depth = d;
     }
     opts.validate()?;
+    let mut frame = Frame::new(width, height)?;
     let ctx = Context::new(backend, threads)?;
     let t0 = Instant::now();
     let mut loaded = load_scene(&name)?;
@@ -201,7 +202,6 @@ fn render(args: &[String]) -> Result<()> {
         loaded.scene.ensure_exact_vertices()?;
     }
     let committed = loaded.scene.committed()?;
-    let mut frame = Frame::new(width, height)?;
     let t1 = Instant::now();
     ctx.render(committed, &loaded.camera, &opts, &mut frame)?;
     let ms = t1.elapsed().as_secs_f64() * 1e3;
