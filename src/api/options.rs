@@ -383,6 +383,7 @@ impl rt2_build_options {
             traversal_cost: self.traversal_cost,
             empty_bonus: self.empty_bonus,
             ropes: self.ropes != 0,
+            ..BuildOptions::default()
         })
     }
 }

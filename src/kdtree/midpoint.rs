@@ -1,10 +1,12 @@
 //! Midpoint builder of the vectorised-traversal paper (Noguera & Ureña): every voxel is split
 //! at its centre along its longest axis until it holds at most `leaf_size` primitives, the
-//! depth limit is reached or no split separates its primitives (see `Midpoint::split`). Cheap
-//! to build and the natural tree for breadth-first ray streams.
+//! depth limit is reached, no split separates its primitives (see `Midpoint::split`) or the
+//! children would exceed the node's share of the reference budget
+//! (`BuildOptions::references_per_prim`). Cheap to
+//! build and the natural tree for breadth-first ray streams.
 
-use super::split::{child_voxels, classify, clip, fork, BuildNode, Side};
-use super::BuildInput;
+use super::split::{child_voxels, classify, clip, fork, Budget, BuildNode, Side};
+use super::{BuildInput, BuildOptions};
 use crate::geometry::Aabb;
 
 /// `prims` are (index, bounds inside `voxel`) pairs.
@@ -13,14 +15,15 @@ pub(super) fn build(
     prims: Vec<(u32, Aabb)>,
     voxel: Aabb,
     max_depth: u32,
-    leaf_size: u32,
+    opts: &BuildOptions,
 ) -> BuildNode {
+    let budget = Budget::root(prims.len(), opts.references_per_prim);
     Midpoint {
         input,
         max_depth,
-        leaf_size: leaf_size as usize,
+        leaf_size: opts.leaf_size as usize,
     }
-    .node(prims, voxel, 0)
+    .node(prims, voxel, 0, budget)
 }
 
 /// (index, bounds inside the child voxel) pairs below and above a split plane.
@@ -33,8 +36,14 @@ struct Midpoint<'a> {
 }
 
 impl Midpoint<'_> {
-    fn node(&self, prims: Vec<(u32, Aabb)>, voxel: Aabb, depth: u32) -> BuildNode {
-        let Some((axis, split, [below, above])) = self.split(&prims, &voxel, depth) else {
+    fn node(&self, prims: Vec<(u32, Aabb)>, voxel: Aabb, depth: u32, budget: Budget) -> BuildNode {
+        let split = self
+            .split(&prims, &voxel, depth)
+            .and_then(|(axis, split, [below, above])| {
+                let budgets = budget.split(below.len(), above.len())?;
+                Some((axis, split, [below, above], budgets))
+            });
+        let Some((axis, split, [below, above], [bb, ba])) = split else {
             return BuildNode::leaf(prims.into_iter().map(|(p, _)| p).collect());
         };
         drop(prims);
@@ -43,8 +52,8 @@ impl Midpoint<'_> {
         let children = fork(
             depth,
             n,
-            || self.node(below, vb, depth + 1),
-            || self.node(above, va, depth + 1),
+            || self.node(below, vb, depth + 1, bb),
+            || self.node(above, va, depth + 1, ba),
         );
         BuildNode::Inner {
             axis,

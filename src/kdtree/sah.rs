@@ -12,11 +12,12 @@
 //! `λ (K_T + K_I (P_below N_below + P_above N_above))`, `P = A(child) / A(voxel)`, with
 //! `K_T = opts.traversal_cost`, `K_I = 1` and `λ = opts.empty_bonus` when a side is empty
 //! (else 1); a leaf costs `K_I N`. A node becomes a leaf when no split is cheaper, at the depth
-//! limit, when it holds no primitive, or when its voxel has no area.
+//! limit, when it holds no primitive, when its voxel has no area, or when its children would
+//! exceed its share of the reference budget (`BuildOptions::references_per_prim`).
 
 use rayon::prelude::*;
 
-use super::split::{child_voxels, clip, fork, parallel, BuildNode, Side};
+use super::split::{child_voxels, clip, fork, parallel, Budget, BuildNode, Side};
 use super::{BuildInput, BuildOptions};
 use crate::geometry::Aabb;
 
@@ -160,11 +161,13 @@ pub(super) fn build(
         traversal_cost: opts.traversal_cost,
         empty_bonus: opts.empty_bonus,
     };
+    let budget = Budget::root(prims.len(), opts.references_per_prim);
     sah.node(
         prims.into_iter().map(|(p, _)| p).collect(),
         events,
         voxel,
         0,
+        budget,
     )
 }
 
@@ -184,7 +187,14 @@ struct Sah<'a> {
 
 impl Sah<'_> {
     /// `prims` are global indices; `events` refer to them by position in `prims`.
-    fn node(&self, prims: Vec<u32>, events: Events, voxel: Aabb, depth: u32) -> BuildNode {
+    fn node(
+        &self,
+        prims: Vec<u32>,
+        events: Events,
+        voxel: Aabb,
+        depth: u32,
+        budget: Budget,
+    ) -> BuildNode {
         let leaf_cost = INTERSECTION_COST * prims.len() as f32;
         let plane = if depth < self.max_depth && !prims.is_empty() {
             self.best_plane(&events, prims.len(), &voxel, depth)
@@ -196,13 +206,16 @@ impl Sah<'_> {
         };
         let voxels = child_voxels(&voxel, plane.axis, plane.pos);
         let [(pb, eb), (pa, ea)] = self.distribute(&prims, events, &voxels, &plane);
+        let Some([bb, ba]) = budget.split(pb.len(), pa.len()) else {
+            return BuildNode::leaf(prims);
+        };
         drop(prims);
         let [vb, va] = voxels;
         let children = fork(
             depth,
             pb.len() + pa.len(),
-            || self.node(pb, eb, vb, depth + 1),
-            || self.node(pa, ea, va, depth + 1),
+            || self.node(pb, eb, vb, depth + 1, bb),
+            || self.node(pa, ea, va, depth + 1, ba),
         );
         BuildNode::Inner {
             axis: plane.axis,

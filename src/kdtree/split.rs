@@ -75,6 +75,31 @@ pub(super) fn clip(input: &dyn BuildInput, prim: u32, voxel: &Aabb) -> Option<Aa
     (!b.is_empty()).then_some(b)
 }
 
+/// The most leaf references (entries of the leaves' primitive lists) a subtree may hold
+/// (`BuildOptions::references_per_prim`). A split goes ahead only when its children's
+/// references fit, and they then share the budget in proportion to their counts, so each
+/// keeps at least its own count and the whole tree holds at most the root's budget.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Budget(usize);
+
+impl Budget {
+    /// The root's budget, for `prims` primitives.
+    pub(super) fn root(prims: usize, per_prim: u32) -> Self {
+        Budget(prims.saturating_mul(per_prim as usize))
+    }
+
+    /// The children's budgets for a split into `below` and `above` references, or `None` when
+    /// they exceed this budget (the node stays a leaf).
+    pub(super) fn split(self, below: usize, above: usize) -> Option<[Budget; 2]> {
+        let n = below + above;
+        if n > self.0 {
+            return None;
+        }
+        let b = (self.0 as u128 * below as u128 / n.max(1) as u128) as usize;
+        Some([Budget(b), Budget(self.0 - b)])
+    }
+}
+
 /// Nodes above this depth with at least [`PARALLEL_MIN_PRIMS`] primitives are worked on in
 /// parallel; below that a rayon fork costs more than it saves.
 const PARALLEL_MAX_DEPTH: u32 = 10;
