@@ -498,6 +498,41 @@ fn coincident_large_triangles_among_small_ones_keep_to_the_reference_budget() {
     }
 }
 
+/// A scene 1e19 wide or more has a surface area past `f32::MAX`: every SAH split cost NaN, and
+/// the whole scene was one leaf (every ray tested every primitive). Areas are taken at the
+/// voxel's unit scale now: with far triangles on both sides (up to a scene 6e38 wide, whose
+/// extent itself overflows) the soup splits as finely as alone, the SAH cost is finite and the
+/// tree is exact.
+#[test]
+fn scenes_wider_than_the_f32_area_range_still_split() {
+    let alone = build(
+        &soup(2000, 31, 0.05, 1.0, Vec3::ZERO),
+        &BuildOptions::default(),
+    );
+    for far in [2e19f32, 1e30, 3e38] {
+        let mut set = soup(2000, 31, 0.05, 1.0, Vec3::ZERO);
+        for side in [1.0, -1.0] {
+            let c = Vec3::new(side * far, side * far, 0.0);
+            let d = 1e-6 * far;
+            set.triangles.push(Triangle::from_vertices(
+                c,
+                c + Vec3::new(d, 0.0, 0.0),
+                c + Vec3::new(0.0, d, 0.0),
+            ));
+        }
+        let tree = build(&set, &BuildOptions::default());
+        let what = format!("far triangles at {far:e}");
+        assert!(tree.stats.sah_cost.is_finite(), "{what}: {:?}", tree.stats);
+        assert!(
+            tree.leaf_count() >= alone.leaf_count() / 2,
+            "{what}: {} leaves, {} without them",
+            tree.leaf_count(),
+            alone.leaf_count()
+        );
+        check_tree(&set, &tree, &what);
+    }
+}
+
 #[test]
 fn empty_scene_is_one_empty_leaf() {
     let tree = build(&PrimitiveSet::default(), &BuildOptions::default());

@@ -69,10 +69,36 @@ impl Aabb {
     }
 
     pub fn surface_area(&self) -> f32 {
+        self.scaled_surface_area(1.0)
+    }
+
+    /// The power of two that brings this box's largest coordinate magnitude into `[1, 2)` (1
+    /// for an empty or infinite box). Lengths and areas of boxes inside it, scaled by it, are
+    /// neither infinite nor zero: a box 1e19 wide has an area past `f32::MAX`, which made
+    /// every SAH split cost NaN. A power of two scales exactly, so ratios of scaled areas are
+    /// bit for bit those of unscaled ones wherever those are finite.
+    pub fn unit_scale(&self) -> f32 {
+        let m = self.min.abs().max(self.max.abs()).max_element();
+        if self.is_empty() || !(m > 0.0 && m.is_finite()) {
+            return 1.0;
+        }
+        // Within f32's exponents: 2^127 is the largest power of two, 2^-149 the smallest.
+        let k = (m as f64).log2().floor() as i32;
+        2f64.powi((-k).clamp(-149, 127)) as f32
+    }
+
+    /// The extent scaled by `scale`, computed from the scaled corners (so that a box from
+    /// -3e38 to 3e38 has a finite scaled extent).
+    pub fn scaled_extent(&self, scale: f32) -> Vec3 {
+        (self.max * scale - self.min * scale).max(Vec3::ZERO)
+    }
+
+    /// The surface area of the box scaled by `scale` (see [`Aabb::unit_scale`]).
+    pub fn scaled_surface_area(&self, scale: f32) -> f32 {
         if self.is_empty() {
             return 0.0;
         }
-        let e = self.extent();
+        let e = self.scaled_extent(scale);
         2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
     }
 

@@ -228,11 +228,13 @@ impl Sah<'_> {
     /// Ties go to the lowest axis, then the lowest position, so the choice does not depend on
     /// the thread count.
     fn best_plane(&self, events: &Events, n: usize, voxel: &Aabb, depth: u32) -> Option<Plane> {
-        let area = voxel.surface_area();
+        // Lengths and areas at the voxel's unit scale: a voxel past 1e19 has no f32 area.
+        let unit = voxel.unit_scale();
+        let area = voxel.scaled_surface_area(unit);
         if area <= 0.0 {
             return None;
         }
-        let sweep = |axis: usize| self.best_on_axis(&events[axis], axis, n, voxel, area);
+        let sweep = |axis: usize| self.best_on_axis(&events[axis], axis, n, voxel, unit, area);
         let per_axis: Vec<Option<Plane>> = if parallel(depth, n) {
             (0..3).into_par_iter().map(sweep).collect()
         } else {
@@ -253,11 +255,13 @@ impl Sah<'_> {
         axis: usize,
         n: usize,
         voxel: &Aabb,
+        unit: f32,
         area: f32,
     ) -> Option<Plane> {
         // A child's area is linear in the plane's position: `2 (face + side · length)`, with
-        // `face` the area of the voxel's face across the axis and `side` the half perimeter.
-        let e = voxel.extent();
+        // `face` the area of the voxel's face across the axis and `side` the half perimeter
+        // (all at the voxel's `unit` scale, as `area`).
+        let e = voxel.scaled_extent(unit);
         let (u, v) = (e[(axis + 1) % 3], e[(axis + 2) % 3]);
         let (face, side) = (u * v, u + v);
         let scale = 2.0 / area;
@@ -288,8 +292,8 @@ impl Sah<'_> {
                 // starting on it) to both children: the cost counts them on both sides, or the
                 // builder would split forever at planes that only duplicate primitives.
                 let probability = [
-                    scale * (face + side * (pos - lo)),
-                    scale * (face + side * (hi - pos)),
+                    scale * (face + side * (pos * unit - lo * unit)),
+                    scale * (face + side * (hi * unit - pos * unit)),
                 ];
                 let cost = self.split_cost(probability, [below + planar + starts, above]);
                 let better = cost < best_cost;

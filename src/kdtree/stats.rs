@@ -9,7 +9,9 @@ use super::{KdTree, TreeStats};
 /// root with zero area (all primitives on a line or at a point) counts every node with
 /// probability 1.
 pub(super) fn tree_stats(tree: &KdTree, traversal_cost: f32) -> TreeStats {
-    let root_area = tree.bounds.surface_area();
+    // Areas at the root's unit scale, which a voxel past 1e19 needs to have one in f32.
+    let unit = tree.bounds.unit_scale();
+    let root_area = tree.bounds.scaled_surface_area(unit);
     let probability = |a: f32| if root_area > 0.0 { a / root_area } else { 1.0 };
     let mut s = TreeStats {
         node_count: tree.nodes.len() as u32,
@@ -19,7 +21,7 @@ pub(super) fn tree_stats(tree: &KdTree, traversal_cost: f32) -> TreeStats {
     let (mut depth_sum, mut refs, mut cost) = (0u64, 0u64, 0f64);
     tree.visit_nodes(|node, voxel, depth| {
         let n = tree.nodes[node as usize];
-        let p = f64::from(probability(voxel.surface_area()));
+        let p = f64::from(probability(voxel.scaled_surface_area(unit)));
         if n.is_leaf() {
             let count = n.prim_range().len() as u32;
             s.max_depth = s.max_depth.max(depth);
