@@ -72,7 +72,10 @@ impl Midpoint<'_> {
     /// and an abort). Such a voxel becomes a leaf, the usual kd-tree termination rule (SAH gets
     /// it from its cost). Only the longest axis is tried, as in the paper: primitives that all
     /// span the voxel's longest axis but could be told apart on another one (long thin
-    /// parallel ones) stay in one leaf, a slower leaf but never a wrong one.
+    /// parallel ones), or that all touch its centre plane (a fan of triangles around a vertex
+    /// at the centre, needles crossing there), stay in one leaf: a slower leaf (100k fan
+    /// triangles: about 90 times slower rays than a random soup) but never a wrong one. The SAH
+    /// builder splits such scenes.
     fn split(
         &self,
         prims: &[(u32, Aabb)],
