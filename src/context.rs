@@ -376,12 +376,7 @@ impl QueryOptions {
     /// at a time). Checked by `Context::intersect` / `occluded`; the C API checks first, before
     /// it builds ropes or exact vertices.
     pub fn validate(&self) -> Result<()> {
-        if !(1..=64).contains(&self.short_stack_size) {
-            return Err(Error::invalid_argument(format!(
-                "short_stack_size is {} (must be in 1..=64)",
-                self.short_stack_size
-            )));
-        }
+        crate::error::check_range("short_stack_size", self.short_stack_size, 1..=64)?;
         if self.mode != cpu::query::QueryMode::Single
             && self.intersector != Intersector::MollerTrumbore
         {

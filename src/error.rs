@@ -60,6 +60,22 @@ impl Error {
     }
 }
 
+/// `INVALID_ARGUMENT` naming `name` unless `value` lies in `range` (the option checks).
+pub fn check_range<T: PartialOrd + fmt::Display>(
+    name: &str,
+    value: T,
+    range: std::ops::RangeInclusive<T>,
+) -> Result<()> {
+    if range.contains(&value) {
+        return Ok(());
+    }
+    Err(Error::invalid_argument(format!(
+        "{name} is {value} (must be in {}..={})",
+        range.start(),
+        range.end()
+    )))
+}
+
 impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{:?}: {}", self.status, self.message)

@@ -63,27 +63,12 @@ impl RenderOptions {
     /// Outside the ranges a render would allocate per depth (`max_depth` 2^32 asked for 400 GB
     /// and aborted), run forever (2^32 samples) or silently draw black (0 samples).
     pub fn validate(&self) -> crate::error::Result<()> {
-        let bad = crate::error::Error::invalid_argument;
-        if !(1..=64).contains(&self.max_depth) {
-            return Err(bad(format!(
-                "max_depth is {} (must be in 1..=64)",
-                self.max_depth
-            )));
-        }
-        if !(1..=1024).contains(&self.samples) {
-            return Err(bad(format!(
-                "samples is {} (must be in 1..=1024)",
-                self.samples
-            )));
-        }
-        if !(1..=64).contains(&self.short_stack_size) {
-            return Err(bad(format!(
-                "short_stack_size is {} (must be in 1..=64)",
-                self.short_stack_size
-            )));
-        }
+        use crate::error::check_range;
+        check_range("max_depth", self.max_depth, 1..=64)?;
+        check_range("samples", self.samples, 1..=1024)?;
+        check_range("short_stack_size", self.short_stack_size, 1..=64)?;
         if !self.background.is_finite() || self.background.min_element() < 0.0 {
-            return Err(bad(format!(
+            return Err(crate::error::Error::invalid_argument(format!(
                 "background is {} (must be finite and >= 0)",
                 self.background
             )));
