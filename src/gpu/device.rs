@@ -136,28 +136,24 @@ impl Faults {
         });
     }
 
-    /// Whether the calling thread has errors pending, or a test injected one.
-    fn any_mine(&self) -> bool {
-        let me = std::thread::current().id();
-        self.errors.iter().any(|f| f.thread.is_none_or(|t| t == me))
+    /// Whether a check on the calling thread takes `f`: its own errors and injected ones.
+    fn checked_here(f: &Fault) -> bool {
+        f.thread.is_none_or(|t| t == std::thread::current().id())
     }
 
-    /// Takes the errors of the calling thread and the injected ones, leaving other threads'.
-    fn take_mine(&mut self) -> Vec<Fault> {
-        self.take_where(|t| t.is_none_or(|t| t == std::thread::current().id()))
-    }
-
-    /// Takes the errors of the calling thread only.
-    fn take_mine_only(&mut self) -> Vec<Fault> {
-        self.take_where(|t| t == Some(std::thread::current().id()))
-    }
-
-    fn take_where(&mut self, mine: impl Fn(Option<ThreadId>) -> bool) -> Vec<Fault> {
+    /// Takes the errors `mine` picks, leaving the rest (other threads').
+    fn take(&mut self, mine: impl Fn(&Fault) -> bool) -> Vec<Fault> {
         let (taken, kept) = std::mem::take(&mut self.errors)
             .into_iter()
-            .partition(|f| mine(f.thread));
+            .partition(|f| mine(f));
         self.errors = kept;
         taken
+    }
+
+    /// Drops the calling thread's own errors (not injected ones): a job's, once it is over.
+    fn drop_thread_errors(&mut self) {
+        let me = Some(std::thread::current().id());
+        self.errors.retain(|f| f.thread != me);
     }
 }
 
@@ -170,7 +166,7 @@ pub(crate) struct JobFaults<'a>(&'a Device);
 impl Drop for JobFaults<'_> {
     fn drop(&mut self) {
         if let Ok(mut f) = self.0.faults.lock() {
-            drop(f.take_mine_only());
+            f.drop_thread_errors();
         }
     }
 }
@@ -675,14 +671,17 @@ impl Device {
     /// [`GpuError::Lost`] (AUTO runs the job on the CPU), anything else (a validation error of
     /// a job: a bug) an internal error.
     pub(crate) fn check(&self) -> GpuResult<()> {
-        let pending = self.faults.lock().map_err(|_| poisoned())?.any_mine();
+        let pending = {
+            let f = self.faults.lock().map_err(|_| poisoned())?;
+            f.errors.iter().any(Faults::checked_here)
+        };
         if pending {
             // wgpu reports a loss from `destroy` (or a driver) only when the device is polled,
             // and a call on the lost device before that is an error like any other.
             let _ = self.device.poll(wgpu::PollType::Poll);
         }
         let mut f = self.faults.lock().map_err(|_| poisoned())?;
-        let mine = f.take_mine();
+        let mine = f.take(Faults::checked_here);
         let out_of_memory = mine.iter().any(|e| e.out_of_memory);
         let errors = mine
             .into_iter()
@@ -713,7 +712,7 @@ impl Device {
     /// check, and are dropped; so are the job's own when the returned guard is.
     pub(crate) fn begin_job(&self) -> GpuResult<JobFaults<'_>> {
         let mut f = self.faults.lock().map_err(|_| poisoned())?;
-        drop(f.take_mine_only());
+        f.drop_thread_errors();
         match &f.lost {
             Some(why) => Err(GpuError::Lost(format!(
                 "the GPU device {} was lost ({why})",
@@ -751,6 +750,23 @@ fn poisoned() -> Error {
     )
 }
 
+/// The GPU of the unit tests (any adapter, software ones included), or `None`, said aloud,
+/// when there is none; with `RT2_REQUIRE_GPU=1` (CI, on lavapipe) a missing adapter fails.
+#[cfg(test)]
+pub(crate) fn open_for_tests() -> Option<Gpu> {
+    match open(&Default::default(), true) {
+        Ok(g) => Some(g),
+        Err(why) => {
+            assert!(
+                std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
+                "{why}"
+            );
+            eprintln!("SKIPPED (no GPU adapter): {why}");
+            None
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::keep_opened;
@@ -762,16 +778,8 @@ mod tests {
     /// thread.
     #[test]
     fn each_thread_checks_its_own_errors() {
-        let gpu = match super::open(&Default::default(), true) {
-            Ok(g) => g,
-            Err(why) => {
-                assert!(
-                    std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
-                    "{why}"
-                );
-                eprintln!("SKIPPED (no GPU adapter): {why}");
-                return;
-            }
+        let Some(gpu) = super::open_for_tests() else {
+            return;
         };
         let dev = &gpu.devices[0];
         // A validation error: mappable for reading and a storage buffer at once.

@@ -2,8 +2,8 @@
 //! at its centre along its longest axis until it holds at most `leaf_size` primitives, the
 //! depth limit is reached, no split separates its primitives (see `Midpoint::split`) or the
 //! children would exceed the node's share of the reference budget
-//! (`BuildOptions::references_per_prim`). Cheap to
-//! build and the natural tree for breadth-first ray streams.
+//! (`BuildOptions::references_per_prim`). Cheap to build and the natural tree for
+//! breadth-first ray streams.
 
 use super::split::{child_voxels, classify, clip, fork, Budget, BuildNode, Side};
 use super::{BuildInput, BuildOptions};
@@ -37,13 +37,9 @@ struct Midpoint<'a> {
 
 impl Midpoint<'_> {
     fn node(&self, prims: Vec<(u32, Aabb)>, voxel: Aabb, depth: u32, budget: Budget) -> BuildNode {
-        let split = self
-            .split(&prims, &voxel, depth)
-            .and_then(|(axis, split, [below, above])| {
-                let budgets = budget.split(below.len(), above.len())?;
-                Some((axis, split, [below, above], budgets))
-            });
-        let Some((axis, split, [below, above], [bb, ba])) = split else {
+        let Some((axis, split, [below, above], [bb, ba])) =
+            self.split(&prims, &voxel, depth, budget)
+        else {
             return BuildNode::leaf(prims.into_iter().map(|(p, _)| p).collect());
         };
         drop(prims);
@@ -62,9 +58,9 @@ impl Midpoint<'_> {
         }
     }
 
-    /// The split plane and the primitives of each side, or `None` for a leaf: few primitives,
-    /// depth limit, a voxel too small to be halved in `f32` (point-like or rounding-limited),
-    /// or a split that separates nothing.
+    /// The split plane, the primitives of each side and their budgets, or `None` for a leaf:
+    /// few primitives, depth limit, a voxel too small to be halved in `f32` (point-like or
+    /// rounding-limited), a split that separates nothing, or children past `budget`.
     ///
     /// A split that leaves every primitive in both children only doubles the references:
     /// overlapping primitives (two coincident spheres, coplanar triangles) would stay together
@@ -81,7 +77,8 @@ impl Midpoint<'_> {
         prims: &[(u32, Aabb)],
         voxel: &Aabb,
         depth: u32,
-    ) -> Option<(usize, f32, Sides)> {
+        budget: Budget,
+    ) -> Option<(usize, f32, Sides, [Budget; 2])> {
         if prims.len() <= self.leaf_size || depth >= self.max_depth {
             return None;
         }
@@ -99,8 +96,11 @@ impl Midpoint<'_> {
         }
         let sides = self.partition(prims, voxel, axis, split);
         // Each primitive is at most once on each side: a side shorter than `prims` misses one.
-        let separates = sides.iter().any(|s| s.len() < prims.len());
-        separates.then_some((axis, split, sides))
+        if sides.iter().all(|s| s.len() == prims.len()) {
+            return None;
+        }
+        let budgets = budget.split(sides[0].len(), sides[1].len())?;
+        Some((axis, split, sides, budgets))
     }
 
     /// The primitives of each child voxel of the split at `axis = split`, with their bounds
