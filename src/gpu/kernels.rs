@@ -134,16 +134,8 @@ mod tests {
     /// panic through wgpu's default error handler.
     #[test]
     fn a_bad_kernel_is_an_error_not_a_panic() {
-        let gpu = match super::super::open(&Default::default(), true) {
-            Ok(g) => g,
-            Err(why) => {
-                assert!(
-                    std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
-                    "{why}"
-                );
-                eprintln!("SKIPPED (no GPU adapter): {why}");
-                return;
-            }
+        let Some(gpu) = super::super::device::open_for_tests() else {
+            return;
         };
         let dev = &gpu.devices[0];
         let bad = source(Traversal::Standard, Program::Query).replace("fn intersect_main", "fn ;");
