@@ -1,10 +1,10 @@
 //! Builder entry point and options: picks the root voxel and the primitives, runs one of the two
-//! builders into a temporary node tree, flattens it with the chosen layout, fills the statistics
-//! and adds ropes when asked.
+//! builders (which write the node arrays in depth-first order), lays the nodes out as asked,
+//! fills the statistics and adds ropes when asked.
 
 use std::time::Instant;
 
-use super::split::BuildNode;
+use super::split::Subtree;
 use super::{layout, midpoint, ropes, sah, stats, KdTree};
 use crate::geometry::Aabb;
 
@@ -106,8 +106,8 @@ impl BuildOptions {
 /// single empty leaf and `bounds` is `Aabb::EMPTY` (infinite, never NaN), which overlaps nothing.
 ///
 /// The result depends only on `input` and `opts`, not on the number of threads of the rayon
-/// pool the call runs in: the builders return a node tree that is flattened afterwards in a
-/// fixed order.
+/// pool the call runs in: the builders write the node arrays in depth-first order whichever
+/// parts ran in parallel (see `split::Subtree`).
 pub fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
     let start = Instant::now();
     let prims: Vec<(u32, Aabb)> = (0..input.prim_count())
@@ -116,8 +116,8 @@ pub fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
         .collect();
     let bounds = prims.iter().fold(Aabb::EMPTY, |acc, (_, b)| acc.union(*b));
     let max_depth = opts.depth_limit(prims.len());
-    let root = if prims.is_empty() {
-        BuildNode::Leaf(Vec::new())
+    let built = if prims.is_empty() {
+        Subtree::built(|out, at| out.leaf(at, Vec::new()))
     } else {
         match opts.builder {
             // Beyond 2^30 primitives (more memory than a machine of this kind has) the SAH
@@ -129,8 +129,7 @@ pub fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
             Builder::Midpoint => midpoint::build(input, prims, bounds, max_depth, opts),
         }
     };
-    let mut tree = layout::flatten(&root, bounds, opts.layout);
-    drop(root);
+    let mut tree = layout::lay_out(built, bounds, opts.layout);
     tree.stats = stats::tree_stats(&tree, opts.traversal_cost);
     if opts.ropes {
         tree.ropes = Some(ropes::build_ropes(&tree));

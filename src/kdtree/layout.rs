@@ -5,47 +5,22 @@
 //! the leaves' primitive lists in depth-first order, so two trees that differ only in layout
 //! have identical `prim_indices` and the same leaf nodes in depth-first order.
 
-use super::split::BuildNode;
+use super::split::Subtree;
 use super::{KdNode, KdTree, Layout, TreeStats};
 use crate::geometry::Aabb;
 
-/// Flattens the builder's node tree into the flat arrays.
-pub(super) fn flatten(root: &BuildNode, bounds: Aabb, layout: Layout) -> KdTree {
-    let mut tree = KdTree {
-        nodes: vec![KdNode::leaf(0, 0)],
-        prim_indices: Vec::new(),
+/// The tree of the builder's depth-first arrays in the chosen layout.
+pub(super) fn lay_out(built: Subtree, bounds: Aabb, layout: Layout) -> KdTree {
+    let nodes = match layout {
+        Layout::DepthFirst => built.nodes,
+        Layout::VanEmdeBoas => van_emde_boas(&built.nodes),
+    };
+    KdTree {
+        nodes,
+        prim_indices: built.prims,
         bounds,
         ropes: None,
         stats: TreeStats::default(),
-    };
-    depth_first(root, 0, &mut tree);
-    if layout == Layout::VanEmdeBoas {
-        tree.nodes = van_emde_boas(&tree.nodes);
-    }
-    tree
-}
-
-/// Writes `node` at `at`; its child pair is allocated when the node is visited, so the pairs
-/// come in pre-order and every subtree is one contiguous run.
-fn depth_first(node: &BuildNode, at: usize, tree: &mut KdTree) {
-    match node {
-        BuildNode::Leaf(prims) => {
-            let first = u32::try_from(tree.prim_indices.len())
-                .expect("over 2^32 leaf references: more than the node format can address");
-            tree.nodes[at] = KdNode::leaf(first, prims.len() as u32);
-            tree.prim_indices.extend_from_slice(prims);
-        }
-        BuildNode::Inner {
-            axis,
-            split,
-            children,
-        } => {
-            let child = tree.nodes.len();
-            tree.nodes[at] = KdNode::inner(*axis, *split, child as u32);
-            tree.nodes.extend([KdNode::leaf(0, 0); 2]);
-            depth_first(&children[0], child, tree);
-            depth_first(&children[1], child + 1, tree);
-        }
     }
 }
 

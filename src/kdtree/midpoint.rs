@@ -5,7 +5,7 @@
 //! (`BuildOptions::references_per_prim`). Cheap to build and the natural tree for
 //! breadth-first ray streams.
 
-use super::split::{child_voxels, classify, clip, fork, Budget, BuildNode, Side};
+use super::split::{child_voxels, classify, clip, fork, Budget, Side, Subtree};
 use super::{BuildInput, BuildOptions};
 use crate::geometry::Aabb;
 
@@ -16,14 +16,14 @@ pub(super) fn build(
     voxel: Aabb,
     max_depth: u32,
     opts: &BuildOptions,
-) -> BuildNode {
+) -> Subtree {
     let budget = Budget::root(prims.len(), opts.references_per_prim);
-    Midpoint {
+    let m = Midpoint {
         input,
         max_depth,
         leaf_size: opts.leaf_size as usize,
-    }
-    .node(prims, voxel, 0, budget)
+    };
+    Subtree::built(|out, at| m.node(prims, voxel, 0, budget, out, at))
 }
 
 /// (index, bounds inside the child voxel) pairs below and above a split plane.
@@ -36,26 +36,34 @@ struct Midpoint<'a> {
 }
 
 impl Midpoint<'_> {
-    fn node(&self, prims: Vec<(u32, Aabb)>, voxel: Aabb, depth: u32, budget: Budget) -> BuildNode {
+    /// Writes the subtree of `voxel` at `at` of `out`.
+    fn node(
+        &self,
+        prims: Vec<(u32, Aabb)>,
+        voxel: Aabb,
+        depth: u32,
+        budget: Budget,
+        out: &mut Subtree,
+        at: usize,
+    ) {
         let Some((axis, split, [below, above], [bb, ba])) =
             self.split(&prims, &voxel, depth, budget)
         else {
-            return BuildNode::leaf(prims.into_iter().map(|(p, _)| p).collect());
+            out.leaf(at, prims.into_iter().map(|(p, _)| p).collect());
+            return;
         };
         drop(prims);
         let [vb, va] = child_voxels(&voxel, axis, split);
         let n = below.len() + above.len();
-        let children = fork(
+        let pair = out.inner(at, axis, split);
+        fork(
             depth,
             n,
-            || self.node(below, vb, depth + 1, bb),
-            || self.node(above, va, depth + 1, ba),
+            out,
+            pair,
+            |out, at| self.node(below, vb, depth + 1, bb, out, at),
+            |out, at| self.node(above, va, depth + 1, ba, out, at),
         );
-        BuildNode::Inner {
-            axis,
-            split,
-            children: Box::new(children),
-        }
     }
 
     /// The split plane, the primitives of each side and their budgets, or `None` for a leaf:

@@ -17,7 +17,7 @@
 
 use rayon::prelude::*;
 
-use super::split::{child_voxels, clip, fork, parallel, Budget, BuildNode, Side};
+use super::split::{child_voxels, clip, fork, parallel, Budget, Side, Subtree};
 use super::{BuildInput, BuildOptions};
 use crate::geometry::Aabb;
 
@@ -147,7 +147,7 @@ pub(super) fn build(
     voxel: Aabb,
     max_depth: u32,
     opts: &BuildOptions,
-) -> BuildNode {
+) -> Subtree {
     let mut events: Events = Default::default();
     for (local, (_, b)) in prims.iter().enumerate() {
         push_events(b, local as u32, &mut events);
@@ -162,13 +162,8 @@ pub(super) fn build(
         empty_bonus: opts.empty_bonus,
     };
     let budget = Budget::root(prims.len(), opts.references_per_prim);
-    sah.node(
-        prims.into_iter().map(|(p, _)| p).collect(),
-        events,
-        voxel,
-        0,
-        budget,
-    )
+    let prims = prims.into_iter().map(|(p, _)| p).collect();
+    Subtree::built(|out, at| sah.node(prims, events, voxel, 0, budget, out, at))
 }
 
 /// A candidate split plane.
@@ -186,7 +181,12 @@ struct Sah<'a> {
 }
 
 impl Sah<'_> {
-    /// `prims` are global indices; `events` refer to them by position in `prims`.
+    /// Writes the subtree of `voxel` at `at` of `out`. `prims` are global indices; `events`
+    /// refer to them by position in `prims`.
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "the node's five inputs and the slot it writes; a struct would only rename them"
+    )]
     fn node(
         &self,
         prims: Vec<u32>,
@@ -194,7 +194,9 @@ impl Sah<'_> {
         voxel: Aabb,
         depth: u32,
         budget: Budget,
-    ) -> BuildNode {
+        out: &mut Subtree,
+        at: usize,
+    ) {
         let leaf_cost = INTERSECTION_COST * prims.len() as f32;
         let plane = if depth < self.max_depth && !prims.is_empty() {
             self.best_plane(&events, prims.len(), &voxel, depth)
@@ -202,26 +204,24 @@ impl Sah<'_> {
             None
         };
         let Some(plane) = plane.filter(|p| p.cost < leaf_cost) else {
-            return BuildNode::leaf(prims);
+            return out.leaf(at, prims);
         };
         let voxels = child_voxels(&voxel, plane.axis, plane.pos);
         let [(pb, eb), (pa, ea)] = self.distribute(&prims, events, &voxels, &plane);
         let Some([bb, ba]) = budget.split(pb.len(), pa.len()) else {
-            return BuildNode::leaf(prims);
+            return out.leaf(at, prims);
         };
         drop(prims);
         let [vb, va] = voxels;
-        let children = fork(
+        let pair = out.inner(at, plane.axis, plane.pos);
+        fork(
             depth,
             pb.len() + pa.len(),
-            || self.node(pb, eb, vb, depth + 1, bb),
-            || self.node(pa, ea, va, depth + 1, ba),
+            out,
+            pair,
+            |out, at| self.node(pb, eb, vb, depth + 1, bb, out, at),
+            |out, at| self.node(pa, ea, va, depth + 1, ba, out, at),
         );
-        BuildNode::Inner {
-            axis: plane.axis,
-            split: plane.pos,
-            children: Box::new(children),
-        }
     }
 
     /// The cheapest plane over the three axes; near the root the axes are swept in parallel.
