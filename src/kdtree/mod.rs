@@ -8,8 +8,8 @@
 //! primitive indices in `prim_indices` itself (see [`KdNode`]).
 //!
 //! Building: `build.rs` (entry point, options), `midpoint.rs` and `sah.rs` (the builders),
-//! `split.rs` (what they share: the side of a primitive, the parallel recursion), `layout.rs`
-//! (flattening, van Emde Boas order), `ropes.rs`, `stats.rs`, `walk.rs` (leaf voxels, point
+//! `split.rs` (what they share: the depth-first node arrays they write, the side of a
+//! primitive, the parallel recursion), `layout.rs` (van Emde Boas order), `ropes.rs`, `stats.rs`, `walk.rs` (leaf voxels, point
 //! location).
 
 mod build;
