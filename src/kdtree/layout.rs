@@ -1,9 +1,10 @@
 //! Node layouts: depth-first and van Emde Boas.
 //!
 //! The unit of layout is the sibling pair: the format keeps the two children of a node side by
-//! side, so a layout is an order of pairs (the root sits alone at index 0). Both layouts write
-//! the leaves' primitive lists in depth-first order, so two trees that differ only in layout
-//! have identical `prim_indices` and the same leaf nodes in depth-first order.
+//! side, so a layout is an order of pairs (the root sits alone at index 0). The builders write
+//! the pairs and the leaves' primitive lists in depth-first order; a layout only reorders the
+//! pairs, so two trees that differ only in layout have identical `prim_indices` and the same
+//! leaf nodes in depth-first order.
 
 use super::split::Subtree;
 use super::{KdNode, KdTree, Layout, TreeStats};

@@ -9,8 +9,8 @@
 //!
 //! Building: `build.rs` (entry point, options), `midpoint.rs` and `sah.rs` (the builders),
 //! `split.rs` (what they share: the depth-first node arrays they write, the side of a
-//! primitive, the parallel recursion), `layout.rs` (van Emde Boas order), `ropes.rs`, `stats.rs`, `walk.rs` (leaf voxels, point
-//! location).
+//! primitive, the parallel recursion), `layout.rs` (van Emde Boas order), `ropes.rs`,
+//! `stats.rs`, `walk.rs` (leaf voxels, point location).
 
 mod build;
 mod layout;

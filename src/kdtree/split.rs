@@ -56,6 +56,10 @@ impl Subtree {
     /// and leaf list starts move by where its arrays land in these.
     fn graft(&mut self, at: usize, sub: Subtree) {
         let (node_shift, prim_shift) = (self.nodes.len() as u32 - 1, self.prims_end());
+        // The moved leaf starts fit in u32 when the joined lists do: `prims_end` checks that,
+        // as it does for every leaf written here.
+        self.prims.extend_from_slice(&sub.prims);
+        self.prims_end();
         let moved = |n: KdNode| {
             if n.is_leaf() {
                 let r = n.prim_range();
@@ -66,7 +70,6 @@ impl Subtree {
         };
         self.nodes[at] = moved(sub.nodes[0]);
         self.nodes.extend(sub.nodes[1..].iter().map(|&n| moved(n)));
-        self.prims.extend_from_slice(&sub.prims);
     }
 
     /// Where the next leaf list starts.
@@ -174,6 +177,8 @@ pub(super) fn fork<A, B>(
     B: FnOnce(&mut Subtree, usize) + Send,
 {
     if parallel(depth, prims) {
+        // The grafts move the subtrees' pairs to right after this node's pair.
+        debug_assert_eq!(out.nodes.len(), pair + 2, "the pair is the last written");
         let (b, a) = rayon::join(|| Subtree::built(below), || Subtree::built(above));
         out.graft(pair, b);
         out.graft(pair + 1, a);
