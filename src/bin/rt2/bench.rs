@@ -277,6 +277,13 @@ fn embree_harness() -> Option<PathBuf> {
     p.exists().then_some(p)
 }
 
+/// The peers' ray set generator (`rt2gen`), built beside Embree's harness.
+fn ray_generator() -> Option<PathBuf> {
+    embree_harness()
+        .map(|h| h.with_file_name("rt2gen"))
+        .filter(|p| p.exists())
+}
+
 /// Runs Embree's harness and returns its TSV rows (split into fields).
 fn embree_rows(mesh: &Path, rays: &[PathBuf], runs: usize) -> Vec<Vec<String>> {
     let Some(exe) = embree_harness() else {

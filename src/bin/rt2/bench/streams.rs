@@ -4,7 +4,7 @@
 //! shared ray sets (diffuse included), Embree's single rays and 8-ray packets measured in the
 //! same run, the lane widths and the stream's ray stack memory.
 
-use super::{embree_rows, model_scene, shared, Args};
+use super::{embree_rows, model_scene, ray_generator, shared, Args};
 use rt2::context::Context;
 use rt2::cpu::query::{self, QueryMode, STREAM_CHUNK, STREAM_MAX};
 use rt2::cpu::simd::Width;
@@ -303,10 +303,32 @@ pub(super) fn streams(a: &Args) -> Result<String> {
     Ok(out)
 }
 
-/// The shared ray sets (bunny, dragon) in every mode and lane width, Embree beside.
+/// The primary rays of the shared sets' camera at 1024², the resolution of the issue's Embree
+/// figures (the shared sets are 512²), made by the peers' `rt2gen` in a temporary folder:
+/// `None` when it is not built or fails.
+fn primary_1024(mesh: &std::path::Path) -> Option<std::path::PathBuf> {
+    let dir = std::env::temp_dir().join(format!("rt2-primary-1024-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).ok()?;
+    let made = std::process::Command::new(ray_generator()?)
+        .arg(mesh)
+        .arg(&dir)
+        .args(["--res", "1024", "--incoherent", "1"])
+        .stdout(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    let set = dir.join("primary_1048576.rays");
+    if !(made && set.exists()) {
+        eprintln!("bench: rt2gen made no 1024² primary set; that row is left out");
+        return None;
+    }
+    Some(set)
+}
+
+/// The shared ray sets (bunny, dragon) in every mode and lane width, Embree beside, and the
+/// bunny's primary rays at 1024² when the peers' generator is built.
 fn raysets(a: &Args, one: &Context) -> Result<String> {
     let mut out = String::from(
-        "#### Shared ray sets (`../shared/raysets`), Mrays/s, 1 thread, Embree 3 measured in the same run\n\n\
+        "#### Shared ray sets (`../shared/raysets`; `primary_1048576` is the bunny's camera at 1024², the issue's resolution, made by the peers' `rt2gen`), Mrays/s, 1 thread, Embree 3 measured in the same run\n\n\
          | set | n-rays ×4 | n-rays ×8 | n-rays ×16 | packets ×4 | packets ×8 | packets ×16 | 1-ray | Embree `intersect1` | Embree `intersect8(coherent)` | best / Embree 1 | best / Embree 8 |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
@@ -333,6 +355,12 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
             })
             .unwrap_or_default();
         sets.sort();
+        let generated = if model == "bunny" {
+            primary_1024(&shared().join("models/bunny.ply"))
+        } else {
+            None
+        };
+        sets.extend(generated.clone());
         let embree = embree_rows(
             &shared().join("models").join(format!("{model}.ply")),
             &sets,
@@ -383,6 +411,9 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
             )
             .ok();
             out += &row;
+        }
+        if let Some(dir) = generated.as_deref().and_then(std::path::Path::parent) {
+            let _ = std::fs::remove_dir_all(dir);
         }
     }
     Ok(out)
