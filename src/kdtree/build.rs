@@ -117,7 +117,7 @@ pub fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
     let bounds = prims.iter().fold(Aabb::EMPTY, |acc, (_, b)| acc.union(*b));
     let max_depth = opts.depth_limit(prims.len());
     let built = if prims.is_empty() {
-        Subtree::built(|out, at| out.leaf(at, Vec::new()))
+        Subtree::built(|slot| slot.leaf(Vec::new()))
     } else {
         match opts.builder {
             // Beyond 2^30 primitives (more memory than a machine of this kind has) the SAH

@@ -5,7 +5,7 @@
 //! (`BuildOptions::references_per_prim`). Cheap to build and the natural tree for
 //! breadth-first ray streams.
 
-use super::split::{child_voxels, classify, clip, fork, Budget, Side, Subtree};
+use super::split::{child_voxels, classify, clip, fork, Budget, Side, Slot, Subtree};
 use super::{BuildInput, BuildOptions};
 use crate::geometry::Aabb;
 
@@ -23,7 +23,7 @@ pub(super) fn build(
         max_depth,
         leaf_size: opts.leaf_size as usize,
     };
-    Subtree::built(|out, at| m.node(prims, voxel, 0, budget, out, at))
+    Subtree::built(|slot| m.node(prims, voxel, 0, budget, slot))
 }
 
 /// (index, bounds inside the child voxel) pairs below and above a split plane.
@@ -36,33 +36,22 @@ struct Midpoint<'a> {
 }
 
 impl Midpoint<'_> {
-    /// Writes the subtree of `voxel` at `at` of `out`.
-    fn node(
-        &self,
-        prims: Vec<(u32, Aabb)>,
-        voxel: Aabb,
-        depth: u32,
-        budget: Budget,
-        out: &mut Subtree,
-        at: usize,
-    ) {
+    /// Writes the subtree of `voxel` into `slot`.
+    fn node(&self, prims: Vec<(u32, Aabb)>, voxel: Aabb, depth: u32, budget: Budget, slot: Slot) {
         let Some((axis, split, [below, above], [bb, ba])) =
             self.split(&prims, &voxel, depth, budget)
         else {
-            out.leaf(at, prims.into_iter().map(|(p, _)| p).collect());
-            return;
+            return slot.leaf(prims.into_iter().map(|(p, _)| p).collect());
         };
         drop(prims);
         let [vb, va] = child_voxels(&voxel, axis, split);
         let n = below.len() + above.len();
-        let pair = out.inner(at, axis, split);
         fork(
             depth,
             n,
-            out,
-            pair,
-            |out, at| self.node(below, vb, depth + 1, bb, out, at),
-            |out, at| self.node(above, va, depth + 1, ba, out, at),
+            slot.inner(axis, split),
+            |slot| self.node(below, vb, depth + 1, bb, slot),
+            |slot| self.node(above, va, depth + 1, ba, slot),
         );
     }
 

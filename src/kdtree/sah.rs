@@ -17,7 +17,7 @@
 
 use rayon::prelude::*;
 
-use super::split::{child_voxels, clip, fork, parallel, Budget, Side, Subtree};
+use super::split::{child_voxels, clip, fork, parallel, Budget, Side, Slot, Subtree};
 use super::{BuildInput, BuildOptions};
 use crate::geometry::Aabb;
 
@@ -163,7 +163,7 @@ pub(super) fn build(
     };
     let budget = Budget::root(prims.len(), opts.references_per_prim);
     let prims = prims.into_iter().map(|(p, _)| p).collect();
-    Subtree::built(|out, at| sah.node(prims, events, voxel, 0, budget, out, at))
+    Subtree::built(|slot| sah.node(prims, events, voxel, 0, budget, slot))
 }
 
 /// A candidate split plane.
@@ -181,12 +181,8 @@ struct Sah<'a> {
 }
 
 impl Sah<'_> {
-    /// Writes the subtree of `voxel` at `at` of `out`. `prims` are global indices; `events`
-    /// refer to them by position in `prims`.
-    #[expect(
-        clippy::too_many_arguments,
-        reason = "the node's five inputs and the slot it writes; a struct would only rename them"
-    )]
+    /// Writes the subtree of `voxel` into `slot`. `prims` are global indices; `events` refer
+    /// to them by position in `prims`.
     fn node(
         &self,
         prims: Vec<u32>,
@@ -194,8 +190,7 @@ impl Sah<'_> {
         voxel: Aabb,
         depth: u32,
         budget: Budget,
-        out: &mut Subtree,
-        at: usize,
+        slot: Slot,
     ) {
         let leaf_cost = INTERSECTION_COST * prims.len() as f32;
         let plane = if depth < self.max_depth && !prims.is_empty() {
@@ -204,23 +199,21 @@ impl Sah<'_> {
             None
         };
         let Some(plane) = plane.filter(|p| p.cost < leaf_cost) else {
-            return out.leaf(at, prims);
+            return slot.leaf(prims);
         };
         let voxels = child_voxels(&voxel, plane.axis, plane.pos);
         let [(pb, eb), (pa, ea)] = self.distribute(&prims, events, &voxels, &plane);
         let Some([bb, ba]) = budget.split(pb.len(), pa.len()) else {
-            return out.leaf(at, prims);
+            return slot.leaf(prims);
         };
         drop(prims);
         let [vb, va] = voxels;
-        let pair = out.inner(at, plane.axis, plane.pos);
         fork(
             depth,
             pb.len() + pa.len(),
-            out,
-            pair,
-            |out, at| self.node(pb, eb, vb, depth + 1, bb, out, at),
-            |out, at| self.node(pa, ea, va, depth + 1, ba, out, at),
+            slot.inner(plane.axis, plane.pos),
+            |slot| self.node(pb, eb, vb, depth + 1, bb, slot),
+            |slot| self.node(pa, ea, va, depth + 1, ba, slot),
         );
     }
 

@@ -20,36 +20,17 @@ pub(super) struct Subtree {
 }
 
 impl Subtree {
-    /// A subtree whose root (slot 0) is still to be written.
-    fn new() -> Self {
-        Subtree {
+    /// The subtree that `build` writes from its root.
+    pub(super) fn built(build: impl FnOnce(Slot)) -> Self {
+        let mut sub = Subtree {
             nodes: vec![KdNode::leaf(0, 0)],
             prims: Vec::new(),
-        }
-    }
-
-    /// The subtree that `build` writes from its root (slot 0).
-    pub(super) fn built(build: impl FnOnce(&mut Subtree, usize)) -> Self {
-        let mut sub = Subtree::new();
-        build(&mut sub, 0);
+        };
+        build(Slot {
+            tree: &mut sub,
+            at: 0,
+        });
         sub
-    }
-
-    /// Writes a leaf at `at` listing `prims` in ascending order, so that equal inputs give
-    /// equal leaves and a traversal meets the lowest index first.
-    pub(super) fn leaf(&mut self, at: usize, mut prims: Vec<u32>) {
-        prims.sort_unstable();
-        self.nodes[at] = KdNode::leaf(self.prims_end(), prims.len() as u32);
-        self.prims.extend_from_slice(&prims);
-    }
-
-    /// Writes an inner node at `at` and appends its child pair (still to be written); returns
-    /// the index of the pair's first (below) child.
-    pub(super) fn inner(&mut self, at: usize, axis: usize, split: f32) -> usize {
-        let pair = self.nodes.len();
-        self.nodes[at] = KdNode::inner(axis, split, pair as u32);
-        self.nodes.extend([KdNode::leaf(0, 0); 2]);
-        pair
     }
 
     /// Appends `sub` (built on its own) and writes its root at `at`: its nodes' child indices
@@ -77,6 +58,41 @@ impl Subtree {
         u32::try_from(self.prims.len())
             .expect("over 2^32 leaf references: more than the node format can address")
     }
+}
+
+/// The place of a node still to be written: a leaf, or an inner node whose children follow.
+pub(super) struct Slot<'a> {
+    tree: &'a mut Subtree,
+    at: usize,
+}
+
+impl<'a> Slot<'a> {
+    /// Writes a leaf listing `prims` in ascending order, so that equal inputs give equal
+    /// leaves and a traversal meets the lowest index first.
+    pub(super) fn leaf(self, mut prims: Vec<u32>) {
+        prims.sort_unstable();
+        let first = self.tree.prims_end();
+        self.tree.nodes[self.at] = KdNode::leaf(first, prims.len() as u32);
+        self.tree.prims.extend_from_slice(&prims);
+    }
+
+    /// Writes an inner node and appends its child pair, to be written by [`fork`].
+    pub(super) fn inner(self, axis: usize, split: f32) -> Children<'a> {
+        let first = self.tree.nodes.len();
+        self.tree.nodes[self.at] = KdNode::inner(axis, split, first as u32);
+        self.tree.nodes.extend([KdNode::leaf(0, 0); 2]);
+        Children {
+            tree: self.tree,
+            first,
+        }
+    }
+}
+
+/// The child pair an inner node just appended: nothing else is written until [`fork`] fills
+/// it, so grafted subtrees land right after it, in pre-order.
+pub(super) struct Children<'a> {
+    tree: &'a mut Subtree,
+    first: usize,
 }
 
 /// Where a primitive goes when its voxel is split.
@@ -162,28 +178,27 @@ pub(super) fn parallel(depth: u32, prims: usize) -> bool {
     depth < PARALLEL_MAX_DEPTH && prims >= PARALLEL_MIN_PRIMS
 }
 
-/// Builds the two children of the inner node whose child pair starts at `pair`, in parallel
-/// near the root (each into its own [`Subtree`], grafted below then above). The arrays do not
-/// depend on whether the closures ran in parallel.
-pub(super) fn fork<A, B>(
-    depth: u32,
-    prims: usize,
-    out: &mut Subtree,
-    pair: usize,
-    below: A,
-    above: B,
-) where
-    A: FnOnce(&mut Subtree, usize) + Send,
-    B: FnOnce(&mut Subtree, usize) + Send,
+/// Builds the two `children` of an inner node, in parallel near the root (each into its own
+/// [`Subtree`], grafted below then above). The arrays do not depend on whether the closures ran
+/// in parallel.
+pub(super) fn fork<A, B>(depth: u32, prims: usize, children: Children, below: A, above: B)
+where
+    A: FnOnce(Slot) + Send,
+    B: FnOnce(Slot) + Send,
 {
+    let Children { tree, first } = children;
     if parallel(depth, prims) {
-        // The grafts move the subtrees' pairs to right after this node's pair.
-        debug_assert_eq!(out.nodes.len(), pair + 2, "the pair is the last written");
         let (b, a) = rayon::join(|| Subtree::built(below), || Subtree::built(above));
-        out.graft(pair, b);
-        out.graft(pair + 1, a);
+        tree.graft(first, b);
+        tree.graft(first + 1, a);
     } else {
-        below(out, pair);
-        above(out, pair + 1);
+        below(Slot {
+            tree: &mut *tree,
+            at: first,
+        });
+        above(Slot {
+            tree,
+            at: first + 1,
+        });
     }
 }
