@@ -319,6 +319,7 @@ fn primary_1024(mesh: &std::path::Path) -> Option<std::path::PathBuf> {
     let set = dir.join("primary_1048576.rays");
     if !(made && set.exists()) {
         eprintln!("bench: rt2gen made no 1024² primary set; that row is left out");
+        let _ = std::fs::remove_dir_all(&dir);
         return None;
     }
     Some(set)
