@@ -5,6 +5,7 @@
 //! default; each device records them instead (out of memory apart from the rest, and a lost
 //! device through its own callback), and every job checks the record.
 
+use super::faults::{Faults, InjectedFault, JobFaults};
 use super::kernels::{self, Program};
 use super::scene::SceneCache;
 use super::{GpuError, GpuResult};
@@ -12,7 +13,6 @@ use crate::cpu::traverse::Traversal;
 use crate::error::{Error, Result, Rt2Status};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
-use std::thread::ThreadId;
 
 /// How the GPU backend picks and uses adapters.
 #[derive(Clone, Debug, Default)]
@@ -30,7 +30,7 @@ pub struct GpuOptions {
 
 impl GpuOptions {
     /// The defaults with `RT2_ADAPTER` and `RT2_GPU_DEVICES` applied; an error for a value
-    /// that is set but unreadable (see [`crate::env`]).
+    /// that is set but unreadable (see the `env` module).
     pub fn from_env() -> Result<Self> {
         Ok(GpuOptions {
             adapter: crate::env::var("RT2_ADAPTER")?.filter(|s| !s.is_empty()),
@@ -97,88 +97,6 @@ pub struct Device {
     /// The committed scene as uploaded; one job at a time uses a device.
     pub(crate) scene: Mutex<SceneCache>,
     max_binding_override: Option<u64>,
-}
-
-/// What wgpu's callbacks reported about a device since the last [`Device::check`].
-#[derive(Default)]
-struct Faults {
-    /// Errors, in order, each with the thread it belongs to.
-    errors: Vec<Fault>,
-    /// Why the device was lost; a lost device stays lost.
-    lost: Option<String>,
-}
-
-/// One error wgpu reported outside error scopes.
-struct Fault {
-    /// The thread whose wgpu call failed: wgpu calls the error handler on it, at once (as it
-    /// keeps error scopes per thread). Jobs may share a device (a context serves many threads),
-    /// and each job makes its calls and its checks on one thread, so a job takes only its own
-    /// errors and another job's out-of-memory does not fail it. `None`: a fault injected by a
-    /// test, which the next check on any thread takes.
-    thread: Option<ThreadId>,
-    message: String,
-    /// An out-of-memory error (the others are often its consequences: a bind group of a buffer
-    /// that was never allocated).
-    out_of_memory: bool,
-}
-
-impl Faults {
-    fn record(&mut self, e: wgpu::Error, thread: Option<ThreadId>) {
-        let (message, out_of_memory) = match e {
-            // Its Display is only "Out of Memory"; the source says which allocation failed.
-            wgpu::Error::OutOfMemory { source } => (source.to_string(), true),
-            e => (e.to_string(), false),
-        };
-        self.errors.push(Fault {
-            thread,
-            message,
-            out_of_memory,
-        });
-    }
-
-    /// Whether a check on the calling thread takes `f`: its own errors and injected ones.
-    fn checked_here(f: &Fault) -> bool {
-        f.thread.is_none_or(|t| t == std::thread::current().id())
-    }
-
-    /// Takes the errors `mine` picks, leaving the rest (other threads').
-    fn take(&mut self, mine: impl Fn(&Fault) -> bool) -> Vec<Fault> {
-        let (taken, kept) = std::mem::take(&mut self.errors)
-            .into_iter()
-            .partition(|f| mine(f));
-        self.errors = kept;
-        taken
-    }
-
-    /// Drops the calling thread's own errors (not injected ones): a job's, once it is over.
-    fn drop_thread_errors(&mut self) {
-        let me = Some(std::thread::current().id());
-        self.errors.retain(|f| f.thread != me);
-    }
-}
-
-/// A job's hold on its thread's faults ([`Device::begin_job`]). Dropped when the job ends, it
-/// drops what the job's wgpu calls reported but no check took (a job that failed before its
-/// check). A render band runs on a thread of its own, so what such a thread left would
-/// otherwise stay in the device's list for good.
-pub(crate) struct JobFaults<'a>(&'a Device);
-
-impl Drop for JobFaults<'_> {
-    fn drop(&mut self) {
-        if let Ok(mut f) = self.0.faults.lock() {
-            f.drop_thread_errors();
-        }
-    }
-}
-
-/// A fault injected by [`Device::inject_fault`], as a driver would report it.
-#[doc(hidden)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum InjectedFault {
-    /// An allocation fails: wgpu reports `Error::OutOfMemory` to the device's handler.
-    OutOfMemory,
-    /// The device is lost: `wgpu::Device::destroy`, after which wgpu calls the lost callback.
-    Lost,
 }
 
 /// The devices of a context.
@@ -312,24 +230,7 @@ fn open_device(adapter: &wgpu::Adapter, opts: &GpuOptions) -> std::result::Resul
         ..Default::default()
     }))
     .map_err(|e| format!("adapter {} refused a device: {e}", info.name))?;
-    let faults = Arc::new(Mutex::new(Faults::default()));
-    let sink = faults.clone();
-    device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
-        if let Ok(mut f) = sink.lock() {
-            f.record(e, Some(std::thread::current().id()));
-        }
-    }));
-    // wgpu reports a lost device only here, never to the error handler.
-    let sink = faults.clone();
-    device.set_device_lost_callback(move |reason, msg| {
-        if let Ok(mut f) = sink.lock() {
-            f.lost = Some(match reason {
-                wgpu::DeviceLostReason::Destroyed => "destroyed".to_string(),
-                wgpu::DeviceLostReason::Unknown if msg.is_empty() => "no reason given".into(),
-                wgpu::DeviceLostReason::Unknown => msg,
-            });
-        }
-    });
+    let faults = Faults::watch(&device);
     let layouts = make_layouts(&device);
     Ok(Device {
         name: info.name,
@@ -718,7 +619,7 @@ impl Device {
                 "the GPU device {} was lost ({why})",
                 self.name
             ))),
-            None => Ok(JobFaults(self)),
+            None => Ok(JobFaults(&self.faults)),
         }
     }
 

@@ -8,13 +8,15 @@
 //! - [`render`]: Whitted frames, megakernel or wavefront, rows split across devices.
 
 mod device;
+mod faults;
 pub mod kernels;
 pub mod layout;
 mod query;
 mod render;
 mod scene;
 
-pub use device::{open, Device, Gpu, GpuOptions, InjectedFault};
+pub use device::{open, Device, Gpu, GpuOptions};
+pub use faults::InjectedFault;
 pub use render::GpuPath;
 
 use crate::camera::Camera;
