@@ -122,7 +122,7 @@ pub(crate) unsafe fn slice<'a, T>(p: *const T, count: usize, arg: &str) -> Resul
     Ok(std::slice::from_raw_parts(p, count))
 }
 
-/// Mutable variant of [`slice`].
+/// Mutable variant of [`slice()`].
 ///
 /// # Safety
 /// A non-NULL `p` must point to `count` writable elements not aliased elsewhere.

@@ -5,7 +5,7 @@
 //! - [`open`] picks adapters and creates devices; the dispatch layer decides whether to use
 //!   them (a software adapter is slower than the CPU path).
 //! - `query`: batch ray queries, one thread per ray.
-//! - [`render`]: Whitted frames, megakernel or wavefront, rows split across devices.
+//! - [`render()`]: Whitted frames, megakernel or wavefront, rows split across devices.
 
 mod device;
 mod faults;
