@@ -270,23 +270,11 @@ fn spheres_png_shows_the_spheres_and_the_sky() {
     );
 }
 
-/// `$RT2_SHARED`, by default `../shared` next to the crate.
-fn shared() -> PathBuf {
-    std::env::var_os("RT2_SHARED")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| support::manifest_dir().join("../shared"))
-}
-
 #[test]
 fn load_model_renders_the_bunny() {
-    let model = shared().join("models/bunny.ply");
-    if !model.is_file() {
-        eprintln!(
-            "SKIPPED load_model_renders_the_bunny: {} is missing (set RT2_SHARED)",
-            model.display()
-        );
+    let Some(model) = support::shared_path("models/bunny.ply") else {
         return;
-    }
+    };
     let exe = build_example("load_model");
     let png = support::scratch("c_examples").join("bunny.png");
     let _ = std::fs::remove_file(&png);
@@ -472,11 +460,9 @@ fn spheres_on_the_gpu_backend_draws_the_cpu_image() {
 /// reports through `rt2_context_info` that the render ran where the context said.
 #[test]
 fn load_model_on_the_gpu_backend_draws_the_cpu_image() {
-    let model = shared().join("models/bunny.ply");
-    if !model.is_file() {
-        eprintln!("SKIPPED: {} is missing (set RT2_SHARED)", model.display());
+    let Some(model) = support::shared_path("models/bunny.ply") else {
         return;
-    }
+    };
     if !gpu_available("load_model_on_the_gpu_backend_draws_the_cpu_image") {
         return;
     }
@@ -535,14 +521,9 @@ fn no_adapter_is_an_error_for_gpu_and_the_cpu_for_auto() {
         err.contains("RT2_STATUS_BACKEND_UNAVAILABLE") && err.contains("WGPU_BACKEND=gl"),
         "unclear message: {err}"
     );
-    let model = shared().join("models/bunny.ply");
-    if !model.is_file() {
-        eprintln!(
-            "SKIPPED the AUTO half: {} is missing (set RT2_SHARED)",
-            model.display()
-        );
+    let Some(model) = support::shared_path("models/bunny.ply") else {
         return;
-    }
+    };
     let exe = build_example_as("load_model", "load_model-no-adapter");
     let png = support::scratch("c_examples").join("bunny-no-adapter.png");
     let out = run_with(&exe, &[model.as_os_str(), png.as_os_str()], &env("auto"));

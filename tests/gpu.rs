@@ -15,7 +15,8 @@ use rt2::gpu::GpuOptions;
 use rt2::rayset;
 use rt2::render::{GpuPathRequest, RenderOptions};
 use rt2::scene::{builtin, loaders, Material, PointLight, Scene, Shape};
-use std::path::PathBuf;
+
+mod support;
 
 /// A GPU context (software adapters accepted), or `None` after a loud SKIPPED line.
 fn gpu(opts: GpuOptions) -> Option<Context> {
@@ -55,12 +56,6 @@ fn auto_on_gpu(max_binding: Option<u64>) -> Option<(Context, GpuOptions)> {
     let c = Context::with_gpu_options(BackendRequest::Auto, 2, &opts).unwrap();
     assert_eq!(c.decision().backend, Backend::Gpu);
     Some((c, opts))
-}
-
-fn shared() -> PathBuf {
-    std::env::var_os("RT2_SHARED")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared"))
 }
 
 fn query(how: Traversal) -> QueryOptions {
@@ -136,16 +131,12 @@ fn queries_match_the_cpu_on_the_bunny_ray_sets() {
     let Some(g) = gpu(GpuOptions::default()) else {
         return;
     };
-    let model = shared().join("models/bunny.ply");
-    let dir = shared().join("raysets/bunny");
-    if !model.exists() || !dir.exists() {
-        eprintln!(
-            "SKIPPED: {} or {} is missing (set RT2_SHARED)",
-            model.display(),
-            dir.display()
-        );
+    let (Some(model), Some(dir)) = (
+        support::shared_path("models/bunny.ply"),
+        support::shared_path("raysets/bunny"),
+    ) else {
         return;
-    }
+    };
     let mesh = loaders::load_mesh(&model).unwrap();
     let mut scene = Scene::new();
     let shape = Shape::Mesh {

@@ -9,6 +9,8 @@ use rt2::geometry::{
 };
 use rt2::kdtree::{build, BuildOptions, Builder, KdNode, KdTree, Layout};
 
+mod support;
+
 /// SplitMix64: a small deterministic generator, so every run sees the same scenes.
 struct Rng(u64);
 
@@ -769,16 +771,10 @@ fn ensure_ropes_matches_ropes_built_with_the_tree() {
 /// to keep the brute force near a second) every triangle reaching into the leaf is listed.
 #[test]
 fn shared_models_keep_every_triangle_in_its_leaves() {
-    let dir = std::env::var_os("RT2_SHARED")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared"))
-        .join("models");
     for model in ["bunny.ply", "snowden.ply"] {
-        let path = dir.join(model);
-        if !path.exists() {
-            eprintln!("SKIPPED: {} is missing (set RT2_SHARED)", path.display());
+        let Some(path) = support::shared_path(&format!("models/{model}")) else {
             continue;
-        }
+        };
         let mesh = rt2::scene::loaders::load_mesh(&path).unwrap();
         let mut set = PrimitiveSet::default();
         for t in &mesh.triangles {

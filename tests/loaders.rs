@@ -9,6 +9,8 @@ use glam::Vec3;
 use rt2::error::{Result, Rt2Status};
 use rt2::scene::loaders::{load_mesh, parse_obj, parse_ply, Mesh};
 
+mod support;
+
 // ---------------------------------------------------------------------------------------------
 // Helpers
 
@@ -1152,19 +1154,7 @@ fn random_meshes_round_trip_identically_through_all_four_formats() {
 // Shared Stanford models
 
 fn shared_model(file: &str) -> Option<PathBuf> {
-    let root = std::env::var_os("RT2_SHARED")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared"));
-    let path = root.join("models").join(file);
-    if path.is_file() {
-        Some(path)
-    } else {
-        eprintln!(
-            "!!!!! SKIPPED: shared model {} is missing (set RT2_SHARED to the shared folder) !!!!!",
-            path.display()
-        );
-        None
-    }
+    support::shared_path(&format!("models/{file}"))
 }
 
 fn check_model(file: &str, vertices: usize, triangles: usize) -> Option<Mesh> {

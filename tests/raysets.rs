@@ -11,26 +11,17 @@ use rt2::dispatch::BackendRequest;
 use rt2::geometry::Hit;
 use rt2::rayset::{self, HitRecord};
 use rt2::scene::{loaders, Scene, Shape};
-use std::path::PathBuf;
 
-fn shared() -> PathBuf {
-    std::env::var_os("RT2_SHARED")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared"))
-}
+mod support;
 
 #[test]
 fn every_traversal_and_mode_agrees_with_embree_on_the_bunny_ray_sets() {
-    let model = shared().join("models/bunny.ply");
-    let dir = shared().join("raysets/bunny");
-    if !model.exists() || !dir.exists() {
-        eprintln!(
-            "SKIPPED: {} or {} is missing (set RT2_SHARED)",
-            model.display(),
-            dir.display()
-        );
+    let (Some(model), Some(dir)) = (
+        support::shared_path("models/bunny.ply"),
+        support::shared_path("raysets/bunny"),
+    ) else {
         return;
-    }
+    };
     let mesh = loaders::load_mesh(&model).unwrap();
     let mut scene = Scene::new();
     scene

@@ -81,3 +81,32 @@ pub fn compiler(cpp: bool, out_dir: &Path) -> cc::Tool {
         .emit_rerun_if_env_changed(false)
         .get_compiler()
 }
+
+/// The shared folder beside the project (models, ray sets with Embree's hits): `$RT2_SHARED`,
+/// by default `../shared` next to the crate.
+pub fn shared_dir() -> PathBuf {
+    std::env::var_os("RT2_SHARED")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| manifest_dir().join("../shared"))
+}
+
+/// `rel` (a file or folder of the shared folder) when it exists. When it does not, the caller
+/// skips its check after a SKIPPED line naming the path, or, with `RT2_REQUIRE_SHARED=1`, the
+/// test fails: CI sets it, so that the checks against Embree's hits and the real models cannot
+/// pass by skipping (libtest hides a passing test's SKIPPED line).
+pub fn shared_path(rel: &str) -> Option<PathBuf> {
+    let path = shared_dir().join(rel);
+    if path.exists() {
+        return Some(path);
+    }
+    assert!(
+        std::env::var("RT2_REQUIRE_SHARED").as_deref() != Ok("1"),
+        "{} is missing and RT2_REQUIRE_SHARED=1 (set RT2_SHARED to the shared folder)",
+        path.display()
+    );
+    eprintln!(
+        "SKIPPED: {} is missing (set RT2_SHARED to the shared folder)",
+        path.display()
+    );
+    None
+}
