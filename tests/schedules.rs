@@ -119,3 +119,41 @@ fn render_options_out_of_range_are_refused_by_the_context() {
         }
     }
 }
+
+/// A HUD mask on the CPU, in both schedules and with one and several samples: masked pixels
+/// keep what the frame held, and every other pixel is exactly what an unmasked render of the
+/// same schedule draws (a pixel's samples do not depend on its neighbours being traced).
+#[test]
+fn masked_pixels_are_left_alone_and_the_rest_are_rendered_as_without_a_mask() {
+    let (w, h) = (64u32, 48u32);
+    // Every 7th pixel is masked, and a whole band of rows, so both lone pixels and runs
+    // longer than a breadth-first run's row are skipped.
+    let mask: Vec<u8> = (0..w * h)
+        .map(|i| (i % 7 != 0 && !(20..26).contains(&(i / w))) as u8)
+        .collect();
+    let masked = mask.iter().filter(|&&m| m == 0).count();
+    assert!(masked > 400, "{masked}");
+    for schedule in [Schedule::DepthFirst, Schedule::BreadthFirst] {
+        for samples in [1, 2] {
+            let opts = RenderOptions {
+                samples,
+                schedule,
+                ..RenderOptions::default()
+            };
+            let full = render("default", &opts, w, h);
+            let mut b = builtin::by_name("default").unwrap();
+            b.scene.commit().unwrap();
+            let mut f = Frame::new(w, h).unwrap();
+            f.pixels_mut().fill(7);
+            f.set_mask(Some(&mask)).unwrap();
+            let ctx = Context::new(BackendRequest::Cpu, 2).unwrap();
+            ctx.render(b.scene.committed().unwrap(), &b.camera, &opts, &mut f)
+                .unwrap();
+            let pairs = f.pixels().chunks(4).zip(full.pixels().chunks(4));
+            for (i, (px, want)) in pairs.enumerate() {
+                let expected = if mask[i] == 0 { &[7u8; 4][..] } else { want };
+                assert_eq!(px, expected, "{schedule:?}, {samples} spp, pixel {i}");
+            }
+        }
+    }
+}
