@@ -222,3 +222,117 @@ fn a_query_longer_than_one_step_answers_every_ray_in_place() {
         rt2_context_destroy(ctx);
     }
 }
+
+/// The counters of `rt2_query_stats`, through the C API in every mode, on a tree whose every
+/// node a ray meets is known from the geometry: two stacks of triangles facing x, `A` (5, at
+/// x in [0, 1]) and `B` (7, at x in [9, 10]), each covering `y + z <= 1` of the unit square.
+/// The midpoint builder at depth 1 splits the root at x = 5 into a leaf per stack. A ray along
+/// +x through `y + z > 1` misses everything: root and both leaves (3 nodes, 2 leaves, 12
+/// tests). One through `y + z < 1` hits A's first triangle, before leaving A's leaf: 2 nodes,
+/// 1 leaf, 5 tests. Along -x, the same with B first (7 tests).
+#[test]
+fn query_statistics_count_the_nodes_leaves_and_tests_of_each_ray() {
+    let (na, nb) = (5usize, 7usize);
+    let xs: Vec<f32> = (0..na)
+        .map(|k| k as f32 / (na - 1) as f32)
+        .chain((0..nb).map(|k| 9.0 + k as f32 / (nb - 1) as f32))
+        .collect();
+    let positions: Vec<f32> = xs
+        .iter()
+        .flat_map(|&x| [x, 0.0, 0.0, x, 1.0, 0.0, x, 0.0, 1.0])
+        .collect();
+    let indices: Vec<u32> = (0..3 * xs.len() as u32).collect();
+    // (y, z, direction sign) and the expected (nodes, leaves, tests) per ray.
+    let mut rays = Vec::new();
+    let mut want = [0u64; 3];
+    for k in 0..40 {
+        // Even k through the triangles (y + z <= 0.69), odd k past them (y + z >= 1.2), all
+        // inside the scene's box.
+        let through = k % 2 == 0;
+        let (y, z) = if through {
+            (0.1 + 0.01 * k as f32, 0.2)
+        } else {
+            (0.5 + 0.01 * k as f32, 0.7)
+        };
+        for sign in [1.0f32, -1.0] {
+            rays.push(rt2_ray {
+                org: [5.0 - 6.0 * sign, y, z],
+                tmin: 0.0,
+                dir: [sign, 0.0, 0.0],
+                tmax: f32::INFINITY,
+            });
+            let first = if sign > 0.0 { na } else { nb };
+            let [n, l, t] = if through {
+                [2, 1, first]
+            } else {
+                [3, 2, na + nb]
+            };
+            want[0] += n as u64;
+            want[1] += l as u64;
+            want[2] += t as u64;
+        }
+    }
+    unsafe {
+        let mut ctx = null_mut();
+        assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
+        let mut scene = null_mut();
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let mut id = 0;
+        assert_eq!(
+            rt2_scene_add_mesh(
+                scene,
+                positions.as_ptr(),
+                positions.len() / 3,
+                indices.as_ptr(),
+                xs.len(),
+                0,
+                &mut id
+            ),
+            Rt2Status::Ok
+        );
+        let mut b = rt2_build_options_default();
+        b.builder = Rt2Builder::Midpoint as u32;
+        b.max_depth = 1;
+        b.leaf_size = 1;
+        assert_eq!(rt2_scene_set_build_options(scene, &b), Rt2Status::Ok);
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        for mode in [
+            Rt2QueryMode::Single,
+            Rt2QueryMode::Packet,
+            Rt2QueryMode::Stream,
+        ] {
+            let mut opt = rt2_query_options_default();
+            opt.traversal = Rt2Traversal::Standard as u32;
+            opt.mode = mode as u32;
+            let miss = rt2_hit {
+                t: 0.0,
+                u: 0.0,
+                v: 0.0,
+                object: 0,
+                prim: 0,
+            };
+            let mut hits = vec![miss; rays.len()];
+            let mut stats = rt2_query_stats {
+                nodes_visited: 99,
+                leaves_visited: 99,
+                prim_tests: 99,
+            };
+            let st = rt2_intersect(
+                ctx,
+                scene,
+                rays.as_ptr(),
+                rays.len(),
+                hits.as_mut_ptr(),
+                &opt,
+                &mut stats,
+            );
+            assert_eq!(st, Rt2Status::Ok);
+            let got = [stats.nodes_visited, stats.leaves_visited, stats.prim_tests];
+            assert_eq!(got, want, "{mode:?}: (nodes, leaves, tests)");
+            let hit_count = hits.iter().filter(|h| h.t.is_finite()).count();
+            assert_eq!(hit_count, rays.len() / 2, "{mode:?}");
+        }
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
