@@ -1,0 +1,257 @@
+//! Object transforms against an independent reference. The library places each shape in world
+//! space once, at commit (a sphere under a non-similarity transform becomes an ellipsoid, a
+//! plane's normal goes through the inverse transpose, a box may have its axes swapped, a mesh's
+//! corners move). The reference does the opposite: it takes each ray into the object's own
+//! space with the inverse transform, in f64, and hits the untransformed shape there, where the
+//! ray parameter `t` is the same. Rays whose reference hit lies within a small margin of the
+//! shape's silhouette or edges are left out: rounding may put them on either side.
+
+use glam::{Affine3A, DAffine3, DVec3, Quat, Vec3};
+use rt2::context::{Context, QueryOptions};
+use rt2::cpu::traverse::Traversal;
+use rt2::dispatch::BackendRequest;
+use rt2::geometry::{Hit, Ray};
+use rt2::scene::{Scene, Shape};
+
+/// The object-space hit of a ray `o + t d` (`d` not unit length): `t`, the primitive (the
+/// triangle of a mesh, else 0) and how far the hit is from the shape's silhouette or edges,
+/// relative to the shape's size (small: a grazing ray, left out).
+type Reference = Option<(f64, u32, f64)>;
+
+/// Nearest root `t >= 0` of `a t² + b t + c` and its margin (the discriminant over `b²`).
+fn quadric(a: f64, b: f64, c: f64) -> Reference {
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return Some((f64::INFINITY, 0, -disc / (b * b).max(1e-300)));
+    }
+    let s = disc.sqrt();
+    let margin = disc / (b * b).max(1e-300);
+    [(-b - s) / (2.0 * a), (-b + s) / (2.0 * a)]
+        .into_iter()
+        .find(|&t| t >= 0.0)
+        .map(|t| (t, 0, margin))
+        .or(Some((f64::INFINITY, 0, margin)))
+}
+
+/// The reference of each kind of shape, in object space.
+fn reference(shape: &Shape, o: DVec3, d: DVec3) -> Reference {
+    match shape {
+        Shape::Sphere { center, radius } => {
+            let r = *radius as f64;
+            let oc = o - center.as_dvec3();
+            quadric(d.dot(d), 2.0 * oc.dot(d), oc.dot(oc) - r * r)
+        }
+        Shape::Ellipsoid { center, radii } => {
+            let k = radii.as_dvec3();
+            let (oc, dd) = ((o - center.as_dvec3()) / k, d / k);
+            quadric(dd.dot(dd), 2.0 * oc.dot(dd), oc.dot(oc) - 1.0)
+        }
+        Shape::Box { min, max } => {
+            let (lo, hi) = (min.as_dvec3(), max.as_dvec3());
+            let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+            for a in 0..3 {
+                let (ta, tb) = ((lo[a] - o[a]) / d[a], (hi[a] - o[a]) / d[a]);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+            // The margin: how far the entry point is from the entry face's edges, relative
+            // to the box.
+            let margin = ((t1 - t0) / t1.abs().max(1e-300)).abs();
+            Some((if t0 <= t1 { t0 } else { f64::INFINITY }, 0, margin))
+        }
+        Shape::Plane { normal, offset } => {
+            let n = normal.as_dvec3();
+            let t = (*offset as f64 - n.dot(o)) / n.dot(d);
+            let margin = (n.dot(d) / (n.length() * d.length())).abs();
+            Some((if t >= 0.0 { t } else { f64::INFINITY }, 0, margin))
+        }
+        Shape::Mesh {
+            positions,
+            triangles,
+        } => {
+            // The nearest triangle hit, and how close the ray passes to any triangle's edges
+            // in front of its origin (barycentric units): near an edge, rounding decides.
+            let (mut best, mut margin) = ((f64::INFINITY, u32::MAX), f64::INFINITY);
+            for (k, tri) in triangles.iter().enumerate() {
+                let [a, b, c] = tri.map(|i| positions[i as usize].as_dvec3());
+                let (e1, e2) = (b - a, c - a);
+                let p = d.cross(e2);
+                let det = e1.dot(p);
+                let s = o - a;
+                let u = s.dot(p) / det;
+                let q = s.cross(e1);
+                let v = d.dot(q) / det;
+                let t = e2.dot(q) / det;
+                if t.is_nan() || t < 0.0 {
+                    continue;
+                }
+                let edge = u.min(v).min(1.0 - u - v);
+                margin = margin.min(edge.abs());
+                if edge >= 0.0 && t < best.0 {
+                    best = (t, k as u32);
+                }
+            }
+            Some((best.0, best.1, margin))
+        }
+    }
+}
+
+/// Rays from a sphere of radius 6 around `target` to points within 1.5 of it: most hit the
+/// object, many miss, some graze.
+fn rays(target: Vec3, n: usize) -> Vec<Ray> {
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    (0..n)
+        .map(|_| {
+            let from = Vec3::new(next(), next(), next()).normalize_or(Vec3::X) * 6.0;
+            let to = Vec3::new(next(), next(), next()) * 1.5;
+            Ray::new(target + from, to - from, 0.0, f32::INFINITY)
+        })
+        .collect()
+}
+
+/// Places `shape` by `t`, traces rays at it with the CPU's standard traversal and compares
+/// every hit with the reference in object space: hit or miss, `t` within 1e-4 relative, and the
+/// same triangle of a mesh. Returns how many rays hit.
+fn check(name: &str, shape: Shape, t: Affine3A, target: Vec3) -> usize {
+    let mut scene = Scene::new();
+    let id = scene.add_object(shape.clone(), 0).unwrap();
+    scene.set_transform(id, t).unwrap();
+    scene.commit().unwrap();
+    let rays = rays(target, 4000);
+    let mut hits = vec![Hit::MISS; rays.len()];
+    let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
+    let q = QueryOptions {
+        traversal: Some(Traversal::Standard),
+        ..QueryOptions::default()
+    };
+    ctx.intersect(scene.committed().unwrap(), &rays, &mut hits, &q)
+        .unwrap();
+    let inverse = DAffine3::from_cols_array(&t.to_cols_array().map(f64::from)).inverse();
+    let (mut compared, mut hit_count) = (0, 0);
+    for (ray, hit) in rays.iter().zip(&hits) {
+        let o = inverse.transform_point3(ray.org.as_dvec3());
+        let d = inverse.transform_vector3(ray.dir.as_dvec3());
+        let (want_t, want_prim, margin) = reference(&shape, o, d).unwrap();
+        if margin < 1e-3 {
+            continue;
+        }
+        compared += 1;
+        if want_t.is_infinite() {
+            assert!(!hit.is_hit(), "{name}: {ray:?} hit at {} but misses", hit.t);
+            continue;
+        }
+        hit_count += 1;
+        assert!(hit.is_hit(), "{name}: {ray:?} misses but hits at {want_t}");
+        let err = (hit.t as f64 - want_t).abs() / want_t.max(1e-30);
+        assert!(err < 1e-4, "{name}: {ray:?} t {} against {want_t}", hit.t);
+        if let Shape::Mesh { .. } = shape {
+            assert_eq!(hit.prim, want_prim, "{name}: {ray:?}");
+        }
+    }
+    assert!(compared > 3000, "{name}: only {compared} rays compared");
+    assert!(
+        hit_count > 200 && hit_count + 200 < compared,
+        "{name}: {hit_count} of {compared} rays hit: the rays should both hit and miss"
+    );
+    hit_count
+}
+
+/// A rotation about a tilted axis, a non-uniform scale and a translation: no axis stays put.
+fn general() -> Affine3A {
+    Affine3A::from_scale_rotation_translation(
+        Vec3::new(1.5, 0.6, 1.1),
+        Quat::from_axis_angle(Vec3::new(1.0, 1.0, 0.3).normalize(), 0.7),
+        Vec3::new(1.0, -2.0, 3.0),
+    )
+}
+
+#[test]
+fn a_sphere_under_a_non_uniform_scale_is_the_stretched_sphere() {
+    let shape = Shape::Sphere {
+        center: Vec3::new(0.3, -0.2, 0.1),
+        radius: 0.9,
+    };
+    let t = general();
+    check("stretched sphere", shape, t, t.transform_point3(Vec3::ZERO));
+}
+
+#[test]
+fn a_sphere_under_a_similarity_stays_a_sphere() {
+    let shape = Shape::Sphere {
+        center: Vec3::new(0.3, -0.2, 0.1),
+        radius: 0.5,
+    };
+    let t = Affine3A::from_scale_rotation_translation(
+        Vec3::splat(2.0),
+        Quat::from_axis_angle(Vec3::Z, 1.1),
+        Vec3::new(-4.0, 0.5, 2.0),
+    );
+    check("similar sphere", shape, t, t.transform_point3(Vec3::ZERO));
+}
+
+#[test]
+fn an_ellipsoid_is_rotated_and_scaled_with_its_axes() {
+    let shape = Shape::Ellipsoid {
+        center: Vec3::new(0.1, 0.2, -0.1),
+        radii: Vec3::new(1.0, 0.5, 0.3),
+    };
+    let t = general();
+    check("ellipsoid", shape, t, t.transform_point3(Vec3::ZERO));
+}
+
+#[test]
+fn a_box_keeps_its_faces_under_an_axis_swap() {
+    let shape = Shape::Box {
+        min: Vec3::new(-1.0, -0.5, -0.25),
+        max: Vec3::new(1.0, 0.5, 0.25),
+    };
+    // x → -z, y → 2x, z → 3y, then a translation: axes onto axes, one flipped.
+    let t = Affine3A::from_cols(
+        Vec3::new(0.0, 0.0, -1.0).into(),
+        Vec3::new(2.0, 0.0, 0.0).into(),
+        Vec3::new(0.0, 3.0, 0.0).into(),
+        Vec3::new(2.0, 1.0, -1.0).into(),
+    );
+    check("box", shape, t, t.transform_point3(Vec3::ZERO));
+}
+
+#[test]
+fn a_plane_normal_follows_the_inverse_transpose() {
+    let shape = Shape::Plane {
+        normal: Vec3::new(0.0, 1.0, 0.5),
+        offset: 0.7,
+    };
+    let t = general();
+    // Aimed at a point of the placed plane.
+    let on_plane = Vec3::new(0.0, 0.7, 0.0);
+    check("plane", shape, t, t.transform_point3(on_plane));
+}
+
+#[test]
+fn a_mesh_moves_with_its_corners() {
+    // A closed tetrahedron.
+    let shape = Shape::Mesh {
+        positions: vec![
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(1.0, -1.0, -1.0),
+            Vec3::new(-1.0, 1.0, -1.0),
+            Vec3::new(-1.0, -1.0, 1.0),
+        ],
+        triangles: vec![[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]],
+    };
+    // With a shear on top of the general transform.
+    let t = general()
+        * Affine3A::from_cols(
+            Vec3::X.into(),
+            Vec3::new(0.6, 1.0, 0.0).into(),
+            Vec3::Z.into(),
+            Vec3::ZERO.into(),
+        );
+    check("mesh", shape, t, t.transform_point3(Vec3::ZERO));
+}
