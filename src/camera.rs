@@ -31,6 +31,14 @@ impl Default for Camera {
     }
 }
 
+/// The unit vector along `v` (NaN for a zero `v`), normalised after scaling `v` by its largest
+/// component: `Vec3::normalize` squares the components, which underflows for a vector shorter
+/// than about 1e-19 (an `up` of 1e-23 gave NaN rays: a blank frame) and overflows for one
+/// longer than about 1e19.
+fn direction(v: Vec3) -> Vec3 {
+    (v / v.abs().max_element()).normalize()
+}
+
 /// The camera's basis and image-plane scale, computed once per frame.
 #[derive(Clone, Copy, Debug)]
 pub struct CameraRays {
@@ -53,24 +61,19 @@ impl Camera {
                 )));
             }
         }
-        // The basis is built from the normalised view direction and up: their squared
-        // lengths must be finite (not overflowed) and non-zero (not underflowed).
+        // The basis is built from the view direction and up, as `rays` builds it.
         let f = target - eye;
-        let (ff, uu) = (f.length_squared(), up.length_squared());
-        if ff == 0.0 {
+        if !f.is_finite() {
+            return Err(Error::invalid_argument(format!(
+                "eye {eye} and target {target} are too far apart (their difference overflows)"
+            )));
+        }
+        let forward = direction(f);
+        if !forward.is_finite() {
             return Err(Error::invalid_argument("eye and target are the same point"));
         }
-        if !ff.is_finite() {
-            return Err(Error::invalid_argument(format!(
-                "eye {eye} and target {target} are too far apart (at most about 1e19)"
-            )));
-        }
-        if !uu.is_finite() {
-            return Err(Error::invalid_argument(format!(
-                "up is {up}: too long (at most about 1e19)"
-            )));
-        }
-        if f.cross(up).length_squared() <= 1e-12 * ff * uu {
+        let sin2 = forward.cross(direction(up)).length_squared();
+        if sin2.is_nan() || sin2 <= 1e-12 {
             return Err(Error::invalid_argument(
                 "up is zero or parallel to the view direction",
             ));
@@ -109,8 +112,8 @@ impl Camera {
 
     /// Ray generator for a `width` × `height` image.
     pub fn rays(&self, width: u32, height: u32) -> CameraRays {
-        let forward = (self.target - self.eye).normalize();
-        let right = forward.cross(self.up).normalize();
+        let forward = direction(self.target - self.eye);
+        let right = forward.cross(direction(self.up)).normalize();
         let up = right.cross(forward);
         let half_h = (self.fov_y.to_radians() * 0.5).tan();
         CameraRays {
@@ -154,5 +157,52 @@ impl CameraRays {
         let phi = std::f32::consts::TAU * lens.y;
         let org = self.eye + r * (phi.cos() * self.right + phi.sin() * self.up);
         Ray::new(org, (focus_point - org).normalize(), 0.0, f32::INFINITY)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Only the directions of the view and of `up` matter: a tiny or huge `up`, or an eye a
+    /// hair from its target, gives the rays of the unit vectors (before, `up` = 1e-23 passed
+    /// `look_at` and gave NaN rays, a blank frame). Zero and parallel `up` are refused.
+    #[test]
+    fn the_basis_depends_on_directions_only() {
+        let size = Vec2::new(64.0, 48.0);
+        let pixels = [
+            Vec2::new(0.5, 0.5),
+            Vec2::new(40.5, 7.5),
+            Vec2::new(63.5, 47.5),
+        ];
+        let rays_of = |eye: Vec3, target: Vec3, up: Vec3| -> Vec<Vec3> {
+            let mut c = Camera::default();
+            c.look_at(eye, target, up).unwrap();
+            let r = c.rays(64, 48);
+            pixels
+                .iter()
+                .map(|&p| r.ray(p, size, Vec2::splat(0.5)).dir.normalize())
+                .collect()
+        };
+        let (eye, up) = (Vec3::new(0.0, 0.0, 5.0), Vec3::new(1.0, 0.2, 0.0));
+        let want = rays_of(eye, Vec3::ZERO, up);
+        for (e, t, u) in [
+            (eye, Vec3::ZERO, up * 1e-23),
+            (eye, Vec3::ZERO, up * 1e30),
+            (Vec3::new(0.0, 0.0, 5e-30), Vec3::ZERO, up),
+        ] {
+            for (a, b) in rays_of(e, t, u).iter().zip(&want) {
+                assert!(a.abs_diff_eq(*b, 1e-6), "eye {e}, up {u}: {a} against {b}");
+            }
+        }
+        let mut c = Camera::default();
+        for bad in [
+            Vec3::ZERO,
+            Vec3::new(0.0, 0.0, -1e-30),
+            Vec3::new(0.0, 0.0, 3.0),
+        ] {
+            assert!(c.look_at(eye, Vec3::ZERO, bad).is_err(), "up {bad}");
+        }
+        assert_eq!(c, Camera::default(), "a refused look_at changed the camera");
     }
 }
