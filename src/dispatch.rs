@@ -105,12 +105,18 @@ pub fn decide_backend(
     }
 }
 
-/// The traversal AUTO picks on the GPU, and why.
+/// The traversal AUTO picks on the GPU, and why. A rope traversal asked for on a tree without
+/// ropes runs as standard, as on the CPU (`Traversal::needs_ropes`: same hits): the kernels
+/// would read ropes that were never uploaded. (The C API builds ropes before such a job.)
 pub fn choose_gpu_traversal(
     scene: &Committed,
     requested: Option<Traversal>,
 ) -> (Traversal, &'static str) {
     match requested {
+        Some(t) if t.needs_ropes() && scene.tree.ropes.is_none() => (
+            Traversal::Standard,
+            "a rope traversal was requested, but the tree has no ropes",
+        ),
         Some(t) => (t, "requested by the caller"),
         // Thesis table 2: ropes++ is the fastest GPU traversal in every scene.
         None if scene.tree.ropes.is_some() => (
@@ -246,6 +252,15 @@ mod tests {
         assert_eq!(pick(&s), Traversal::RopesPlusPlus);
         let asked = choose_gpu_traversal(s.committed().unwrap(), Some(Traversal::KdRestart));
         assert_eq!(asked.0, Traversal::KdRestart);
+        for rope in [Traversal::Ropes, Traversal::RopesPlusPlus] {
+            assert_eq!(
+                choose_gpu_traversal(s.committed().unwrap(), Some(rope)).0,
+                rope
+            );
+            let ropeless = spheres(8, 0);
+            let asked = choose_gpu_traversal(ropeless.committed().unwrap(), Some(rope));
+            assert_eq!(asked.0, Traversal::Standard, "{rope:?} without ropes");
+        }
         assert_eq!(
             choose_traversal(s.committed().unwrap(), None).0,
             Traversal::Standard
