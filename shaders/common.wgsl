@@ -145,8 +145,18 @@ fn hit_triangle(tri: Triangle, r: Ray, tmax: f32) -> Tuv {
 // `sphere_root` of src/geometry/analytic.rs: the nearest root in [tmin, tmax) of the ray
 // o + t d (relative to the centre) with the sphere of squared radius r2. The discriminant comes
 // from the centre-to-line distance (Ray Tracing Gems ch. 7), not from b² - ac, which cancels.
-fn sphere_root(o: vec3<f32>, d: vec3<f32>, r2: f32, tmin: f32, tmax: f32) -> Tuv {
+// A direction whose largest component lies outside [1e-15, 1e15] (d·d would overflow or
+// underflow) is solved scaled by a power of two into [1, 4), its roots scaled back.
+fn sphere_root(o: vec3<f32>, d_in: vec3<f32>, r2: f32, tmin: f32, tmax: f32) -> Tuv {
     let no = Tuv(false, 0.0, 0.0, 0.0);
+    let m = max(abs(d_in.x), max(abs(d_in.y), abs(d_in.z)));
+    var s = 1.0;
+    if (!(m >= 1e-15 && m <= 1e15)) {
+        let exponent = (bitcast<u32>(m) >> 23u) & 0xffu;
+        if (!(m > 0.0) || exponent == 255u) { return no; }
+        s = bitcast<f32>((254u - min(exponent, 253u)) << 23u);
+    }
+    let d = d_in * s;
     let a = dot(d, d);
     if (a == 0.0) { return no; }
     let b = dot(o, d);
@@ -159,7 +169,9 @@ fn sphere_root(o: vec3<f32>, d: vec3<f32>, r2: f32, tmin: f32, tmax: f32) -> Tuv
     var t0 = q / a;
     var t1 = q / a;
     if (q != 0.0) { t1 = c / q; }
-    if (t0 > t1) { let s = t0; t0 = t1; t1 = s; }
+    if (t0 > t1) { let x = t0; t0 = t1; t1 = x; }
+    t0 = t0 * s;
+    t1 = t1 * s;
     if (t0 >= tmin && t0 < tmax) { return Tuv(true, t0, 0.0, 0.0); }
     if (t1 >= tmin && t1 < tmax) { return Tuv(true, t1, 0.0, 0.0); }
     return no;

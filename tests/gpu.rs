@@ -1029,3 +1029,40 @@ fn commits_upload_only_what_changed() {
         "{sent:?}"
     );
 }
+
+/// Spheres and ellipsoids on the GPU for directions from 1e-25 to 1e30 long, against the CPU
+/// (which `tests/precision.rs` checks against the analytic distances): the kernels' sphere
+/// test squares the direction too, and scales it as the CPU's does.
+#[test]
+fn spheres_and_ellipsoids_are_hit_whatever_the_direction_length() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let mut scene = Scene::new();
+    let sphere = Shape::Sphere {
+        center: Vec3::ZERO,
+        radius: 1.0,
+    };
+    let ellipsoid = Shape::Ellipsoid {
+        center: Vec3::new(3.0, 0.0, 0.0),
+        radii: Vec3::new(1.0, 0.5, 2.0),
+    };
+    scene.add_object(sphere, 0).unwrap();
+    scene.add_object(ellipsoid, 0).unwrap();
+    scene.commit().unwrap();
+    let mut rays = Vec::new();
+    for s in [1e-25f32, 1e-22, 1e-18, 1.0, 1e18, 1e20, 1e30] {
+        for k in 0..40 {
+            let org = Vec3::new(-1.2 + 0.12 * k as f32, 0.3, 5.0);
+            rays.push(Ray::new(org, Vec3::new(0.0, 0.0, -s), 0.0, f32::INFINITY));
+        }
+    }
+    let c = scene.committed().unwrap();
+    let mut on_cpu = vec![Hit::MISS; rays.len()];
+    cpu()
+        .intersect(c, &rays, &mut on_cpu, &QueryOptions::default())
+        .unwrap();
+    // Most rays hit (a row across the sphere and the ellipsoid), at every length.
+    assert!(on_cpu.iter().filter(|h| h.is_hit()).count() > rays.len() / 2);
+    compare_queries("long and short directions", &g, &scene, &rays);
+}

@@ -457,3 +457,83 @@ fn offset_modes_and_shadow_acne_far_from_the_origin() {
     assert_eq!(epsilon_acne[0], 0.0, "the epsilon works near the origin");
     assert!(epsilon_acne[2] > 0.1, "far away it fails: {epsilon_acne:?}");
 }
+
+/// Directions need not be unit length: every kind of primitive is hit at the same point
+/// (`t |d|` the distance, within 1e-5) for directions from 1e-25 to 1e30 long. A sphere or
+/// ellipsoid squares the direction, which over- or underflowed past about 1e19 and below
+/// about 1e-19: they were missed there, and hit imprecisely near the low end.
+#[test]
+fn every_kind_of_primitive_is_hit_whatever_the_direction_length() {
+    let origin = Vec3::new(0.1, 0.1, 5.0);
+    // The true distance from `origin` along -z to each shape's surface.
+    let sphere_z = (1.0f64 - 0.02).sqrt();
+    let shapes = [
+        (
+            "triangle",
+            Shape::Mesh {
+                positions: vec![
+                    Vec3::new(-1.0, -1.0, 0.0),
+                    Vec3::new(1.0, -1.0, 0.0),
+                    Vec3::new(0.0, 1.0, 0.0),
+                ],
+                triangles: vec![[0, 1, 2]],
+            },
+            5.0,
+        ),
+        (
+            "sphere",
+            Shape::Sphere {
+                center: Vec3::ZERO,
+                radius: 1.0,
+            },
+            5.0 - sphere_z,
+        ),
+        (
+            "ellipsoid",
+            Shape::Ellipsoid {
+                center: Vec3::ZERO,
+                radii: Vec3::new(1.0, 1.0, 2.0),
+            },
+            5.0 - 2.0 * sphere_z,
+        ),
+        (
+            "box",
+            Shape::Box {
+                min: Vec3::splat(-1.0),
+                max: Vec3::splat(1.0),
+            },
+            4.0,
+        ),
+        (
+            "plane",
+            Shape::Plane {
+                normal: Vec3::Z,
+                offset: 0.0,
+            },
+            5.0,
+        ),
+    ];
+    let ctx = rt2::context::Context::new(rt2::dispatch::BackendRequest::Cpu, 1).unwrap();
+    for (name, shape, distance) in shapes {
+        let mut scene = Scene::new();
+        scene.add_object(shape, 0).unwrap();
+        scene.commit().unwrap();
+        let lengths = [1e-25f32, 1e-22, 1e-18, 1e-3, 1.0, 1e3, 1e18, 1e20, 1e30];
+        let rays: Vec<Ray> = lengths
+            .iter()
+            .map(|&s| Ray::new(origin, Vec3::new(0.0, 0.0, -s), 0.0, f32::INFINITY))
+            .collect();
+        let mut hits = vec![Hit::MISS; rays.len()];
+        let q = rt2::context::QueryOptions::default();
+        ctx.intersect(scene.committed().unwrap(), &rays, &mut hits, &q)
+            .unwrap();
+        for (s, hit) in lengths.iter().zip(&hits) {
+            let got = hit.t as f64 * *s as f64;
+            assert!(
+                (got - distance).abs() <= 1e-5 * distance,
+                "{name}, |dir| {s:e}: distance {got} (t {}), want {distance}",
+                hit.t
+            );
+        }
+    }
+}

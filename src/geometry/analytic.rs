@@ -10,7 +10,33 @@ use glam::{Mat3, Vec3};
 /// ray/sphere intersection", Ray Tracing Gems ch. 7), not from `b² - a c`, which cancels
 /// catastrophically far from the sphere or for a thin ellipsoid's stretched unit space; the
 /// roots use Numerical Recipes' `q` form.
+///
+/// Directions need not be unit length, but `d·d` overflows for `|d|` past about 1e19 and
+/// underflows below about 1e-19, which missed the sphere. A direction whose largest component
+/// lies outside [1e-15, 1e15] is therefore solved scaled by a power of two (exact) into
+/// [1, 4), and its roots scaled back; others are solved as given.
 fn sphere_root(o: Vec3, d: Vec3, r2: f32, tmin: f32, tmax: f32) -> Option<f32> {
+    let m = d.abs().max_element();
+    let s = if (1e-15..=1e15).contains(&m) {
+        1.0
+    } else {
+        power_of_two_near_recip(m)?
+    };
+    let (t0, t1) = sphere_roots(o, d * s, r2)?;
+    [t0 * s, t1 * s]
+        .into_iter()
+        .find(|&t| t >= tmin && t < tmax)
+}
+
+/// A power of two `s` with `m s` in [1, 4): the scale [`sphere_root`] applies to a direction
+/// whose largest component is `m`. `None` for a zero, infinite or NaN `m`.
+fn power_of_two_near_recip(m: f32) -> Option<f32> {
+    let exponent = (m.to_bits() >> 23) & 0xff;
+    (m > 0.0 && exponent < 255).then(|| f32::from_bits((254 - exponent.min(253)) << 23))
+}
+
+/// Both roots of the ray `o + t d` with the sphere of squared radius `r2`, ascending.
+fn sphere_roots(o: Vec3, d: Vec3, r2: f32) -> Option<(f32, f32)> {
     let a = d.length_squared();
     if a == 0.0 {
         return None;
@@ -23,11 +49,8 @@ fn sphere_root(o: Vec3, d: Vec3, r2: f32, tmin: f32, tmax: f32) -> Option<f32> {
     }
     let c = o.length_squared() - r2;
     let q = -(b + b.signum() * disc.sqrt());
-    let (mut t0, mut t1) = (q / a, if q != 0.0 { c / q } else { q / a });
-    if t0 > t1 {
-        std::mem::swap(&mut t0, &mut t1);
-    }
-    [t0, t1].into_iter().find(|&t| t >= tmin && t < tmax)
+    let (t0, t1) = (q / a, if q != 0.0 { c / q } else { q / a });
+    Some(if t0 > t1 { (t1, t0) } else { (t0, t1) })
 }
 
 #[repr(C)]
