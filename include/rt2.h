@@ -465,7 +465,7 @@ typedef struct rt2_render_options {
    */
   uint32_t traversal;
   /**
-   * Entries of the short stack, 1..=64 (default 3, as in RT²).
+   * Entries of the short stack, 1..=32 (default 3, as in RT²).
    */
   uint32_t short_stack_size;
   /**
@@ -508,7 +508,7 @@ typedef struct rt2_query_options {
    */
   uint32_t traversal;
   /**
-   * Entries of the short stack, 1..=64 (default 3).
+   * Entries of the short stack, 1..=32 (default 3).
    */
   uint32_t short_stack_size;
   /**

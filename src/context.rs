@@ -376,7 +376,11 @@ impl QueryOptions {
     /// at a time). Checked by `Context::intersect` / `occluded`; the C API checks first, before
     /// it builds ropes or exact vertices.
     pub fn validate(&self) -> Result<()> {
-        crate::error::check_range("short_stack_size", self.short_stack_size, 1..=64)?;
+        crate::error::check_range(
+            "short_stack_size",
+            self.short_stack_size,
+            1..=crate::cpu::traverse::MAX_SHORT_STACK,
+        )?;
         if self.mode != cpu::query::QueryMode::Single
             && self.intersector != Intersector::MollerTrumbore
         {

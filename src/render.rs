@@ -66,7 +66,11 @@ impl RenderOptions {
         use crate::error::check_range;
         check_range("max_depth", self.max_depth, 1..=64)?;
         check_range("samples", self.samples, 1..=1024)?;
-        check_range("short_stack_size", self.short_stack_size, 1..=64)?;
+        check_range(
+            "short_stack_size",
+            self.short_stack_size,
+            1..=crate::cpu::traverse::MAX_SHORT_STACK,
+        )?;
         if !self.background.is_finite() || self.background.min_element() < 0.0 {
             return Err(crate::error::Error::invalid_argument(format!(
                 "background is {} (must be finite and >= 0)",

@@ -123,6 +123,22 @@ fn every_query_mode_gives_the_same_hits_and_bad_values_are_rejected() {
             null_mut(),
         );
         assert_eq!(st, Rt2Status::InvalidArgument);
+        // The short stack holds at most 32 entries: 33 is refused, 32 runs.
+        for (size, want) in [(33, Rt2Status::InvalidArgument), (32, Rt2Status::Ok)] {
+            let mut opt = rt2_query_options_default();
+            opt.traversal = Rt2Traversal::ShortStack as u32;
+            opt.short_stack_size = size;
+            let st = rt2_intersect(
+                ctx,
+                scene,
+                rays.as_ptr(),
+                1,
+                hits.as_mut_ptr(),
+                &opt,
+                null_mut(),
+            );
+            assert_eq!(st, want, "short_stack_size {size}");
+        }
 
         let mut ropt = rt2_render_options_default();
         assert_eq!(ropt.schedule, Rt2Schedule::DepthFirst as u32);

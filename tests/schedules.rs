@@ -96,6 +96,15 @@ fn render_options_out_of_range_are_refused_by_the_context() {
                 ..d
             },
         ),
+        // The traversal holds 32 entries (`MAX_SHORT_STACK`); 33 to 64 were accepted and
+        // silently run as 32.
+        (
+            "short_stack_size",
+            RenderOptions {
+                short_stack_size: 33,
+                ..d
+            },
+        ),
         (
             "background",
             RenderOptions {

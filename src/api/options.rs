@@ -406,7 +406,7 @@ pub struct rt2_render_options {
     pub samples: u32,
     /// An `rt2_traversal` value (default AUTO).
     pub traversal: u32,
-    /// Entries of the short stack, 1..=64 (default 3, as in RT²).
+    /// Entries of the short stack, 1..=32 (default 3, as in RT²).
     pub short_stack_size: u32,
     /// An `rt2_transparency` value (default REFRACT).
     pub transparency: u32,

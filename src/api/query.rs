@@ -46,7 +46,7 @@ pub struct rt2_query_options {
     pub struct_size: u32,
     /// An `rt2_traversal` value (default AUTO).
     pub traversal: u32,
-    /// Entries of the short stack, 1..=64 (default 3).
+    /// Entries of the short stack, 1..=32 (default 3).
     pub short_stack_size: u32,
     /// An `rt2_query_mode` value (default SINGLE). PACKET and STREAM follow the standard
     /// traversal's order whatever `traversal` says, and return the same hits.

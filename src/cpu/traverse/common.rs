@@ -420,7 +420,8 @@ impl Stack {
     }
 }
 
-/// Largest short stack; larger requests are clamped (the thesis uses 3).
+/// Largest short stack (the thesis uses 3): the query and render options refuse larger sizes,
+/// and the traversal clamps them. The GPU kernels hold the same bound (`SHORT_STACK_MAX`).
 pub const MAX_SHORT_STACK: usize = INLINE;
 
 /// The short stack of Horn et al.: circular, so a push onto a full stack overwrites the oldest
