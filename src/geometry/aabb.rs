@@ -68,10 +68,6 @@ impl Aabb {
         }
     }
 
-    pub fn surface_area(&self) -> f32 {
-        self.scaled_surface_area(1.0)
-    }
-
     /// The power of two that brings this box's largest coordinate magnitude into `[1, 2)` (1
     /// for an empty or infinite box). Lengths and areas of boxes inside it, scaled by it, are
     /// neither infinite nor zero: a box 1e19 wide has an area past `f32::MAX`, which made

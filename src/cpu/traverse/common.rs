@@ -65,11 +65,10 @@ pub(crate) fn clip(bounds: &Aabb, ray: &TRay) -> Option<(f32, f32)> {
 
 /// The segments `[t0, t1]` of N rays (origins `org`, reciprocal directions `inv`, windows
 /// `[tmin, tmax]`) inside the closed box, and the mask of the lanes whose segment is not empty.
-/// Like `Aabb::clip_ray`, but with the slab's near and far planes chosen by the direction sign:
-/// a ray lying in a face plane (NaN distance) is inside the closed slab for either sign of zero,
-/// where `clip_ray` rejects it for `+0.0` and keeps it for `-0.0`. Written over lanes so that
-/// the batch setup of packets and streams clips N rays as vectors, with the single-ray clip's
-/// operations.
+/// `Aabb::clip_ray`'s slab test (near and far planes chosen by the direction sign, so a ray
+/// lying in a face plane is inside the closed slab for either sign of zero), written over lanes
+/// so that the batch setup of packets and streams clips N rays as vectors, with the single-ray
+/// clip's operations.
 #[inline(always)]
 pub(crate) fn clip_lanes<const N: usize>(
     isa: Isa<N>,
