@@ -43,8 +43,16 @@ pub struct KdNode {
 impl KdNode {
     pub const LEAF: u32 = 3;
 
+    /// An inner node splitting `axis` at `split`, children at `first_child` and the next.
+    ///
+    /// # Panics
+    /// When `first_child` does not fit the node's 30 bits (a tree of 2^30 nodes, 8 GiB): a
+    /// wrapped index would send rays into another subtree, so release builds check it too.
     pub fn inner(axis: usize, split: f32, first_child: u32) -> Self {
-        debug_assert!(axis < 3 && first_child < (1 << 30));
+        assert!(
+            axis < 3 && first_child < (1 << 30),
+            "kd-tree node index {first_child} past 2^30"
+        );
         KdNode {
             split,
             bits: (first_child << 2) | axis as u32,
@@ -52,8 +60,12 @@ impl KdNode {
     }
 
     /// A leaf listing `prim_indices[first..first + count]`.
+    ///
+    /// # Panics
+    /// When `count` does not fit the node's 30 bits (scenes hold fewer than 2^30 primitives,
+    /// so a leaf never lists more).
     pub fn leaf(first: u32, count: u32) -> Self {
-        debug_assert!(count < (1 << 30));
+        assert!(count < (1 << 30), "kd-tree leaf of {count} primitives");
         KdNode {
             split: f32::from_bits(first),
             bits: (count << 2) | Self::LEAF,
