@@ -252,3 +252,45 @@ pub(crate) fn enum_error(name: &str, value: u32) -> Error {
         format!("{value} is not a valid {name} value"),
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::api::status::rt2_last_error_message;
+
+    fn last_message() -> String {
+        // SAFETY: rt2_last_error_message returns a NUL-terminated string valid until the next
+        // failing call on this thread.
+        unsafe { CStr::from_ptr(rt2_last_error_message()) }
+            .to_string_lossy()
+            .into_owned()
+    }
+
+    /// The panic barrier every `rt2_*` function runs in: a panic (a `&str` or a formatted
+    /// `String` payload) becomes `RT2_STATUS_INTERNAL` with the panic's text in the thread's
+    /// message, an error its own status and message, and the call after either still works.
+    #[test]
+    fn guard_turns_panics_and_errors_into_statuses() {
+        let st = guard(|| panic!("plain payload"));
+        assert_eq!(st, Rt2Status::Internal);
+        let m = last_message();
+        assert!(
+            m.contains("internal error") && m.contains("plain payload"),
+            "{m}"
+        );
+
+        let n = 7;
+        let st = guard(|| panic!("formatted payload {n}"));
+        assert_eq!(st, Rt2Status::Internal);
+        assert!(last_message().contains("formatted payload 7"));
+
+        let st = guard(|| Err(Error::invalid_argument("bad input")));
+        assert_eq!(st, Rt2Status::InvalidArgument);
+        assert_eq!(last_message(), "bad input");
+
+        assert_eq!(guard(|| Ok(())), Rt2Status::Ok);
+        let p: *const u8 = guard_ptr(|| panic!("in a pointer call"));
+        assert!(p.is_null());
+        assert!(last_message().contains("in a pointer call"));
+    }
+}
