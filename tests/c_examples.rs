@@ -221,6 +221,10 @@ fn spheres_png_shows_the_spheres_and_the_sky() {
         stdout(&out).contains("spheres: OK"),
         "spheres did not report OK"
     );
+    // Every one of its pixel checks ran: the four sphere centres, the sky and the floor. The
+    // program skips a centre hidden by another sphere ("not checked"), which would pass.
+    let checked = stdout(&out).lines().filter(|l| l.ends_with(": ok")).count();
+    assert_eq!(checked, 6, "spheres ran {checked} of its 6 pixel checks");
 
     let img = image::open(&png)
         .unwrap_or_else(|e| panic!("cannot decode {}: {e}", png.display()))
