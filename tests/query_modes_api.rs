@@ -151,7 +151,36 @@ fn every_query_mode_gives_the_same_hits_and_bad_values_are_rejected() {
             rt2_render(ctx, scene, camera, &ropt, frame),
             Rt2Status::InvalidArgument
         );
-        ropt.schedule = Rt2Schedule::BreadthFirst as u32;
+        // The schedule the C caller names is the one that runs: breadth-first draws what
+        // depth-first draws (up to 1/255, the order of a pixel's sums), and a watertight
+        // render, which the breadth-first streams do not trace, is refused there.
+        let (w, h) = (64u32, 48u32);
+        let mut pixels = Vec::new();
+        for schedule in [Rt2Schedule::DepthFirst, Rt2Schedule::BreadthFirst] {
+            ropt.schedule = schedule as u32;
+            let mut f = null_mut();
+            assert_eq!(rt2_frame_create(w, h, &mut f), Rt2Status::Ok);
+            assert_eq!(rt2_render(ctx, scene, camera, &ropt, f), Rt2Status::Ok);
+            let n = (4 * w * h) as usize;
+            pixels.push(std::slice::from_raw_parts(rt2_frame_pixels(f), n).to_vec());
+            rt2_frame_destroy(f);
+        }
+        let worst = pixels[0]
+            .iter()
+            .zip(&pixels[1])
+            .map(|(a, b)| a.abs_diff(*b))
+            .max();
+        assert!(worst <= Some(1), "breadth-first differs by {worst:?}/255");
+        assert!(
+            pixels[0].chunks(4).any(|p| p != &pixels[0][..4]),
+            "the image is uniform: nothing was compared"
+        );
+        ropt.intersector = Rt2Intersector::Watertight as u32;
+        assert_eq!(
+            rt2_render(ctx, scene, camera, &ropt, frame),
+            Rt2Status::Unsupported
+        );
+        ropt.schedule = Rt2Schedule::DepthFirst as u32;
         assert_eq!(rt2_render(ctx, scene, camera, &ropt, frame), Rt2Status::Ok);
         rt2_camera_destroy(camera);
         rt2_frame_destroy(frame);
