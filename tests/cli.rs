@@ -35,6 +35,36 @@ fn readme_render_command_draws_the_default_scene() {
     // Shaded objects, not one flat colour: a frame of background alone has one.
     let colours: HashSet<[u8; 3]> = img.pixels().map(|p| p.0).collect();
     assert!(colours.len() > 1000, "{} colours", colours.len());
+    // The image is the library's render of the built-in scene with the documented defaults
+    // (the scene's own depth, 1 sample) on the CPU. The command's AUTO context may take a
+    // hardware GPU, whose rounding differs a little: PSNR 40 dB (identical on the CPU).
+    let mut b = rt2::scene::builtin::by_name("default").unwrap();
+    b.scene.commit().unwrap();
+    let opts = rt2::render::RenderOptions {
+        max_depth: b.max_depth,
+        ..Default::default()
+    };
+    let mut frame = rt2::frame::Frame::new(1376, 768).unwrap();
+    let ctx = rt2::context::Context::new(rt2::dispatch::BackendRequest::Cpu, 0).unwrap();
+    ctx.render(b.scene.committed().unwrap(), &b.camera, &opts, &mut frame)
+        .unwrap();
+    let want: Vec<u8> = frame
+        .pixels()
+        .chunks(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    let mse = img
+        .as_raw()
+        .iter()
+        .zip(&want)
+        .map(|(a, b)| (*a as f64 - *b as f64).powi(2))
+        .sum::<f64>()
+        / want.len() as f64;
+    let psnr = 10.0 * (255.0f64.powi(2) / mse.max(1e-12)).log10();
+    assert!(
+        psnr >= 40.0,
+        "the PNG is {psnr:.1} dB from the library's render"
+    );
 }
 
 /// Each bad input fails with status 1, a message naming it, and no PNG written.
