@@ -152,22 +152,63 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
     return out;
 }
 
-// `sample_offset` of whitted.rs: a stratified grid jittered by a hash.
-fn hash(x: u32, y: u32, s: u32, k: u32, salt: u32) -> f32 {
-    var v = (x * 0x9E3779B1u) ^ (y * 0x85EBCA77u) ^ (s * 0xC2B2AE3Du) ^ k ^ salt;
+// The sample positions of whitted.rs: `mix`, `stratified`, `pixel_offset`, `lens_offset`
+// (a stratified grid jittered by a hash; the lens deals the cells to the samples in an order
+// shuffled per pixel by Kensler's `permute`).
+fn mix(x: u32, y: u32, s: u32, k: u32) -> u32 {
+    var v = (x * 0x9E3779B1u) ^ (y * 0x85EBCA77u) ^ (s * 0xC2B2AE3Du) ^ k;
     v ^= v >> 16u;
     v *= 0x7FEB352Du;
     v ^= v >> 15u;
     v *= 0x846CA68Bu;
-    v ^= v >> 16u;
-    return f32(v >> 8u) / f32(1u << 24u);
+    return v ^ (v >> 16u);
 }
 
-fn sample_offset(x: u32, y: u32, s: u32, n: u32, salt: u32) -> vec2<f32> {
+fn stratified(x: u32, y: u32, s: u32, cell: u32, side: u32, salt: u32) -> vec2<f32> {
+    let h1 = f32(mix(x, y, s, 1u ^ salt) >> 8u) / f32(1u << 24u);
+    let h2 = f32(mix(x, y, s, 2u ^ salt) >> 8u) / f32(1u << 24u);
+    return vec2<f32>((f32(cell % side) + h1) / f32(side), (f32(cell / side) + h2) / f32(side));
+}
+
+fn side_of(n: u32) -> u32 { return u32(ceil(sqrt(f32(n)))); }
+
+fn pixel_offset(x: u32, y: u32, s: u32, n: u32) -> vec2<f32> {
     if (n == 1u) { return vec2<f32>(0.5, 0.5); }
-    let side = u32(ceil(sqrt(f32(n))));
-    return vec2<f32>((f32(s % side) + hash(x, y, s, 1u, salt)) / f32(side),
-                     (f32(s / side) + hash(x, y, s, 2u, salt)) / f32(side));
+    return stratified(x, y, s, s, side_of(n), 0u);
+}
+
+fn permute(index: u32, l: u32, p: u32) -> u32 {
+    var w = l - 1u;
+    w |= w >> 1u; w |= w >> 2u; w |= w >> 4u; w |= w >> 8u; w |= w >> 16u;
+    var i = index;
+    loop {
+        i ^= p;
+        i *= 0xe170893du;
+        i ^= p >> 16u;
+        i ^= (i & w) >> 4u;
+        i ^= p >> 8u;
+        i *= 0x0929eb3fu;
+        i ^= p >> 23u;
+        i ^= (i & w) >> 1u;
+        i *= 1u | (p >> 27u);
+        i *= 0x6935fa69u;
+        i ^= (i & w) >> 11u;
+        i *= 0x74dcb303u;
+        i ^= (i & w) >> 2u;
+        i *= 0x9e501cc3u;
+        i ^= (i & w) >> 2u;
+        i *= 0xc860a3dfu;
+        i &= w;
+        i ^= i >> 5u;
+        if (i < l) { break; }
+    }
+    return (i + p) % l;
+}
+
+fn lens_offset(x: u32, y: u32, s: u32, n: u32) -> vec2<f32> {
+    let side = side_of(n);
+    let cell = permute(s, side * side, mix(x, y, 0u, 0x5bd1e995u));
+    return stratified(x, y, s, cell, side, 0x5bd1e995u);
 }
 
 // `CameraRays::ray`: pinhole or thin lens.
@@ -193,8 +234,8 @@ fn primary(i: u32, s: u32) -> Ray {
     let g = params.row0 * params.width + i;
     let x = g % params.width;
     let y = g / params.width;
-    let pixel = vec2<f32>(f32(x), f32(y)) + sample_offset(x, y, s, params.samples, 0u);
-    let lens = sample_offset(x, y, s, max(params.samples, 2u), 0x5bd1e995u);
+    let pixel = vec2<f32>(f32(x), f32(y)) + pixel_offset(x, y, s, params.samples);
+    let lens = lens_offset(x, y, s, params.samples);
     return camera_ray(pixel, lens);
 }
 
