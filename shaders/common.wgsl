@@ -145,17 +145,15 @@ fn hit_triangle(tri: Triangle, r: Ray, tmax: f32) -> Tuv {
 // `sphere_root` of src/geometry/analytic.rs: the nearest root in [tmin, tmax) of the ray
 // o + t d (relative to the centre) with the sphere of squared radius r2. The discriminant comes
 // from the centre-to-line distance (Ray Tracing Gems ch. 7), not from b² - ac, which cancels.
-// A direction whose largest component lies outside [1e-15, 1e15] (d·d would overflow or
-// underflow) is solved scaled by a power of two into [1, 4), its roots scaled back.
+// The direction is solved scaled by a power of two into [1, 4) for its largest component
+// (d·d and d·d r² would over- or underflow for long or short directions), its roots scaled
+// back; exact, so the roots are those of the unscaled direction wherever that one is finite.
 fn sphere_root(o: vec3<f32>, d_in: vec3<f32>, r2: f32, tmin: f32, tmax: f32) -> Tuv {
     let no = Tuv(false, 0.0, 0.0, 0.0);
     let m = max(abs(d_in.x), max(abs(d_in.y), abs(d_in.z)));
-    var s = 1.0;
-    if (!(m >= 1e-15 && m <= 1e15)) {
-        let exponent = (bitcast<u32>(m) >> 23u) & 0xffu;
-        if (!(m > 0.0) || exponent == 255u) { return no; }
-        s = bitcast<f32>((254u - min(exponent, 253u)) << 23u);
-    }
+    let exponent = (bitcast<u32>(m) >> 23u) & 0xffu;
+    if (!(m > 0.0) || exponent == 255u) { return no; }
+    let s = bitcast<f32>((254u - min(exponent, 253u)) << 23u);
     let d = d_in * s;
     let a = dot(d, d);
     if (a == 0.0) { return no; }

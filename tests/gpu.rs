@@ -1077,9 +1077,15 @@ fn spheres_and_ellipsoids_are_hit_whatever_the_direction_length() {
     };
     scene.add_object(sphere, 0).unwrap();
     scene.add_object(ellipsoid, 0).unwrap();
+    // Behind them, a sphere large enough that |d|² r² overflows before |d|² does.
+    let large = Shape::Sphere {
+        center: Vec3::new(0.0, 0.0, -2e6),
+        radius: 1e5,
+    };
+    scene.add_object(large, 0).unwrap();
     scene.commit().unwrap();
     let mut rays = Vec::new();
-    for s in [1e-25f32, 1e-22, 1e-18, 1.0, 1e18, 1e20, 1e30] {
+    for s in [1e-25f32, 1e-22, 1e-18, 1.0, 1e14, 1e15, 1e18, 1e20, 1e30] {
         for k in 0..40 {
             let org = Vec3::new(-1.2 + 0.12 * k as f32, 0.3, 5.0);
             rays.push(Ray::new(org, Vec3::new(0.0, 0.0, -s), 0.0, f32::INFINITY));
@@ -1090,7 +1096,8 @@ fn spheres_and_ellipsoids_are_hit_whatever_the_direction_length() {
     cpu()
         .intersect(c, &rays, &mut on_cpu, &QueryOptions::default())
         .unwrap();
-    // Most rays hit (a row across the sphere and the ellipsoid), at every length.
-    assert!(on_cpu.iter().filter(|h| h.is_hit()).count() > rays.len() / 2);
+    // Every ray hits: the row crosses the small sphere and the ellipsoid, and the large sphere
+    // behind them.
+    assert!(on_cpu.iter().all(|h| h.is_hit()));
     compare_queries("long and short directions", &g, &scene, &rays);
 }

@@ -537,3 +537,40 @@ fn every_kind_of_primitive_is_hit_whatever_the_direction_length() {
         }
     }
 }
+
+/// A large sphere seen from afar: `|d|² r²` overflows long before `|d|²` does (radius 1e5 at
+/// `|d|` = 1e15 was "hit" at `t` = 0), and a tiny one underflows (radius 1e-12 at `|d|` =
+/// 1e-15 came out 1% short). Every direction length, both scales.
+#[test]
+fn large_and_tiny_spheres_are_hit_whatever_the_direction_length() {
+    let ctx = rt2::context::Context::new(rt2::dispatch::BackendRequest::Cpu, 1).unwrap();
+    for (radius, away) in [(1e5f32, 1e6f32), (1e-12, 1e-10)] {
+        let mut scene = Scene::new();
+        let sphere = Shape::Sphere {
+            center: Vec3::ZERO,
+            radius,
+        };
+        scene.add_object(sphere, 0).unwrap();
+        scene.commit().unwrap();
+        let lengths = [
+            1e-25f32, 1e-16, 1e-15, 1e-3, 1.0, 1e3, 1e14, 1e15, 1e16, 1e30,
+        ];
+        let rays: Vec<Ray> = lengths
+            .iter()
+            .map(|&s| Ray::new(Vec3::new(0.0, 0.0, away), -s * Vec3::Z, 0.0, f32::INFINITY))
+            .collect();
+        let mut hits = vec![Hit::MISS; rays.len()];
+        let q = rt2::context::QueryOptions::default();
+        ctx.intersect(scene.committed().unwrap(), &rays, &mut hits, &q)
+            .unwrap();
+        let distance = away as f64 - radius as f64;
+        for (s, hit) in lengths.iter().zip(&hits) {
+            let got = hit.t as f64 * *s as f64;
+            assert!(
+                (got - distance).abs() <= 1e-5 * distance,
+                "radius {radius:e}, |dir| {s:e}: distance {got:e} (t {}), want {distance:e}",
+                hit.t
+            );
+        }
+    }
+}

@@ -11,17 +11,14 @@ use glam::{Mat3, Vec3};
 /// catastrophically far from the sphere or for a thin ellipsoid's stretched unit space; the
 /// roots use Numerical Recipes' `q` form.
 ///
-/// Directions need not be unit length, but `d·d` overflows for `|d|` past about 1e19 and
-/// underflows below about 1e-19, which missed the sphere. A direction whose largest component
-/// lies outside [1e-15, 1e15] is therefore solved scaled by a power of two (exact) into
-/// [1, 4), and its roots scaled back; others are solved as given.
+/// Directions need not be unit length, but the test squares them: `d·d` overflows for `|d|`
+/// past about 1e19 and underflows below about 1e-19, and `d·d · r²` overflows sooner for a
+/// large sphere (radius 1e5 at `|d|` = 1e15 "hit" at `t` = 0). So the direction is scaled by a
+/// power of two into [1, 4) for its largest component, and the roots scaled back. Every step
+/// is homogeneous in `d` and a power of two scales exactly, so wherever nothing over- or
+/// underflowed the roots are bit for bit those of the unscaled direction.
 fn sphere_root(o: Vec3, d: Vec3, r2: f32, tmin: f32, tmax: f32) -> Option<f32> {
-    let m = d.abs().max_element();
-    let s = if (1e-15..=1e15).contains(&m) {
-        1.0
-    } else {
-        power_of_two_near_recip(m)?
-    };
+    let s = power_of_two_near_recip(d.abs().max_element())?;
     let (t0, t1) = sphere_roots(o, d * s, r2)?;
     [t0 * s, t1 * s]
         .into_iter()
