@@ -170,7 +170,13 @@ fn stratified(x: u32, y: u32, s: u32, cell: u32, side: u32, salt: u32) -> vec2<f
     return vec2<f32>((f32(cell % side) + h1) / f32(side), (f32(cell / side) + h2) / f32(side));
 }
 
-fn side_of(n: u32) -> u32 { return u32(ceil(sqrt(f32(n)))); }
+// `side` of whitted.rs: the smallest k with k² >= n, the float root corrected in integers.
+fn side_of(n: u32) -> u32 {
+    var k = u32(ceil(sqrt(f32(n))));
+    if (k > 1u && (k - 1u) * (k - 1u) >= n) { k -= 1u; }
+    if (k * k < n) { k += 1u; }
+    return k;
+}
 
 fn pixel_offset(x: u32, y: u32, s: u32, n: u32) -> vec2<f32> {
     if (n == 1u) { return vec2<f32>(0.5, 0.5); }
@@ -202,7 +208,7 @@ fn permute(index: u32, l: u32, p: u32) -> u32 {
         i ^= i >> 5u;
         if (i < l) { break; }
     }
-    return (i + p) % l;
+    return (i + p % l) % l;
 }
 
 fn lens_offset(x: u32, y: u32, s: u32, n: u32) -> vec2<f32> {

@@ -270,8 +270,17 @@ fn lens_offset(x: u32, y: u32, s: u32, n: u32) -> Vec2 {
     stratified(x, y, s, cell, side, 0x5bd1_e995)
 }
 
+/// The grid side for `n` samples: the smallest `k` with `k² >= n`. The float square root is
+/// corrected in integers, as in WGSL, where `sqrt` may be a few ULPs off (64 → 8.0000005).
 fn side(n: u32) -> u32 {
-    (n as f32).sqrt().ceil() as u32
+    let mut k = (n as f32).sqrt().ceil() as u32;
+    if k > 1 && (k - 1) * (k - 1) >= n {
+        k -= 1;
+    }
+    if k * k < n {
+        k += 1;
+    }
+    k
 }
 
 /// Element `i` of a permutation of `0..l` chosen by `p` (Kensler 2013, "Correlated
@@ -300,7 +309,9 @@ fn permute(i: u32, l: u32, p: u32) -> u32 {
         i &= w;
         i ^= i >> 5;
         if i < l {
-            return (i.wrapping_add(p)) % l;
+            // `(i + p) % l` in Kensler's paper wraps past 2^32 for `p` near it, and then two
+            // indices meet.
+            return (i + p % l) % l;
         }
     }
 }
@@ -508,4 +519,38 @@ fn trace_wavefronts(
         }
     }
     color
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The lens deals every cell once per pixel: `permute` is a bijection of `0..l` for every
+    /// grid the samples use, with seeds near 2^32 too (where `(i + p) % l` wrapped and two
+    /// indices met), and `side` is the smallest grid that holds `n` samples.
+    #[test]
+    fn lens_cells_are_a_permutation_and_grids_hold_their_samples() {
+        for n in 1..=1024u32 {
+            let k = side(n);
+            assert!(k * k >= n && (k - 1) * (k - 1) < n, "side({n}) = {k}");
+        }
+        let seeds = [0, 1, 0x5bd1_e995, u32::MAX - 2, u32::MAX - 1, u32::MAX];
+        for l in (1..=32u32).map(|k| k * k).chain([2, 3, 5, 7, 1000, 1023]) {
+            for (j, p) in seeds
+                .into_iter()
+                .chain((0..20).map(|k| mix(k, l, 0, 7)))
+                .enumerate()
+            {
+                let mut seen = vec![false; l as usize];
+                for i in 0..l {
+                    let c = permute(i, l, p) as usize;
+                    assert!(
+                        c < l as usize && !seen[c],
+                        "l {l}, seed {j} ({p:#x}): {i} -> {c}"
+                    );
+                    seen[c] = true;
+                }
+            }
+        }
+    }
 }
