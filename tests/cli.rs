@@ -37,7 +37,7 @@ fn readme_render_command_draws_the_default_scene() {
     assert!(colours.len() > 1000, "{} colours", colours.len());
     // The image is the library's render of the built-in scene with the documented defaults
     // (the scene's own depth, 1 sample) on the CPU. The command's AUTO context may take a
-    // hardware GPU, whose rounding differs a little: PSNR 40 dB (identical on the CPU).
+    // hardware GPU, whose rounding differs a little: PSNR 40 dB there, identical on the CPU.
     let mut b = rt2::scene::builtin::by_name("default").unwrap();
     b.scene.commit().unwrap();
     let opts = rt2::render::RenderOptions {
@@ -65,6 +65,14 @@ fn readme_render_command_draws_the_default_scene() {
         psnr >= 40.0,
         "the PNG is {psnr:.1} dB from the library's render"
     );
+    // The command reports where it rendered; on the CPU the image is the same, byte for byte.
+    let report = String::from_utf8_lossy(&out.stdout);
+    if report.contains("on the CPU") || report.contains("CPU requested") {
+        assert!(
+            mse == 0.0,
+            "rendered on the CPU but {psnr:.1} dB off: {report}"
+        );
+    }
 }
 
 /// Each bad input fails with status 1, a message naming it, and no PNG written.

@@ -144,7 +144,7 @@ fn leaves_of(tree: &KdTree, voxels: &[Option<(Aabb, u32)>]) -> Vec<(KdNode, Aabb
 /// Triangles and boxes: the separating-axis test, the largest separation over the candidate
 /// axes. Spheres: the centre's distance to the box minus the radius. Ellipsoids: the same in
 /// the unit sphere's space (`|inv (x - c)| - 1` at the box's nearest point, found by coordinate
-/// descent on that convex quadratic).
+/// descent on that convex quadratic), scaled back to world lengths by a lower bound.
 fn gap(set: &PrimitiveSet, p: usize, voxel: &Aabb) -> f64 {
     let (lo, hi) = (voxel.min.as_dvec3(), voxel.max.as_dvec3());
     let nt = set.triangles.len();
@@ -198,7 +198,15 @@ fn gap(set: &PrimitiveSet, p: usize, voxel: &Aabb) -> f64 {
                 x[a] = (x[a] - col.dot(r) / col.length_squared()).clamp(lo[a], hi[a]);
             }
         }
-        (inv * (x - c)).length() - 1.0
+        // From the unit sphere's space back to world lengths, at most: a unit there is at
+        // least the smallest semi-axis, which is at least 1 / |inv| (Frobenius).
+        let frobenius = inv
+            .to_cols_array()
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt();
+        ((inv * (x - c)).length() - 1.0) / frobenius
     } else {
         let b = &set.boxes[p - ne];
         let (bl, bh) = (b.min.as_dvec3(), b.max.as_dvec3());
