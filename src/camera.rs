@@ -2,7 +2,7 @@
 //! rays only, as in the thesis; the aspect ratio comes from the frame.
 
 use crate::error::{Error, Result};
-use crate::geometry::Ray;
+use crate::geometry::{unit, Ray};
 use glam::{Vec2, Vec3};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -31,14 +31,6 @@ impl Default for Camera {
     }
 }
 
-/// The unit vector along `v` (NaN for a zero `v`), normalised after scaling `v` by its largest
-/// component: `Vec3::normalize` squares the components, which underflows for a vector shorter
-/// than about 1e-19 (an `up` of 1e-23 gave NaN rays: a blank frame) and overflows for one
-/// longer than about 1e19.
-fn direction(v: Vec3) -> Vec3 {
-    (v / v.abs().max_element()).normalize()
-}
-
 /// The camera's basis and image-plane scale, computed once per frame.
 #[derive(Clone, Copy, Debug)]
 pub struct CameraRays {
@@ -61,19 +53,18 @@ impl Camera {
                 )));
             }
         }
-        // The basis is built from the view direction and up, as `rays` builds it.
+        // The basis is built from the unit view direction and up, as `rays` builds it
+        // (`geometry::unit`: an `up` of 1e-23, normalised directly, gave NaN rays).
         let f = target - eye;
         if !f.is_finite() {
             return Err(Error::invalid_argument(format!(
                 "eye {eye} and target {target} are too far apart (their difference overflows)"
             )));
         }
-        let forward = direction(f);
-        if !forward.is_finite() {
+        let Some(forward) = unit(f) else {
             return Err(Error::invalid_argument("eye and target are the same point"));
-        }
-        let sin2 = forward.cross(direction(up)).length_squared();
-        if sin2.is_nan() || sin2 <= 1e-12 {
+        };
+        if unit(up).is_none_or(|u| forward.cross(u).length_squared() <= 1e-12) {
             return Err(Error::invalid_argument(
                 "up is zero or parallel to the view direction",
             ));
@@ -112,8 +103,10 @@ impl Camera {
 
     /// Ray generator for a `width` × `height` image.
     pub fn rays(&self, width: u32, height: u32) -> CameraRays {
-        let forward = direction(self.target - self.eye);
-        let right = forward.cross(direction(self.up)).normalize();
+        // NaN rays for a camera `look_at` would refuse (its fields are public).
+        let unit_or_nan = |v: Vec3| unit(v).unwrap_or(Vec3::NAN);
+        let forward = unit_or_nan(self.target - self.eye);
+        let right = forward.cross(unit_or_nan(self.up)).normalize();
         let up = right.cross(forward);
         let half_h = (self.fov_y.to_radians() * 0.5).tan();
         CameraRays {

@@ -75,12 +75,10 @@ impl Aabb {
     /// bit for bit those of unscaled ones wherever those are finite.
     pub fn unit_scale(&self) -> f32 {
         let m = self.min.abs().max(self.max.abs()).max_element();
-        if self.is_empty() || !(m > 0.0 && m.is_finite()) {
-            return 1.0;
+        match super::power_of_two_scale(m) {
+            Some(s) if !self.is_empty() => s,
+            _ => 1.0,
         }
-        // Within f32's exponents: 2^127 is the largest power of two, 2^-149 the smallest.
-        let k = (m as f64).log2().floor() as i32;
-        2f64.powi((-k).clamp(-149, 127)) as f32
     }
 
     /// The extent scaled by `scale`, computed from the scaled corners (so that a box from

@@ -1,7 +1,7 @@
 //! Analytic primitives: spheres, ellipsoids, axis-aligned boxes and planes. They stay
 //! analytic (never tessellated): a sphere costs 16 bytes where a mesh of it costs kilobytes.
 
-use super::{Aabb, Ray};
+use super::{power_of_two_scale, Aabb, Ray};
 use glam::{Mat3, Vec3};
 
 /// Nearest intersection in `[tmin, tmax)` of the ray `o + t d` (relative to the centre) with
@@ -14,22 +14,15 @@ use glam::{Mat3, Vec3};
 /// Directions need not be unit length, but the test squares them: `d·d` overflows for `|d|`
 /// past about 1e19 and underflows below about 1e-19, and `d·d · r²` overflows sooner for a
 /// large sphere (radius 1e5 at `|d|` = 1e15 "hit" at `t` = 0). So the direction is scaled by a
-/// power of two into [1, 4) for its largest component, and the roots scaled back. Every step
+/// power of two into [1, 2) for its largest component, and the roots scaled back. Every step
 /// is homogeneous in `d` and a power of two scales exactly, so wherever nothing over- or
 /// underflowed the roots are bit for bit those of the unscaled direction.
 fn sphere_root(o: Vec3, d: Vec3, r2: f32, tmin: f32, tmax: f32) -> Option<f32> {
-    let s = power_of_two_near_recip(d.abs().max_element())?;
+    let s = power_of_two_scale(d.abs().max_element())?;
     let (t0, t1) = sphere_roots(o, d * s, r2)?;
     [t0 * s, t1 * s]
         .into_iter()
         .find(|&t| t >= tmin && t < tmax)
-}
-
-/// A power of two `s` with `m s` in [1, 4): the scale [`sphere_root`] applies to a direction
-/// whose largest component is `m`. `None` for a zero, infinite or NaN `m`.
-fn power_of_two_near_recip(m: f32) -> Option<f32> {
-    let exponent = (m.to_bits() >> 23) & 0xff;
-    (m > 0.0 && exponent < 255).then(|| f32::from_bits((254 - exponent.min(253)) << 23))
 }
 
 /// Both roots of the ray `o + t d` with the sphere of squared radius `r2`, ascending.

@@ -1,14 +1,16 @@
-//! The geometric vocabulary shared by every layer: rays and hits, boxes, and the
-//! primitive set a committed scene is made of.
+//! The geometric vocabulary shared by every layer: rays and hits, boxes, the primitive set a
+//! committed scene is made of, and the scaling that keeps their `f32` arithmetic in range.
 
 mod aabb;
 mod analytic;
 mod primitives;
 mod ray;
+mod scale;
 mod triangle;
 
 pub use aabb::Aabb;
 pub use analytic::{box_intersect, box_normal, Ellipsoid, Plane, Sphere};
 pub use primitives::{PrimKind, PrimitiveSet, RayTest};
 pub use ray::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
+pub use scale::{power_of_two_scale, unit};
 pub use triangle::{Triangle, TriangleTest};

@@ -3,7 +3,7 @@
 //! a non-uniform scale becomes an ellipsoid, never a mesh.
 
 use crate::error::{Error, Result};
-use crate::geometry::{Aabb, Ellipsoid, Plane, PrimitiveSet, Sphere, Triangle};
+use crate::geometry::{unit, Aabb, Ellipsoid, Plane, PrimitiveSet, Sphere, Triangle};
 use glam::{Affine3A, Mat3, Vec3};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -261,18 +261,6 @@ fn ellipsoid(center: Vec3, m: Mat3, what: &str) -> Result<Ellipsoid> {
                 m.to_cols_array_2d()
             ))
         })
-}
-
-/// `v` scaled to unit length, or `None` for a zero or non-finite vector. Divided by its largest
-/// component first, so that lengths beyond the `f32` range (1e20, 1e-23) normalise exactly as
-/// unit ones do.
-fn unit(v: Vec3) -> Option<Vec3> {
-    let m = v.abs().max_element();
-    if !(m > 0.0 && m.is_finite()) {
-        return None;
-    }
-    let u = (v / m).normalize();
-    u.is_finite().then_some(u)
 }
 
 /// The world-space plane of `normal · x = offset` under `t`. `normal` may have any non-zero
