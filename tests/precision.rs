@@ -458,10 +458,38 @@ fn offset_modes_and_shadow_acne_far_from_the_origin() {
     assert!(epsilon_acne[2] > 0.1, "far away it fails: {epsilon_acne:?}");
 }
 
-/// Directions need not be unit length: every kind of primitive is hit at the same point
-/// (`t |d|` the distance, within 1e-5) for directions from 1e-25 to 1e30 long. A sphere or
-/// ellipsoid squares the direction, which over- or underflowed past about 1e19 and below
-/// about 1e-19: they were missed there, and hit imprecisely near the low end.
+/// Traces `shape` alone along -z from `origin` with directions from 1e-25 to 1e30 long, and
+/// checks that each is hit `distance` away (`t |d|`, within 1e-5).
+fn hit_at_every_direction_length(what: &str, shape: Shape, origin: Vec3, distance: f64) {
+    let ctx = rt2::context::Context::new(rt2::dispatch::BackendRequest::Cpu, 1).unwrap();
+    let mut scene = Scene::new();
+    scene.add_object(shape, 0).unwrap();
+    scene.commit().unwrap();
+    let lengths = [
+        1e-25f32, 1e-22, 1e-18, 1e-16, 1e-15, 1e-3, 1.0, 1e3, 1e14, 1e15, 1e16, 1e18, 1e20, 1e30,
+    ];
+    let rays: Vec<Ray> = lengths
+        .iter()
+        .map(|&s| Ray::new(origin, -s * Vec3::Z, 0.0, f32::INFINITY))
+        .collect();
+    let mut hits = vec![Hit::MISS; rays.len()];
+    let q = rt2::context::QueryOptions::default();
+    ctx.intersect(scene.committed().unwrap(), &rays, &mut hits, &q)
+        .unwrap();
+    for (s, hit) in lengths.iter().zip(&hits) {
+        let got = hit.t as f64 * *s as f64;
+        assert!(
+            (got - distance).abs() <= 1e-5 * distance,
+            "{what}, |dir| {s:e}: distance {got:e} (t {}), want {distance:e}",
+            hit.t
+        );
+    }
+}
+
+/// Directions need not be unit length: every kind of primitive is hit at the same point for
+/// directions from 1e-25 to 1e30 long. A sphere or ellipsoid squares the direction, which
+/// over- or underflowed past about 1e19 and below about 1e-19: they were missed there, and
+/// hit imprecisely near the low end.
 #[test]
 fn every_kind_of_primitive_is_hit_whatever_the_direction_length() {
     let origin = Vec3::new(0.1, 0.1, 5.0);
@@ -513,64 +541,23 @@ fn every_kind_of_primitive_is_hit_whatever_the_direction_length() {
             5.0,
         ),
     ];
-    let ctx = rt2::context::Context::new(rt2::dispatch::BackendRequest::Cpu, 1).unwrap();
     for (name, shape, distance) in shapes {
-        let mut scene = Scene::new();
-        scene.add_object(shape, 0).unwrap();
-        scene.commit().unwrap();
-        let lengths = [1e-25f32, 1e-22, 1e-18, 1e-3, 1.0, 1e3, 1e18, 1e20, 1e30];
-        let rays: Vec<Ray> = lengths
-            .iter()
-            .map(|&s| Ray::new(origin, Vec3::new(0.0, 0.0, -s), 0.0, f32::INFINITY))
-            .collect();
-        let mut hits = vec![Hit::MISS; rays.len()];
-        let q = rt2::context::QueryOptions::default();
-        ctx.intersect(scene.committed().unwrap(), &rays, &mut hits, &q)
-            .unwrap();
-        for (s, hit) in lengths.iter().zip(&hits) {
-            let got = hit.t as f64 * *s as f64;
-            assert!(
-                (got - distance).abs() <= 1e-5 * distance,
-                "{name}, |dir| {s:e}: distance {got} (t {}), want {distance}",
-                hit.t
-            );
-        }
+        hit_at_every_direction_length(name, shape, origin, distance);
     }
 }
 
 /// A large sphere seen from afar: `|d|² r²` overflows long before `|d|²` does (radius 1e5 at
 /// `|d|` = 1e15 was "hit" at `t` = 0), and a tiny one underflows (radius 1e-12 at `|d|` =
-/// 1e-15 came out 1% short). Every direction length, both scales.
+/// 1e-15 came out 1% short).
 #[test]
 fn large_and_tiny_spheres_are_hit_whatever_the_direction_length() {
-    let ctx = rt2::context::Context::new(rt2::dispatch::BackendRequest::Cpu, 1).unwrap();
     for (radius, away) in [(1e5f32, 1e6f32), (1e-12, 1e-10)] {
-        let mut scene = Scene::new();
         let sphere = Shape::Sphere {
             center: Vec3::ZERO,
             radius,
         };
-        scene.add_object(sphere, 0).unwrap();
-        scene.commit().unwrap();
-        let lengths = [
-            1e-25f32, 1e-16, 1e-15, 1e-3, 1.0, 1e3, 1e14, 1e15, 1e16, 1e30,
-        ];
-        let rays: Vec<Ray> = lengths
-            .iter()
-            .map(|&s| Ray::new(Vec3::new(0.0, 0.0, away), -s * Vec3::Z, 0.0, f32::INFINITY))
-            .collect();
-        let mut hits = vec![Hit::MISS; rays.len()];
-        let q = rt2::context::QueryOptions::default();
-        ctx.intersect(scene.committed().unwrap(), &rays, &mut hits, &q)
-            .unwrap();
-        let distance = away as f64 - radius as f64;
-        for (s, hit) in lengths.iter().zip(&hits) {
-            let got = hit.t as f64 * *s as f64;
-            assert!(
-                (got - distance).abs() <= 1e-5 * distance,
-                "radius {radius:e}, |dir| {s:e}: distance {got:e} (t {}), want {distance:e}",
-                hit.t
-            );
-        }
+        let what = format!("radius {radius:e}");
+        let origin = Vec3::new(0.0, 0.0, away);
+        hit_at_every_direction_length(&what, sphere, origin, away as f64 - radius as f64);
     }
 }

@@ -101,43 +101,20 @@ fn every_query_mode_gives_the_same_hits_and_bad_values_are_rejected() {
         assert_eq!(results[0], results[1]);
         assert_eq!(results[0], results[2]);
 
+        // One ray with the options `opt`: its status.
+        let one_ray = |opt: &rt2_query_options| {
+            let mut hit = results[0][0];
+            rt2_intersect(ctx, scene, rays.as_ptr(), 1, &mut hit, opt, null_mut())
+        };
         let mut opt = rt2_query_options_default();
         opt.mode = 3;
-        let mut hits = vec![
-            rt2_hit {
-                t: 0.0,
-                u: 0.0,
-                v: 0.0,
-                object: 0,
-                prim: 0
-            };
-            1
-        ];
-        let st = rt2_intersect(
-            ctx,
-            scene,
-            rays.as_ptr(),
-            1,
-            hits.as_mut_ptr(),
-            &opt,
-            null_mut(),
-        );
-        assert_eq!(st, Rt2Status::InvalidArgument);
+        assert_eq!(one_ray(&opt), Rt2Status::InvalidArgument);
         // The short stack holds at most 32 entries: 33 is refused, 32 runs.
         for (size, want) in [(33, Rt2Status::InvalidArgument), (32, Rt2Status::Ok)] {
             let mut opt = rt2_query_options_default();
             opt.traversal = Rt2Traversal::ShortStack as u32;
             opt.short_stack_size = size;
-            let st = rt2_intersect(
-                ctx,
-                scene,
-                rays.as_ptr(),
-                1,
-                hits.as_mut_ptr(),
-                &opt,
-                null_mut(),
-            );
-            assert_eq!(st, want, "short_stack_size {size}");
+            assert_eq!(one_ray(&opt), want, "short_stack_size {size}");
         }
 
         let mut ropt = rt2_render_options_default();
