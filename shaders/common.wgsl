@@ -149,7 +149,8 @@ fn hit_triangle(tri: Triangle, r: Ray, tmax: f32) -> Tuv {
 // would over- or underflow for long or short directions), its roots scaled back; exact, so the
 // roots are those of the unscaled direction wherever that one is finite. The scale is the
 // CPU's `power_of_two_scale`, but 2^-126 rather than the subnormal 2^-127 for components
-// past 2^127 (GPUs may flush subnormals): [2, 4) there instead of [1, 2), as exact.
+// past 2^127 (GPUs may flush subnormals): [2, 4) there instead of [1, 2), as exact. (The CPU
+// skips the scaling where d·d and d·d r² are normal, which gives the same roots.)
 fn sphere_root(o: vec3<f32>, d_in: vec3<f32>, r2: f32, tmin: f32, tmax: f32) -> Tuv {
     let no = Tuv(false, 0.0, 0.0, 0.0);
     let m = max(abs(d_in.x), max(abs(d_in.y), abs(d_in.z)));
