@@ -347,9 +347,9 @@ int main(int argc, char **argv) {
     }
 
     {
-        /* Options refused as UNSUPPORTED (ropes traversal with the watertight test: breadth-first
-         * renders and packet queries take Möller–Trumbore only) leave the scene as it was: no
-         * ropes, no exact vertices built on the way to the refusal. */
+        /* Refused options (out of range, with the ropes traversal and the watertight test, which
+         * build ropes and exact vertices on first use) leave the scene as it was: the options
+         * are checked before anything is built. */
         rt2_scene_statistics before = {0}, after = {0};
         before.struct_size = after.struct_size = sizeof before;
         must(rt2_scene_stats(scene, &before), "rt2_scene_stats (before refused options)");
@@ -357,16 +357,18 @@ int main(int argc, char **argv) {
         bf.traversal = RT2_TRAVERSAL_ROPES;
         bf.intersector = RT2_INTERSECTOR_WATERTIGHT;
         bf.schedule = RT2_SCHEDULE_BREADTH_FIRST;
-        expect(rt2_render(ctx, scene, camera, &bf, frame), RT2_STATUS_UNSUPPORTED, "breadth-first",
-               "rt2_render(breadth-first, watertight, ropes)");
+        bf.samples = 0;
+        expect(rt2_render(ctx, scene, camera, &bf, frame), RT2_STATUS_INVALID_ARGUMENT, "samples",
+               "rt2_render(breadth-first, watertight, ropes, 0 samples)");
         rt2_query_options q = rt2_query_options_default();
         q.traversal = RT2_TRAVERSAL_ROPES;
         q.intersector = RT2_INTERSECTOR_WATERTIGHT;
         q.mode = RT2_QUERY_MODE_PACKET;
+        q.short_stack_size = 33;
         const rt2_ray ray = {{0.0f, 0.0f, 5.0f}, 0.0f, {0.0f, 0.0f, -1.0f}, INFINITY};
         rt2_hit hit;
-        expect(rt2_intersect(ctx, scene, &ray, 1, &hit, &q, NULL), RT2_STATUS_UNSUPPORTED, "Möller",
-               "rt2_intersect(packets, watertight, ropes)");
+        expect(rt2_intersect(ctx, scene, &ray, 1, &hit, &q, NULL), RT2_STATUS_INVALID_ARGUMENT,
+               "short_stack_size", "rt2_intersect(packets, watertight, ropes, short stack 33)");
         must(rt2_scene_stats(scene, &after), "rt2_scene_stats (after refused options)");
         char d[128];
         snprintf(d, sizeof d, "ropes %llu -> %llu bytes, primitives %llu -> %llu bytes",

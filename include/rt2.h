@@ -166,7 +166,9 @@ typedef uint32_t rt2_offset_mode;
 
 /**
  * How a batch of rays is traced (`rt2_query_options.mode`). Every mode returns the same closest
- * hits, bit for bit; they differ in speed (`rt2 bench streams`).
+ * hits, bit for bit, with either intersector; they differ in speed (`rt2 bench streams`). The
+ * SIMD leaf tests of packets and streams are Möller–Trumbore's: with the watertight test their
+ * traversal stays SIMD and the leaves are tested one ray at a time.
  */
 enum rt2_query_mode
 #ifdef __cplusplus
@@ -178,7 +180,8 @@ enum rt2_query_mode
    */
   RT2_QUERY_MODE_SINGLE = 0,
   /**
-   * Packets of 8 rays (4 without AVX2) of one octant (Wald); standard traversal order.
+   * Packets of one octant (Wald) as wide as the CPU runs: 16 rays with AVX-512, 8 with
+   * AVX2, else 4; standard traversal order.
    */
   RT2_QUERY_MODE_PACKET = 1,
   /**
@@ -294,13 +297,6 @@ enum rt2_traversal
 #ifndef __cplusplus
 typedef uint32_t rt2_traversal;
 #endif // __cplusplus
-
-/**
- * What the intersection core needs per ray besides the ray itself, prepared once per ray:
- * the triangle test with its per-ray set-up, and the primitive to ignore (the one a
- * secondary ray leaves, for `OffsetMode::ExcludePrim`; `INVALID` for none).
- */
-typedef struct RayTest RayTest;
 
 /**
  * Creation parameters of a context.

@@ -371,25 +371,15 @@ pub struct QueryOptions {
 }
 
 impl QueryOptions {
-    /// The short stack's range, and the combinations packets and streams cannot honour (they
-    /// test triangles with Möller–Trumbore, their SIMD test; the watertight test runs one ray
-    /// at a time). Checked by `Context::intersect` / `occluded`; the C API checks first, before
-    /// it builds ropes or exact vertices.
+    /// The short stack's range (every mode takes every intersector). Checked by
+    /// `Context::intersect` / `occluded`; the C API checks first, before it builds ropes or
+    /// exact vertices.
     pub fn validate(&self) -> Result<()> {
         crate::error::check_range(
             "short_stack_size",
             self.short_stack_size,
             1..=crate::cpu::traverse::MAX_SHORT_STACK,
-        )?;
-        if self.mode != cpu::query::QueryMode::Single
-            && self.intersector != Intersector::MollerTrumbore
-        {
-            return Err(Error::unsupported(
-                "packet and stream queries test triangles with Möller–Trumbore only: use \
-                 single-ray mode for the watertight test",
-            ));
-        }
-        Ok(())
+        )
     }
 }
 

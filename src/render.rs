@@ -57,9 +57,8 @@ pub struct RenderOptions {
 }
 
 impl RenderOptions {
-    /// The ranges every backend relies on, and the combinations the breadth-first schedule
-    /// cannot honour; checked by `Context::render`, so the C API, the CLI and Rust callers all
-    /// get the same errors (the C API checks first, before it builds ropes or exact vertices).
+    /// The ranges every backend relies on; checked by `Context::render`, so the C API, the CLI
+    /// and Rust callers all get the same errors (the C API checks first, before it builds ropes or exact vertices).
     /// Outside the ranges a render would allocate per depth (`max_depth` 2^32 asked for 400 GB
     /// and aborted), run forever (2^32 samples) or silently draw black (0 samples).
     pub fn validate(&self) -> crate::error::Result<()> {
@@ -76,18 +75,6 @@ impl RenderOptions {
                 "background is {} (must be finite and >= 0)",
                 self.background
             )));
-        }
-        // Its stream queries test triangles with Möller–Trumbore and carry no per-ray excluded
-        // primitive.
-        if self.schedule == Schedule::BreadthFirst
-            && (self.offset_mode == OffsetMode::ExcludePrim
-                || self.intersector != Intersector::MollerTrumbore)
-        {
-            return Err(crate::error::Error::unsupported(
-                "the breadth-first schedule traces ray streams with Möller–Trumbore and no \
-                 excluded primitive: use the depth-first schedule for the watertight test or \
-                 exclude-prim offsets",
-            ));
         }
         Ok(())
     }

@@ -6,6 +6,7 @@
 //! counts how often and asserts the documented bound.
 
 use glam::Vec3;
+use rt2::cpu::query::{self, QueryMode};
 use rt2::cpu::traverse::{intersect, Traversal, TraverseOptions};
 use rt2::geometry::{Hit, Ray, RayTest, Sphere, TraversalStats, Triangle, INVALID};
 use rt2::precision::{offset_ray_origin, Intersector};
@@ -107,20 +108,30 @@ fn leak_rays(m: &Mesh, inside: &[Vec3]) -> Vec<Ray> {
     rays
 }
 
-/// Leaks (misses) of every traversal with `intersector` on rays that must all hit.
-fn leaks(c: &Committed, rays: &[Ray], intersector: Intersector) -> [usize; 7] {
+/// Leaks (misses) of every traversal with `intersector` on rays that must all hit, then of the
+/// packet and stream queries.
+fn leaks(c: &Committed, rays: &[Ray], intersector: Intersector) -> [usize; 9] {
     let opts = TraverseOptions {
         intersector,
         ..TraverseOptions::default()
     };
-    Traversal::ALL.map(|how| {
+    let single = Traversal::ALL.map(|how| {
         rays.iter()
             .filter(|r| {
                 let mut st = TraversalStats::default();
                 !intersect(&c.tree, &c.prims, r, how, &opts, &mut st).is_hit()
             })
             .count()
-    })
+    });
+    let batch = [QueryMode::Packet, QueryMode::Stream].map(|mode| {
+        let mut hits = vec![Hit::MISS; rays.len()];
+        query::intersect(c, rays, &mut hits, Traversal::Standard, &opts, mode);
+        hits.iter().filter(|h| !h.is_hit()).count()
+    });
+    let mut all = [0; 9];
+    all[..7].copy_from_slice(&single);
+    all[7..].copy_from_slice(&batch);
+    all
 }
 
 /// Möller–Trumbore leaks: at most this fraction of these rays, most of them aimed at vertices
@@ -129,7 +140,7 @@ fn leaks(c: &Committed, rays: &[Ray], intersector: Intersector) -> [usize; 7] {
 const MT_LEAK_BOUND: f64 = 0.1;
 
 /// Rays from strictly inside closed meshes, at the scales where rounding is worst: the
-/// watertight test never lets one out, with any traversal.
+/// watertight test never lets one out, with any traversal, in packets and in streams.
 #[test]
 fn closed_meshes_never_leak_with_watertight_at_tiny_huge_and_far_coordinates() {
     let mut mt_leaks = 0usize;
@@ -148,8 +159,8 @@ fn closed_meshes_never_leak_with_watertight_at_tiny_huge_and_far_coordinates() {
             let c = scene.committed().unwrap();
             let wt = leaks(c, &rays, Intersector::Watertight);
             assert_eq!(
-                wt, [0; 7],
-                "{} at scale {scale}, offset {offset}: watertight leaks per traversal",
+                wt, [0; 9],
+                "{} at scale {scale}, offset {offset}: watertight leaks per traversal, packets, streams",
                 case.name
             );
             let mt = leaks(c, &rays, Intersector::MollerTrumbore);
@@ -159,7 +170,7 @@ fn closed_meshes_never_leak_with_watertight_at_tiny_huge_and_far_coordinates() {
                 rays.len()
             );
             mt_leaks += mt.iter().sum::<usize>();
-            total += 7 * rays.len();
+            total += mt.len() * rays.len();
         }
     }
     let rate = mt_leaks as f64 / total as f64;

@@ -9,7 +9,7 @@
 use glam::{DVec3, Mat3, Vec3};
 use rt2::cpu::simd::Width;
 use rt2::cpu::traverse::{intersect, occluded, Traversal, TraverseOptions};
-use rt2::cpu::{packet, stream};
+use rt2::cpu::{packet, stream, RayTests};
 use rt2::geometry::{
     Aabb, Ellipsoid, Hit, Plane, PrimKind, PrimitiveSet, Ray, RayTest, Sphere, TraversalStats,
     Triangle, INVALID,
@@ -355,7 +355,7 @@ fn check_rays(
                 }
             }
         }
-        check_batch_modes(&format!("{what}, {name}"), prims, tree, rays, &stats[0]);
+        check_batch_modes(&format!("{what}, {name}"), prims, tree, rays);
         all_stats.push(stats);
     }
     all_stats
@@ -363,59 +363,89 @@ fn check_rays(
 
 /// Packets and streams at every lane width this CPU runs: the same hits as the standard
 /// traversal, bit for bit, the same occlusion answers, and the same work (they take the standard
-/// traversal's decisions for every ray, only grouped differently).
-fn check_batch_modes(
-    what: &str,
-    prims: &PrimitiveSet,
-    tree: &KdTree,
-    rays: &[Ray],
-    standard_stats: &TraversalStats,
-) {
-    let std: Vec<Hit> = rays
+/// traversal's decisions for every ray, only grouped differently). With both ray–triangle tests,
+/// and with per-ray excluded primitives: every other ray ignores the primitive it hits first,
+/// so it must find what lies behind it (the SIMD leaf tests serve only Möller–Trumbore with
+/// nothing excluded; the others run the single-ray leaf test lane by lane).
+fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ray]) {
+    let single = |opts: &TraverseOptions, ray: &Ray, stats: &mut TraversalStats| {
+        intersect(tree, prims, ray, Traversal::Standard, opts, stats)
+    };
+    let first: Vec<Hit> = rays
         .iter()
         .map(|r| {
-            let opts = TraverseOptions::default();
-            let mut st = TraversalStats::default();
-            intersect(tree, prims, r, Traversal::Standard, &opts, &mut st)
+            single(
+                &TraverseOptions::default(),
+                r,
+                &mut TraversalStats::default(),
+            )
         })
         .collect();
-    for width in Width::ALL.into_iter().filter(|w| w.supported()) {
-        for mode in ["packet", "stream"] {
-            let mut hits = vec![Hit::MISS; rays.len()];
-            let mut occ = vec![false; rays.len()];
-            let stats = match mode {
-                "packet" => {
-                    packet::occluded(tree, prims, rays, &mut occ, width);
-                    packet::intersect(tree, prims, rays, &mut hits, width)
-                }
-                _ => {
-                    stream::occluded(tree, prims, rays, &mut occ, width);
-                    stream::intersect(tree, prims, rays, &mut hits, width).0
-                }
+    let skip: Vec<u32> = (0..rays.len())
+        .map(|i| if i % 2 == 0 { first[i].prim } else { INVALID })
+        .collect();
+    for intersector in Intersector::ALL {
+        for exclude in [None, Some(&skip[..])] {
+            let tests = RayTests {
+                intersector,
+                exclude,
             };
-            for (i, (h, s)) in hits.iter().zip(&std).enumerate() {
+            let mut standard_stats = TraversalStats::default();
+            let std: Vec<Hit> = (0..rays.len())
+                .map(|i| {
+                    let opts = TraverseOptions {
+                        intersector,
+                        exclude: exclude.map_or(INVALID, |e| e[i]),
+                        ..TraverseOptions::default()
+                    };
+                    single(&opts, &rays[i], &mut standard_stats)
+                })
+                .collect();
+            if exclude.is_some() {
+                let moved = (0..rays.len()).filter(|&i| std[i].prim != first[i].prim);
                 assert!(
-                    h.prim == s.prim
-                        && h.t.to_bits() == s.t.to_bits()
-                        && h.u.to_bits() == s.u.to_bits()
-                        && h.v.to_bits() == s.v.to_bits(),
-                    "{what}, {mode} x{}, ray {i}: {:?} gives {h:?}, standard {s:?}",
-                    width.lanes(),
-                    rays[i]
-                );
-                assert_eq!(
-                    occ[i],
-                    s.is_hit(),
-                    "{what}, {mode} x{}, ray {i} occluded",
-                    width.lanes()
+                    moved.count() > 0 || first.iter().all(|h| !h.is_hit()),
+                    "{what}: excluding the first hits changed no hit: nothing was checked"
                 );
             }
-            assert_eq!(
-                (stats.nodes_visited, stats.leaves_visited),
-                (standard_stats.nodes_visited, standard_stats.leaves_visited),
-                "{what}, {mode} x{}: work differs from the standard traversal",
-                width.lanes()
-            );
+            for width in Width::ALL.into_iter().filter(|w| w.supported()) {
+                for mode in ["packet", "stream"] {
+                    let mut hits = vec![Hit::MISS; rays.len()];
+                    let mut occ = vec![false; rays.len()];
+                    let stats = match mode {
+                        "packet" => {
+                            packet::occluded(tree, prims, rays, tests, &mut occ, width);
+                            packet::intersect(tree, prims, rays, tests, &mut hits, width)
+                        }
+                        _ => {
+                            stream::occluded(tree, prims, rays, tests, &mut occ, width);
+                            stream::intersect(tree, prims, rays, tests, &mut hits, width).0
+                        }
+                    };
+                    let how = format!(
+                        "{what}, {mode} x{}, {}{}",
+                        width.lanes(),
+                        intersector.name(),
+                        if exclude.is_some() { ", excluding" } else { "" }
+                    );
+                    for (i, (h, s)) in hits.iter().zip(&std).enumerate() {
+                        assert!(
+                            h.prim == s.prim
+                                && h.t.to_bits() == s.t.to_bits()
+                                && h.u.to_bits() == s.u.to_bits()
+                                && h.v.to_bits() == s.v.to_bits(),
+                            "{how}, ray {i}: {:?} gives {h:?}, standard {s:?}",
+                            rays[i]
+                        );
+                        assert_eq!(occ[i], s.is_hit(), "{how}, ray {i} occluded");
+                    }
+                    assert_eq!(
+                        (stats.nodes_visited, stats.leaves_visited),
+                        (standard_stats.nodes_visited, standard_stats.leaves_visited),
+                        "{how}: work differs from the standard traversal"
+                    );
+                }
+            }
         }
     }
 }
@@ -835,14 +865,19 @@ fn degenerate_rays_miss_without_touching_the_tree() {
                 );
             }
         }
-        for width in Width::ALL.into_iter().filter(|w| w.supported()) {
+        let widths = Width::ALL.into_iter().filter(|w| w.supported());
+        for (width, intersector) in widths.flat_map(|w| Intersector::ALL.map(|i| (w, i))) {
+            let t = RayTests {
+                intersector,
+                exclude: None,
+            };
             let mut hits = vec![Hit::MISS; rays.len()];
             let mut occ = vec![true; rays.len()];
             let stats = [
-                packet::intersect(&tree, &prims, &rays, &mut hits, width),
-                packet::occluded(&tree, &prims, &rays, &mut occ, width),
-                stream::intersect(&tree, &prims, &rays, &mut hits, width).0,
-                stream::occluded(&tree, &prims, &rays, &mut occ, width).0,
+                packet::intersect(&tree, &prims, &rays, t, &mut hits, width),
+                packet::occluded(&tree, &prims, &rays, t, &mut occ, width),
+                stream::intersect(&tree, &prims, &rays, t, &mut hits, width).0,
+                stream::occluded(&tree, &prims, &rays, t, &mut occ, width).0,
             ];
             assert!(hits.iter().all(|h| !h.is_hit()) && !occ.contains(&true));
             assert!(stats.iter().all(|s| *s == TraversalStats::default()));

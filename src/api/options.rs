@@ -39,13 +39,16 @@ pub enum Rt2Traversal {
 }
 
 /// How a batch of rays is traced (`rt2_query_options.mode`). Every mode returns the same closest
-/// hits, bit for bit; they differ in speed (`rt2 bench streams`).
+/// hits, bit for bit, with either intersector; they differ in speed (`rt2 bench streams`). The
+/// SIMD leaf tests of packets and streams are Möller–Trumbore's: with the watertight test their
+/// traversal stays SIMD and the leaves are tested one ray at a time.
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Rt2QueryMode {
     /// One ray at a time with `rt2_query_options.traversal` (default).
     Single = 0,
-    /// Packets of 8 rays (4 without AVX2) of one octant (Wald); standard traversal order.
+    /// Packets of one octant (Wald) as wide as the CPU runs: 16 rays with AVX-512, 8 with
+    /// AVX2, else 4; standard traversal order.
     Packet = 1,
     /// The n-ray traversal of the vectorised-traversal paper: all rays of a stream at once, in
     /// streams of one octant and at most 32768 rays (`cpu::query::STREAM_MAX`).

@@ -13,10 +13,47 @@ use super::simd::{
     self, lanes_less, lanes_less_eq, prefetch, Isa, Kernel, LeafPrims, RayLanes, Width,
 };
 use super::traverse::{
-    any_among, any_in_subtree, clip_lanes, closest_among, closest_in_subtree, Entry,
+    any_among, any_in_subtree, clip_lanes, closest_among, closest_in_subtree, scene_box, Entry,
 };
-use crate::geometry::{Hit, PrimitiveSet, Ray, RayTest, TraversalStats};
+use crate::geometry::{Hit, PrimIndex, PrimitiveSet, Ray, RayTest, TraversalStats, INVALID};
 use crate::kdtree::KdTree;
+use crate::precision::Intersector;
+
+/// The primitive test of a batch's rays: the ray–triangle test, and the primitive each ray
+/// ignores (`OffsetMode::ExcludePrim`'s secondary rays).
+///
+/// The SIMD leaf tests (N rays × 1 triangle in streams, 1 ray × N triangles in packets) compute
+/// the default, Möller–Trumbore with nothing excluded. Any other test runs the single-ray leaf
+/// test lane by lane, so that every mode still takes the standard traversal's decisions and
+/// returns its hits bit for bit: the traversal stays vectorised, the leaves do not.
+#[derive(Clone, Copy, Debug)]
+pub struct RayTests<'a> {
+    pub intersector: Intersector,
+    /// `exclude[i]` is the primitive ray `i` ignores (`INVALID` for none); `None`: nothing
+    /// is excluded. As long as the batch's rays.
+    pub exclude: Option<&'a [PrimIndex]>,
+}
+
+impl RayTests<'_> {
+    /// Möller–Trumbore, nothing excluded: what the SIMD leaf tests compute.
+    pub const PLAIN: RayTests<'static> = RayTests {
+        intersector: Intersector::MollerTrumbore,
+        exclude: None,
+    };
+
+    /// Whether these are [`RayTests::PLAIN`]'s tests.
+    #[inline(always)]
+    fn plain(&self) -> bool {
+        self.intersector == Intersector::MollerTrumbore && self.exclude.is_none()
+    }
+
+    /// The test of ray `i`.
+    #[inline(always)]
+    fn of(&self, i: usize, ray: &Ray) -> RayTest {
+        let exclude = self.exclude.map_or(INVALID, |e| e[i]);
+        RayTest::new(ray, self.intersector, exclude)
+    }
+}
 
 /// What a batch query computes per ray, written once for packets and streams.
 pub(crate) trait Answer {
@@ -24,7 +61,7 @@ pub(crate) trait Answer {
     fn reset(&mut self);
     /// Tests the planes (outside the tree) against ray `i`, not degenerate. False when that
     /// answers the ray (any-hit): it needs no traversal.
-    fn planes(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool;
+    fn planes(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray, test: &RayTest) -> bool;
     /// Tests ray `i` against a leaf's prepared primitives; `t_exit` is where the ray leaves the
     /// leaf. True when the ray is finished (the standard traversal's stop rule). (The leaf, the
     /// ray and the width's proof: a struct bundling them would only rename the arguments.)
@@ -53,14 +90,30 @@ pub(crate) trait Answer {
         live: u32,
         t_exit: &[f32; N],
     ) -> u32;
+    /// Tests ray `i` against the primitives `leaf` one at a time with its own `test`, as the
+    /// single-ray traversal does (tests the SIMD leaves do not compute: [`RayTests`]). True
+    /// when the ray is finished.
+    #[allow(clippy::too_many_arguments)]
+    fn leaf_one(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &[u32],
+        i: usize,
+        ray: &Ray,
+        test: &RayTest,
+        t_exit: f32,
+        stats: &mut TraversalStats,
+    ) -> bool;
     /// Ray `i` through the subtree `start` alone, with the standard single-ray traversal.
     /// True when the ray is finished.
+    #[allow(clippy::too_many_arguments)]
     fn single(
         &mut self,
         tree: &KdTree,
         prims: &PrimitiveSet,
         i: usize,
         ray: &Ray,
+        test: &RayTest,
         start: Entry,
         stats: &mut TraversalStats,
     ) -> bool;
@@ -76,8 +129,8 @@ impl Answer for Closest<'_> {
         self.0.fill(Hit::MISS);
     }
 
-    fn planes(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool {
-        prims.intersect_planes(ray, &RayTest::PLAIN, &mut self.0[i]);
+    fn planes(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray, test: &RayTest) -> bool {
+        prims.intersect_planes(ray, test, &mut self.0[i]);
         true
     }
 
@@ -148,16 +201,34 @@ impl Answer for Closest<'_> {
     }
 
     #[inline(always)]
+    fn leaf_one(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &[u32],
+        i: usize,
+        ray: &Ray,
+        test: &RayTest,
+        t_exit: f32,
+        stats: &mut TraversalStats,
+    ) -> bool {
+        let hit = &mut self.0[i];
+        closest_among(prims, ray, test, leaf, hit, stats);
+        // Strictly before the exit, as `traverse::common::Closest`.
+        hit.t < t_exit
+    }
+
+    #[inline(always)]
     fn single(
         &mut self,
         tree: &KdTree,
         prims: &PrimitiveSet,
         i: usize,
         ray: &Ray,
+        test: &RayTest,
         start: Entry,
         stats: &mut TraversalStats,
     ) -> bool {
-        closest_in_subtree(tree, prims, ray, start, &mut self.0[i], stats)
+        closest_in_subtree(tree, prims, ray, test, start, &mut self.0[i], stats)
     }
 
     #[inline(always)]
@@ -176,9 +247,9 @@ impl Answer for AnyHit<'_> {
         self.0.fill(false);
     }
 
-    fn planes(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray) -> bool {
+    fn planes(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray, test: &RayTest) -> bool {
         let mut planes = Hit::MISS;
-        prims.intersect_planes(ray, &RayTest::PLAIN, &mut planes);
+        prims.intersect_planes(ray, test, &mut planes);
         self.0[i] = planes.is_hit();
         !self.0[i]
     }
@@ -234,16 +305,32 @@ impl Answer for AnyHit<'_> {
     }
 
     #[inline(always)]
+    fn leaf_one(
+        &mut self,
+        prims: &PrimitiveSet,
+        leaf: &[u32],
+        i: usize,
+        ray: &Ray,
+        test: &RayTest,
+        _t_exit: f32,
+        stats: &mut TraversalStats,
+    ) -> bool {
+        self.0[i] = any_among(prims, ray, test, leaf, stats);
+        self.0[i]
+    }
+
+    #[inline(always)]
     fn single(
         &mut self,
         tree: &KdTree,
         prims: &PrimitiveSet,
         i: usize,
         ray: &Ray,
+        test: &RayTest,
         start: Entry,
         stats: &mut TraversalStats,
     ) -> bool {
-        self.0[i] = any_in_subtree(tree, prims, ray, start, stats);
+        self.0[i] = any_in_subtree(tree, prims, ray, test, start, stats);
         self.0[i]
     }
 
@@ -266,6 +353,8 @@ pub(crate) struct Batch<'a, A> {
     /// How many rays are done so far: a list written when it was this value needs no filtering.
     pub finished: usize,
     pub answer: A,
+    /// The rays' primitive tests; the SIMD leaf tests serve only [`RayTests::PLAIN`].
+    pub tests: RayTests<'a>,
     pub stats: TraversalStats,
 }
 
@@ -292,6 +381,7 @@ impl<'a, A: Answer> Batch<'a, A> {
         tree: &'a KdTree,
         prims: &'a PrimitiveSet,
         rays: &'a [Ray],
+        tests: RayTests<'a>,
         mut answer: A,
     ) -> (Self, [Vec<Root>; 8]) {
         let n = rays.len();
@@ -299,6 +389,12 @@ impl<'a, A: Answer> Batch<'a, A> {
             u32::try_from(n).is_ok(),
             "a packet or stream batch holds at most u32::MAX rays, not {n}"
         );
+        assert!(
+            tests.exclude.is_none_or(|e| e.len() == n),
+            "one excluded primitive per ray"
+        );
+        // The single-ray traversal's box: padded for the watertight test.
+        let bounds = scene_box(tree, tests.intersector);
         let mut split = [(); 3].map(|_| Vec::with_capacity(n));
         let mut groups: [Vec<Root>; 8] = Default::default();
         answer.reset();
@@ -314,7 +410,8 @@ impl<'a, A: Answer> Batch<'a, A> {
             if !prims.planes.is_empty() {
                 // The planes are outside the tree, tested before it as the single-ray query does.
                 for_lanes(valid, |l| {
-                    if !answer.planes(prims, start + l, &rays[start + l]) {
+                    let (i, ray) = (start + l, &rays[start + l]);
+                    if !answer.planes(prims, i, ray, &tests.of(i, ray)) {
                         todo &= !(1 << l);
                     }
                 });
@@ -322,7 +419,7 @@ impl<'a, A: Answer> Batch<'a, A> {
             if tree.nodes.is_empty() {
                 continue;
             }
-            let (t0, t1, inside) = clip_lanes(isa, &tree.bounds, &r.org, &inv, r.tmin, r.tmax);
+            let (t0, t1, inside) = clip_lanes(isa, &bounds, &r.org, &inv, r.tmin, r.tmax);
             for_lanes(todo & inside, |l| {
                 let i = start + l;
                 groups[octant(&rays[i])].push(Root {
@@ -340,9 +437,16 @@ impl<'a, A: Answer> Batch<'a, A> {
             done: vec![false; n],
             finished: 0,
             answer,
+            tests,
             stats: TraversalStats::default(),
         };
         (batch, groups)
+    }
+
+    /// Whether the rays take the plain test, which the SIMD leaf tests compute.
+    #[inline(always)]
+    pub fn tests_plain(&self) -> bool {
+        self.tests.plain()
     }
 
     /// Starts loading ray `i` and its answer, a few rays before [`Batch::visit_leaf`] needs them.
@@ -366,6 +470,12 @@ impl<'a, A: Answer> Batch<'a, A> {
         live: u32,
         t_exit: &[f32; N],
     ) {
+        if !self.tests.plain() {
+            for_lanes(live, |l| {
+                self.visit_leaf_one(leaf, ids[l], t_exit[l]);
+            });
+            return;
+        }
         let n = live.count_ones() as u64;
         self.stats.leaves_visited += n;
         self.stats.prim_tests += n * leaf.len() as u64;
@@ -380,11 +490,13 @@ impl<'a, A: Answer> Batch<'a, A> {
     #[inline(always)]
     pub fn trace_single(&mut self, i: u32, start: Entry) {
         let i = i as usize;
+        let ray = &self.rays[i];
         let done = self.answer.single(
             self.tree,
             self.prims,
             i,
-            &self.rays[i],
+            ray,
+            &self.tests.of(i, ray),
             start,
             &mut self.stats,
         );
@@ -392,7 +504,8 @@ impl<'a, A: Answer> Batch<'a, A> {
         self.finished += done as usize;
     }
 
-    /// Tests ray `i` against a prepared leaf and marks it done when finished.
+    /// Tests ray `i` against a prepared leaf (SIMD blocks: [`RayTests::PLAIN`] only) and marks it
+    /// done when finished.
     #[inline(always)]
     pub fn visit_leaf<const N: usize>(
         &mut self,
@@ -412,6 +525,22 @@ impl<'a, A: Answer> Batch<'a, A> {
             t_exit,
             &mut self.stats,
         );
+        self.done[i] = done;
+        self.finished += done as usize;
+        done
+    }
+
+    /// Tests ray `i` against the leaf primitives `list` one at a time with the ray's own test
+    /// (what the SIMD blocks do not compute) and marks it done when finished.
+    #[inline(always)]
+    pub fn visit_leaf_one(&mut self, list: &[u32], i: u32, t_exit: f32) -> bool {
+        let i = i as usize;
+        self.stats.leaves_visited += 1;
+        let ray = &self.rays[i];
+        let test = self.tests.of(i, ray);
+        let done = self
+            .answer
+            .leaf_one(self.prims, list, i, ray, &test, t_exit, &mut self.stats);
         self.done[i] = done;
         self.finished += done as usize;
         done
@@ -483,6 +612,7 @@ pub(crate) fn run<M: Mode, A: Answer>(
     tree: &KdTree,
     prims: &PrimitiveSet,
     rays: &[Ray],
+    tests: RayTests,
     answer: A,
     width: Width,
 ) -> M::Out {
@@ -490,6 +620,7 @@ pub(crate) fn run<M: Mode, A: Answer>(
         tree: &'a KdTree,
         prims: &'a PrimitiveSet,
         rays: &'a [Ray],
+        tests: RayTests<'a>,
         answer: A,
         mode: std::marker::PhantomData<M>,
     }
@@ -497,7 +628,14 @@ pub(crate) fn run<M: Mode, A: Answer>(
         type Out = M::Out;
         #[inline(always)]
         fn run<const N: usize>(self, isa: Isa<N>) -> M::Out {
-            let (mut b, groups) = Batch::new(isa, self.tree, self.prims, self.rays, self.answer);
+            let (mut b, groups) = Batch::new(
+                isa,
+                self.tree,
+                self.prims,
+                self.rays,
+                self.tests,
+                self.answer,
+            );
             M::trace(isa, &mut b, &groups)
         }
     }
@@ -507,6 +645,7 @@ pub(crate) fn run<M: Mode, A: Answer>(
             tree,
             prims,
             rays,
+            tests,
             answer,
             mode: std::marker::PhantomData,
         },

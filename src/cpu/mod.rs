@@ -8,3 +8,5 @@ pub mod simd;
 pub mod stream;
 pub mod traverse;
 pub mod whitted;
+
+pub use batch::RayTests;

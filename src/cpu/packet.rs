@@ -6,7 +6,7 @@
 //! The same function finishes a stream traversal when few rays reach a node (the paper's future
 //! work: stop paying for lists when the rays no longer share nodes).
 
-use super::batch::{positive, run, Answer, Batch, Mode, Root, Split};
+use super::batch::{positive, run, Answer, Batch, Mode, RayTests, Root, Split};
 use super::simd::{Isa, LeafPrims, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
@@ -143,16 +143,23 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
             };
             continue;
         }
-        s.leaf.gather(
-            &b.prims.triangles,
-            tree.leaf_prims(n),
-            live.count_ones() as usize,
-        );
+        let list = tree.leaf_prims(n);
+        // The SIMD blocks serve the plain test only (`RayTests`).
+        let plain = b.tests_plain();
+        if plain {
+            s.leaf
+                .gather(&b.prims.triangles, list, live.count_ones() as usize);
+        }
         let mut m = live;
         while m != 0 {
             let l = m.trailing_zeros() as usize;
             m &= m - 1;
-            if b.visit_leaf(isa, &s.leaf, id[l], cur.t1[l]) {
+            let done = if plain {
+                b.visit_leaf(isa, &s.leaf, id[l], cur.t1[l])
+            } else {
+                b.visit_leaf_one(list, id[l], cur.t1[l])
+            };
+            if done {
                 dead |= 1 << l;
             }
         }
@@ -205,7 +212,7 @@ pub(crate) fn lanes_of<const N: usize>(roots: &[Root]) -> Lanes<N> {
     p
 }
 
-/// Closest hits of `rays` with N-ray packets (one thread).
+/// Closest hits of `rays` (primitive tests `tests`) with N-ray packets (one thread).
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
@@ -215,13 +222,14 @@ pub fn intersect(
     tree: &KdTree,
     prims: &PrimitiveSet,
     rays: &[Ray],
+    tests: RayTests,
     hits: &mut [Hit],
     width: Width,
 ) -> TraversalStats {
-    run::<PacketMode, _>(tree, prims, rays, super::batch::Closest(hits), width)
+    run::<PacketMode, _>(tree, prims, rays, tests, super::batch::Closest(hits), width)
 }
 
-/// Any-hit queries of `rays` with N-ray packets (one thread).
+/// Any-hit queries of `rays` (primitive tests `tests`) with N-ray packets (one thread).
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
@@ -231,8 +239,9 @@ pub fn occluded(
     tree: &KdTree,
     prims: &PrimitiveSet,
     rays: &[Ray],
+    tests: RayTests,
     found: &mut [bool],
     width: Width,
 ) -> TraversalStats {
-    run::<PacketMode, _>(tree, prims, rays, super::batch::AnyHit(found), width)
+    run::<PacketMode, _>(tree, prims, rays, tests, super::batch::AnyHit(found), width)
 }

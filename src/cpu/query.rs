@@ -3,11 +3,11 @@
 //! is traced one ray at a time, in packets or as one stream ([`QueryMode`]); streams are cut
 //! by octant ([`STREAM_MAX`]).
 
-use super::batch::octant;
+use super::batch::{octant, RayTests};
 use super::simd::Width;
 use super::traverse::{self, Traversal, TraverseOptions};
 use super::{packet, stream};
-use crate::geometry::{Hit, Ray, TraversalStats};
+use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
 use crate::scene::Committed;
 use rayon::prelude::*;
 
@@ -53,7 +53,8 @@ impl QueryMode {
 }
 
 /// Closest hits of `rays` into `hits` (same length). Packets and streams use the standard
-/// traversal's order whatever `how` says.
+/// traversal's order whatever `how` says; every mode honours `opts.intersector` and
+/// `opts.exclude`, with the same hits.
 pub fn intersect(
     scene: &Committed,
     rays: &[Ray],
@@ -75,15 +76,43 @@ pub fn intersect_width(
     mode: QueryMode,
     width: Width,
 ) -> TraversalStats {
-    let (tree, prims) = (&scene.tree, &scene.prims);
-    traced(
+    let uniform = uniform_exclusions(opts, rays.len());
+    closest_hits(
+        scene,
         rays,
+        uniform.as_deref(),
         hits,
+        how,
+        opts,
         mode,
-        Hit::MISS,
-        |ray, stats| traverse::intersect(tree, prims, ray, how, opts, stats),
-        |r, h| packet::intersect(tree, prims, r, h, width),
-        |r, h| stream::intersect(tree, prims, r, h, width).0,
+        width,
+    )
+}
+
+/// [`intersect`] where ray `i` ignores primitive `exclude[i]` (`INVALID` for none) in place of
+/// `opts.exclude`: the secondary rays of a breadth-first render (`OffsetMode::ExcludePrim`).
+///
+/// # Panics
+/// When `exclude` is not as long as `rays`.
+pub fn intersect_excluding(
+    scene: &Committed,
+    rays: &[Ray],
+    exclude: &[PrimIndex],
+    hits: &mut [Hit],
+    how: Traversal,
+    opts: &TraverseOptions,
+    mode: QueryMode,
+) -> TraversalStats {
+    assert_eq!(exclude.len(), rays.len(), "one excluded primitive per ray");
+    closest_hits(
+        scene,
+        rays,
+        Some(exclude),
+        hits,
+        how,
+        opts,
+        mode,
+        Width::best(),
     )
 }
 
@@ -96,31 +125,153 @@ pub fn occluded(
     opts: &TraverseOptions,
     mode: QueryMode,
 ) -> TraversalStats {
-    let (tree, prims, width) = (&scene.tree, &scene.prims, Width::best());
+    let uniform = uniform_exclusions(opts, rays.len());
+    any_hits(scene, rays, uniform.as_deref(), occluded, how, opts, mode)
+}
+
+/// [`occluded`] where ray `i` ignores primitive `exclude[i]` in place of `opts.exclude` (the
+/// shadow rays of a breadth-first render).
+///
+/// # Panics
+/// When `exclude` is not as long as `rays`.
+pub fn occluded_excluding(
+    scene: &Committed,
+    rays: &[Ray],
+    exclude: &[PrimIndex],
+    occluded: &mut [bool],
+    how: Traversal,
+    opts: &TraverseOptions,
+    mode: QueryMode,
+) -> TraversalStats {
+    assert_eq!(exclude.len(), rays.len(), "one excluded primitive per ray");
+    any_hits(scene, rays, Some(exclude), occluded, how, opts, mode)
+}
+
+/// `opts.exclude` for each of `n` rays, where it excludes something (`None`: nothing).
+fn uniform_exclusions(opts: &TraverseOptions, n: usize) -> Option<Vec<PrimIndex>> {
+    (opts.exclude != INVALID).then(|| vec![opts.exclude; n])
+}
+
+/// Closest hits in `mode`, ray `i` ignoring `exclude[i]` (nothing where `None`).
+#[allow(clippy::too_many_arguments)]
+fn closest_hits(
+    scene: &Committed,
+    rays: &[Ray],
+    exclude: Option<&[PrimIndex]>,
+    hits: &mut [Hit],
+    how: Traversal,
+    opts: &TraverseOptions,
+    mode: QueryMode,
+    width: Width,
+) -> TraversalStats {
+    let (tree, prims) = (&scene.tree, &scene.prims);
+    let intersector = opts.intersector;
     traced(
-        rays,
+        (rays, exclude),
+        hits,
+        mode,
+        Hit::MISS,
+        |ray, exclude, stats| {
+            let opts = TraverseOptions { exclude, ..*opts };
+            traverse::intersect(tree, prims, ray, how, &opts, stats)
+        },
+        |r, e, h| {
+            packet::intersect(
+                tree,
+                prims,
+                r,
+                RayTests {
+                    intersector,
+                    exclude: e,
+                },
+                h,
+                width,
+            )
+        },
+        |r, e, h| {
+            stream::intersect(
+                tree,
+                prims,
+                r,
+                RayTests {
+                    intersector,
+                    exclude: e,
+                },
+                h,
+                width,
+            )
+            .0
+        },
+    )
+}
+
+/// Any-hit answers in `mode`, ray `i` ignoring `exclude[i]` (nothing where `None`).
+fn any_hits(
+    scene: &Committed,
+    rays: &[Ray],
+    exclude: Option<&[PrimIndex]>,
+    occluded: &mut [bool],
+    how: Traversal,
+    opts: &TraverseOptions,
+    mode: QueryMode,
+) -> TraversalStats {
+    let (tree, prims, width) = (&scene.tree, &scene.prims, Width::best());
+    let intersector = opts.intersector;
+    traced(
+        (rays, exclude),
         occluded,
         mode,
         false,
-        |ray, stats| traverse::occluded(tree, prims, ray, how, opts, stats),
-        |r, o| packet::occluded(tree, prims, r, o, width),
-        |r, o| stream::occluded(tree, prims, r, o, width).0,
+        |ray, exclude, stats| {
+            let opts = TraverseOptions { exclude, ..*opts };
+            traverse::occluded(tree, prims, ray, how, &opts, stats)
+        },
+        |r, e, o| {
+            packet::occluded(
+                tree,
+                prims,
+                r,
+                RayTests {
+                    intersector,
+                    exclude: e,
+                },
+                o,
+                width,
+            )
+        },
+        |r, e, o| {
+            stream::occluded(
+                tree,
+                prims,
+                r,
+                RayTests {
+                    intersector,
+                    exclude: e,
+                },
+                o,
+                width,
+            )
+            .0
+        },
     )
 }
+
+/// Rays and, where some are excluded, the primitive each ignores.
+type Rays<'a> = (&'a [Ray], Option<&'a [PrimIndex]>);
 
 /// A batch in `mode`: `single` answers one ray, `packet` and `stream` a slice of rays;
 /// streams fill from `empty` (see [`streamed`]).
 fn traced<T: Copy + Send + Sync>(
-    rays: &[Ray],
+    rays: Rays,
     out: &mut [T],
     mode: QueryMode,
     empty: T,
-    single: impl Fn(&Ray, &mut TraversalStats) -> T + Sync,
-    packet: impl Fn(&[Ray], &mut [T]) -> TraversalStats + Sync,
-    stream: impl Fn(&[Ray], &mut [T]) -> TraversalStats + Sync,
+    single: impl Fn(&Ray, PrimIndex, &mut TraversalStats) -> T + Sync,
+    packet: impl Fn(&[Ray], Option<&[PrimIndex]>, &mut [T]) -> TraversalStats + Sync,
+    stream: impl Fn(&[Ray], Option<&[PrimIndex]>, &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
     match mode {
-        QueryMode::Single => chunked(rays, out, CHUNK, |r, o| serial(r, o, &single)),
+        QueryMode::Single => chunked(rays, out, CHUNK, |r, e, o| serial((r, e), o, &single)),
         QueryMode::Packet => chunked(rays, out, CHUNK, packet),
         QueryMode::Stream => streamed(rays, out, empty, stream),
     }
@@ -129,14 +280,15 @@ fn traced<T: Copy + Send + Sync>(
 /// Traces `chunk`-ray pieces of a batch in parallel (`out[i]` belongs to `rays[i]`) and sums
 /// their statistics: no shared counters in the hot loop.
 fn chunked<T: Send>(
-    rays: &[Ray],
+    (rays, exclude): Rays,
     out: &mut [T],
     chunk: usize,
-    trace: impl Fn(&[Ray], &mut [T]) -> TraversalStats + Sync,
+    trace: impl Fn(&[Ray], Option<&[PrimIndex]>, &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
     rays.par_chunks(chunk)
         .zip(out.par_chunks_mut(chunk))
-        .map(|(r, o)| trace(r, o))
+        .enumerate()
+        .map(|(k, (r, o))| trace(r, exclude.map(|e| &e[k * chunk..][..r.len()]), o))
         .reduce(TraversalStats::default, |mut a, b| {
             a.add(&b);
             a
@@ -145,13 +297,13 @@ fn chunked<T: Send>(
 
 /// One ray at a time, for one chunk on the calling thread.
 fn serial<T>(
-    rays: &[Ray],
+    (rays, exclude): Rays,
     out: &mut [T],
-    single: impl Fn(&Ray, &mut TraversalStats) -> T,
+    single: impl Fn(&Ray, PrimIndex, &mut TraversalStats) -> T,
 ) -> TraversalStats {
     let mut stats = TraversalStats::default();
-    for (ray, o) in rays.iter().zip(out) {
-        *o = single(ray, &mut stats);
+    for (i, (ray, o)) in rays.iter().zip(out).enumerate() {
+        *o = single(ray, exclude.map_or(INVALID, |e| e[i]), &mut stats);
     }
     stats
 }
@@ -166,10 +318,10 @@ const LONG_RUNS: usize = 64;
 /// own order; others are sorted by octant (a stable counting sort) and each stream, of one
 /// octant, traced on a gathered copy, with `out` filled from `empty` and its answers.
 fn streamed<T: Copy + Send + Sync>(
-    rays: &[Ray],
+    (rays, exclude): Rays,
     out: &mut [T],
     empty: T,
-    trace: impl Fn(&[Ray], &mut [T]) -> TraversalStats + Sync,
+    trace: impl Fn(&[Ray], Option<&[PrimIndex]>, &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
     let size = rays
         .len()
@@ -178,7 +330,7 @@ fn streamed<T: Copy + Send + Sync>(
     let octants: Vec<u8> = rays.iter().map(|r| octant(r) as u8).collect();
     let runs = 1 + octants.windows(2).filter(|w| w[0] != w[1]).count();
     if runs * LONG_RUNS <= rays.len() {
-        return chunked(rays, out, size, trace);
+        return chunked((rays, exclude), out, size, trace);
     }
     let mut start = [0usize; 9];
     for &o in &octants {
@@ -201,8 +353,11 @@ fn streamed<T: Copy + Send + Sync>(
         .par_iter()
         .map(|part| {
             let part_rays: Vec<Ray> = part.iter().map(|&i| rays[i]).collect();
+            let part_exclude: Option<Vec<PrimIndex>> =
+                exclude.map(|e| part.iter().map(|&i| e[i]).collect());
             let mut answers = vec![empty; part.len()];
-            (trace(&part_rays, &mut answers), answers)
+            let stats = trace(&part_rays, part_exclude.as_deref(), &mut answers);
+            (stats, answers)
         })
         .collect();
     let mut stats = TraversalStats::default();

@@ -2,7 +2,8 @@
 //! once per octant group with all the group's rays at once. Every node receives a list of the
 //! rays that enter it; an inner node splits its list into the near and far children's lists
 //! (SIMD over N lanes), a leaf tests its triangles against every ray of its list (N rays × 1
-//! triangle: SAH leaves hold ~2 triangles per visit, too few to fill a block of N triangles).
+//! triangle: SAH leaves hold ~2 triangles per visit, too few to fill a block of N triangles;
+//! Möller–Trumbore, other tests ray by ray: [`RayTests`]).
 //!
 //! Memory: the lists live on one ray stack, reused for the whole batch and never shrunk, so no node
 //! allocates. Each list is a run of slots in columns (ray index, segment start, segment end),
@@ -18,7 +19,7 @@
 //! bit-identical to the single-ray traversals.
 
 use super::batch::{
-    first, lanes_where, positive, run, Answer, AnyHit, Batch, Closest, Mode, Root, Split,
+    first, lanes_where, positive, run, Answer, AnyHit, Batch, Closest, Mode, RayTests, Root, Split,
 };
 use super::packet::{self, Lanes};
 use super::simd::{self, Isa, Width};
@@ -327,7 +328,7 @@ impl Mode for StreamMode {
     }
 }
 
-/// Closest hits of `rays` with the n-ray traversal (one thread).
+/// Closest hits of `rays` (primitive tests `tests`) with the n-ray traversal (one thread).
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
@@ -337,13 +338,14 @@ pub fn intersect(
     tree: &KdTree,
     prims: &PrimitiveSet,
     rays: &[Ray],
+    tests: RayTests,
     hits: &mut [Hit],
     width: Width,
 ) -> (TraversalStats, StreamMemory) {
-    run::<StreamMode, _>(tree, prims, rays, Closest(hits), width)
+    run::<StreamMode, _>(tree, prims, rays, tests, Closest(hits), width)
 }
 
-/// Any-hit queries of `rays` with the n-ray traversal (one thread).
+/// Any-hit queries of `rays` (primitive tests `tests`) with the n-ray traversal (one thread).
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
@@ -353,8 +355,9 @@ pub fn occluded(
     tree: &KdTree,
     prims: &PrimitiveSet,
     rays: &[Ray],
+    tests: RayTests,
     found: &mut [bool],
     width: Width,
 ) -> (TraversalStats, StreamMemory) {
-    run::<StreamMode, _>(tree, prims, rays, AnyHit(found), width)
+    run::<StreamMode, _>(tree, prims, rays, tests, AnyHit(found), width)
 }

@@ -368,6 +368,8 @@ fn rgba(c: Vec3, samples: u32) -> [u8; 4] {
 #[derive(Clone, Copy)]
 struct WaveRay {
     ray: Ray,
+    /// The primitive the ray ignores (`OffsetMode::ExcludePrim`; `INVALID` for none).
+    exclude: PrimIndex,
     weight: Vec3,
     depth: u32,
     path: u32,
@@ -383,9 +385,9 @@ const WAVE_PATHS: usize = 1 << 20;
 /// closest hits of all rays of a depth as one stream query, then all their shadow rays as one
 /// occlusion query, then the next depth's rays. Each sample's radiance is the depth-first one's
 /// terms (same rays, same hits, same shading) summed in another order; float addition is not
-/// associative, so a pixel may round to the next 1/255 step. The stream queries carry no
-/// per-ray excluded primitive, so `OffsetMode::ExcludePrim` is refused before rendering
-/// (`RenderOptions::validate`). The traced pixels go in runs of at most [`WAVE_PATHS`] samples.
+/// associative, so a pixel may round to the next 1/255 step. Each ray carries the primitive it
+/// ignores (`OffsetMode::ExcludePrim`) into the stream queries. The traced pixels go in runs of
+/// at most [`WAVE_PATHS`] samples.
 fn render_breadth_first(
     scene: &Committed,
     camera: &Camera,
@@ -415,6 +417,7 @@ fn render_breadth_first(
                 let rays = &rays;
                 (0..samples).map(move |s| WaveRay {
                     ray: primary_ray(rays, size, i % w, i / w, s, samples),
+                    exclude: INVALID,
                     weight: Vec3::ONE,
                     depth: 1,
                     path: (k as u32) * samples + s,
@@ -456,6 +459,7 @@ fn trace_wavefronts(
     let mut color = vec![Vec3::ZERO; pixels * samples as usize];
     let mut hits = Vec::new();
     let mut shadows = Vec::new();
+    let mut skips = Vec::new();
     let mut blocked = Vec::new();
     // Each ray of a slice may add a shadow ray per light.
     let slice = (WAVE_RAYS / (1 + scene.lights.len())).max(1);
@@ -466,10 +470,12 @@ fn trace_wavefronts(
             waiting.push(rest);
         }
         let rays: Vec<Ray> = wave.iter().map(|r| r.ray).collect();
+        let exclude: Vec<PrimIndex> = wave.iter().map(|r| r.exclude).collect();
         hits.resize(rays.len(), Hit::MISS);
-        query::intersect(
+        query::intersect_excluding(
             scene,
             &rays,
+            &exclude,
             &mut hits,
             traversal,
             &topts,
@@ -481,13 +487,18 @@ fn trace_wavefronts(
             .map(|(r, hit)| hit.is_hit().then(|| tracer.surface(&r.ray, hit)))
             .collect();
         shadows.clear();
+        skips.clear();
         for s in surfaces.iter().flatten().filter(|s| s.local_weight > 0.0) {
-            shadows.extend(tracer.shadow_rays(s).flatten().map(|(r, _)| r));
+            for (r, skip) in tracer.shadow_rays(s).flatten() {
+                shadows.push(r);
+                skips.push(skip);
+            }
         }
         blocked.resize(shadows.len(), false);
-        query::occluded(
+        query::occluded_excluding(
             scene,
             &shadows,
+            &skips,
             &mut blocked,
             traversal,
             &topts,
@@ -505,14 +516,21 @@ fn trace_wavefronts(
                 let local = tracer.local(s, &r.ray, |_, _| !blocked.next().is_some_and(|&b| b));
                 *c += r.weight * s.local_weight * local;
             }
-            tracer.secondary(s, &r.ray, r.weight, r.depth, |ray, _, weight, depth| {
-                next.push(WaveRay {
-                    ray,
-                    weight,
-                    depth,
-                    path: r.path,
-                })
-            });
+            tracer.secondary(
+                s,
+                &r.ray,
+                r.weight,
+                r.depth,
+                |ray, exclude, weight, depth| {
+                    next.push(WaveRay {
+                        ray,
+                        exclude,
+                        weight,
+                        depth,
+                        path: r.path,
+                    })
+                },
+            );
         }
         if !next.is_empty() {
             waiting.push(next);

@@ -104,7 +104,7 @@ impl Default for TraverseOptions {
 /// gaps; a ray through a leaf corner may still be placed in a neighbouring leaf, which is why
 /// the builders list a primitive in every leaf it touches, with padded clipped boxes
 /// (`kdtree::split::classify`, `Triangle::clipped_bounds`).
-fn scene_box(tree: &KdTree, intersector: Intersector) -> Aabb {
+pub(crate) fn scene_box(tree: &KdTree, intersector: Intersector) -> Aabb {
     match intersector {
         Intersector::MollerTrumbore => tree.bounds,
         Intersector::Watertight => {
@@ -168,13 +168,15 @@ pub fn occluded(
     query.found
 }
 
-/// The standard traversal of one subtree, `start`, for ray `ray` of a batch whose list of rays
-/// became too short to share nodes (the n-ray traversal's finish): the closest hit goes into
-/// `hit` (the planes were tested already). Returns whether the ray is finished there.
+/// The standard traversal of one subtree, `start`, for ray `ray` (primitive test `test`) of a
+/// batch whose list of rays became too short to share nodes (the n-ray traversal's finish): the
+/// closest hit goes into `hit` (the planes were tested already). Returns whether the ray is
+/// finished there.
 pub(crate) fn closest_in_subtree(
     tree: &KdTree,
     prims: &PrimitiveSet,
     ray: &Ray,
+    test: &RayTest,
     start: Entry,
     hit: &mut Hit,
     stats: &mut TraversalStats,
@@ -182,7 +184,7 @@ pub(crate) fn closest_in_subtree(
     let mut query = Closest {
         prims,
         ray,
-        test: RayTest::PLAIN,
+        test: *test,
         hit: *hit,
     };
     let done = standard::traverse(tree, &TRay::new(ray), start, &mut query, stats);
@@ -195,13 +197,14 @@ pub(crate) fn any_in_subtree(
     tree: &KdTree,
     prims: &PrimitiveSet,
     ray: &Ray,
+    test: &RayTest,
     start: Entry,
     stats: &mut TraversalStats,
 ) -> bool {
     let mut query = AnyHit {
         prims,
         ray,
-        test: RayTest::PLAIN,
+        test: *test,
         found: false,
     };
     standard::traverse(tree, &TRay::new(ray), start, &mut query, stats)

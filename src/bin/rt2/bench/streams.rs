@@ -8,8 +8,8 @@ use super::{embree_rows, model_scene, ray_generator, shared, Args};
 use rt2::context::Context;
 use rt2::cpu::query::{self, QueryMode, STREAM_CHUNK, STREAM_MAX};
 use rt2::cpu::simd::Width;
-use rt2::cpu::stream;
 use rt2::cpu::traverse::{Traversal, TraverseOptions};
+use rt2::cpu::{stream, RayTests};
 use rt2::dispatch::BackendRequest;
 use rt2::error::Result;
 use rt2::geometry::{Hit, Ray};
@@ -276,7 +276,8 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             for size in [STREAM_CHUNK, STREAM_MAX] {
                 let chunk = &rays[..size.min(rays.len())];
                 let mut hits = vec![Hit::MISS; chunk.len()];
-                let (_, m) = stream::intersect(&c.tree, &c.prims, chunk, &mut hits, width);
+                let (_, m) =
+                    stream::intersect(&c.tree, &c.prims, chunk, RayTests::PLAIN, &mut hits, width);
                 writeln!(
                     mem,
                     "| {model} {what} ({} rays) | {:.0} | {:.0} | {:.0} |",

@@ -24,8 +24,7 @@ use std::time::Instant;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Engine {
     /// The CPU backend in one of its query modes. Packets and streams follow the standard
-    /// traversal's order and test triangles with Möller–Trumbore only (the library refuses the
-    /// watertight test there).
+    /// traversal's order, with either intersector.
     Cpu(QueryMode),
     /// The GPU backend: Möller–Trumbore and the fixed epsilon offset only.
     Gpu,
@@ -48,22 +47,24 @@ impl Engine {
     }
 
     /// The traversals × intersectors measured with this engine. One ray at a time: all of
-    /// them. Packets and streams: their one combination. The GPU: every traversal kernel,
-    /// Möller–Trumbore.
+    /// them. Packets and streams: their traversal order with each intersector. The GPU: every
+    /// traversal kernel, Möller–Trumbore.
     fn methods(self) -> Vec<(Traversal, Intersector)> {
-        let mt = Intersector::MollerTrumbore;
         match self {
             Engine::Cpu(QueryMode::Single) => Traversal::ALL
                 .into_iter()
                 .flat_map(|t| Intersector::ALL.map(|i| (t, i)))
                 .collect(),
-            Engine::Cpu(_) => vec![(Traversal::Standard, mt)],
-            Engine::Gpu => Traversal::ALL.map(|t| (t, mt)).to_vec(),
+            Engine::Cpu(_) => Intersector::ALL.map(|i| (Traversal::Standard, i)).to_vec(),
+            Engine::Gpu => Traversal::ALL
+                .map(|t| (t, Intersector::MollerTrumbore))
+                .to_vec(),
         }
     }
 
-    /// The offset modes measured with this engine: the breadth-first waves carry no excluded
-    /// primitive, and the GPU kernels offset by the fixed epsilon only.
+    /// The offset modes measured with this engine: batch queries (`Context::intersect`, like
+    /// `rt2_intersect`) take no per-ray excluded primitive (the breadth-first renderer's own
+    /// waves do), and the GPU kernels offset by the fixed epsilon only.
     fn offsets(self) -> &'static [OffsetMode] {
         match self {
             Engine::Cpu(QueryMode::Single) => &OffsetMode::ALL,
@@ -246,8 +247,8 @@ pub(super) fn chart(a: &Args) -> Result<String> {
          Modes (the `mode` column; marker on the chart): **single** = `QueryMode::Single`, one ray \
          at a time, every traversal × intersector (circles); **packet** = `QueryMode::Packet` \
          (triangles) and **stream** = `QueryMode::Stream` (squares), which follow the standard \
-         traversal's order and test triangles with Möller–Trumbore only (the library refuses \
-         the watertight test there); **gpu** = the GPU backend (diamonds), every traversal \
+         traversal's order with either intersector (the watertight test one ray at a time in \
+         the leaves); **gpu** = the GPU backend (diamonds), every traversal \
          kernel, Möller–Trumbore and the epsilon offset only (all its kernels have); its \
          Möller–Trumbore rounds differently from the CPU's near edges (Vulkan lets a division \
          be off by 2.5 ULP and a shader compiler fuse multiply-adds), so its leak count on the \
