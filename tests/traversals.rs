@@ -9,7 +9,7 @@
 use glam::{DVec3, Mat3, Vec3};
 use rt2::cpu::simd::Width;
 use rt2::cpu::traverse::{intersect, occluded, Traversal, TraverseOptions};
-use rt2::cpu::{packet, stream, RayTests};
+use rt2::cpu::{packet, stream, Excluded, RayTests};
 use rt2::geometry::{
     Aabb, Ellipsoid, Hit, Plane, PrimKind, PrimitiveSet, Ray, RayTest, Sphere, TraversalStats,
     Triangle, INVALID,
@@ -364,8 +364,8 @@ fn check_rays(
 /// Packets and streams at every lane width this CPU runs: the same hits as the standard
 /// traversal, bit for bit, the same occlusion answers, and the same work (they take the standard
 /// traversal's decisions for every ray, only grouped differently). With both ray–triangle tests,
-/// and with per-ray excluded primitives: every other ray ignores the primitive it hits first,
-/// so it must find what lies behind it (the SIMD leaf tests serve only Möller–Trumbore with
+/// with one primitive excluded for all rays, and with per-ray excluded primitives: every other
+/// ray ignores the primitive it hits first, so it must find what lies behind it (the SIMD leaf tests serve only Möller–Trumbore with
 /// nothing excluded; the others run the single-ray leaf test lane by lane).
 fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ray]) {
     let single = |opts: &TraverseOptions, ray: &Ray, stats: &mut TraversalStats| {
@@ -385,7 +385,16 @@ fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ra
         .map(|i| if i % 2 == 0 { first[i].prim } else { INVALID })
         .collect();
     for intersector in Intersector::ALL {
-        for exclude in [None, Some(&skip[..])] {
+        // One primitive for every ray too (`TraverseOptions::exclude` in a batch query).
+        let one = first
+            .iter()
+            .find(|h| h.is_hit())
+            .map_or(INVALID, |h| h.prim);
+        for exclude in [
+            Excluded::All(INVALID),
+            Excluded::All(one),
+            Excluded::Each(&skip),
+        ] {
             let tests = RayTests {
                 intersector,
                 exclude,
@@ -395,13 +404,18 @@ fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ra
                 .map(|i| {
                     let opts = TraverseOptions {
                         intersector,
-                        exclude: exclude.map_or(INVALID, |e| e[i]),
+                        // Spelled out: the reference must not share `Excluded::of`.
+                        exclude: match exclude {
+                            Excluded::All(p) => p,
+                            Excluded::Each(e) => e[i],
+                        },
                         ..TraverseOptions::default()
                     };
                     single(&opts, &rays[i], &mut standard_stats)
                 })
                 .collect();
-            if exclude.is_some() {
+            let excluding = matches!(exclude, Excluded::Each(_));
+            if excluding {
                 let moved = (0..rays.len()).filter(|&i| std[i].prim != first[i].prim);
                 assert!(
                     moved.count() > 0 || first.iter().all(|h| !h.is_hit()),
@@ -426,7 +440,11 @@ fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ra
                         "{what}, {mode} x{}, {}{}",
                         width.lanes(),
                         intersector.name(),
-                        if exclude.is_some() { ", excluding" } else { "" }
+                        match exclude {
+                            Excluded::All(INVALID) => "",
+                            Excluded::All(_) => ", excluding one",
+                            Excluded::Each(_) => ", excluding each",
+                        }
                     );
                     for (i, (h, s)) in hits.iter().zip(&std).enumerate() {
                         assert!(
@@ -869,7 +887,7 @@ fn degenerate_rays_miss_without_touching_the_tree() {
         for (width, intersector) in widths.flat_map(|w| Intersector::ALL.map(|i| (w, i))) {
             let t = RayTests {
                 intersector,
-                exclude: None,
+                exclude: Excluded::All(INVALID),
             };
             let mut hits = vec![Hit::MISS; rays.len()];
             let mut occ = vec![true; rays.len()];

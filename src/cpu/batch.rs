@@ -29,29 +29,47 @@ use crate::precision::Intersector;
 #[derive(Clone, Copy, Debug)]
 pub struct RayTests<'a> {
     pub intersector: Intersector,
-    /// `exclude[i]` is the primitive ray `i` ignores (`INVALID` for none); `None`: nothing
-    /// is excluded. As long as the batch's rays.
-    pub exclude: Option<&'a [PrimIndex]>,
+    pub exclude: Excluded<'a>,
+}
+
+/// The primitives the rays of a batch ignore.
+#[derive(Clone, Copy, Debug)]
+pub enum Excluded<'a> {
+    /// The same one for every ray (`INVALID`: none).
+    All(PrimIndex),
+    /// Ray `i` ignores `Each(e)`'s `e[i]`; as long as the rays.
+    Each(&'a [PrimIndex]),
+}
+
+impl Excluded<'_> {
+    /// The primitive ray `i` ignores.
+    #[inline(always)]
+    pub fn of(&self, i: usize) -> PrimIndex {
+        match self {
+            Excluded::All(p) => *p,
+            Excluded::Each(e) => e[i],
+        }
+    }
 }
 
 impl RayTests<'_> {
     /// Möller–Trumbore, nothing excluded: what the SIMD leaf tests compute.
     pub const PLAIN: RayTests<'static> = RayTests {
         intersector: Intersector::MollerTrumbore,
-        exclude: None,
+        exclude: Excluded::All(INVALID),
     };
 
     /// Whether these are [`RayTests::PLAIN`]'s tests.
     #[inline(always)]
     fn plain(&self) -> bool {
-        self.intersector == Intersector::MollerTrumbore && self.exclude.is_none()
+        self.intersector == Intersector::MollerTrumbore
+            && matches!(self.exclude, Excluded::All(INVALID))
     }
 
     /// The test of ray `i`.
     #[inline(always)]
     fn of(&self, i: usize, ray: &Ray) -> RayTest {
-        let exclude = self.exclude.map_or(INVALID, |e| e[i]);
-        RayTest::new(ray, self.intersector, exclude)
+        RayTest::new(ray, self.intersector, self.exclude.of(i))
     }
 }
 
@@ -389,10 +407,9 @@ impl<'a, A: Answer> Batch<'a, A> {
             u32::try_from(n).is_ok(),
             "a packet or stream batch holds at most u32::MAX rays, not {n}"
         );
-        assert!(
-            tests.exclude.is_none_or(|e| e.len() == n),
-            "one excluded primitive per ray"
-        );
+        if let Excluded::Each(e) = tests.exclude {
+            assert_eq!(e.len(), n, "one excluded primitive per ray");
+        }
         // The single-ray traversal's box: padded for the watertight test.
         let bounds = scene_box(tree, tests.intersector);
         let mut split = [(); 3].map(|_| Vec::with_capacity(n));

@@ -9,4 +9,4 @@ pub mod stream;
 pub mod traverse;
 pub mod whitted;
 
-pub use batch::RayTests;
+pub use batch::{Excluded, RayTests};

@@ -3,11 +3,11 @@
 //! is traced one ray at a time, in packets or as one stream ([`QueryMode`]); streams are cut
 //! by octant ([`STREAM_MAX`]).
 
-use super::batch::{octant, RayTests};
+use super::batch::{octant, Excluded, RayTests};
 use super::simd::Width;
 use super::traverse::{self, Traversal, TraverseOptions};
 use super::{packet, stream};
-use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
+use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats};
 use crate::scene::Committed;
 use rayon::prelude::*;
 
@@ -76,17 +76,8 @@ pub fn intersect_width(
     mode: QueryMode,
     width: Width,
 ) -> TraversalStats {
-    let uniform = uniform_exclusions(opts, rays.len());
-    closest_hits(
-        scene,
-        rays,
-        uniform.as_deref(),
-        hits,
-        how,
-        opts,
-        mode,
-        width,
-    )
+    let rays = (rays, Excluded::All(opts.exclude));
+    closest_hits(scene, rays, hits, how, opts, mode, width)
 }
 
 /// [`intersect`] where ray `i` ignores primitive `exclude[i]` (`INVALID` for none) in place of
@@ -104,16 +95,8 @@ pub fn intersect_excluding(
     mode: QueryMode,
 ) -> TraversalStats {
     assert_eq!(exclude.len(), rays.len(), "one excluded primitive per ray");
-    closest_hits(
-        scene,
-        rays,
-        Some(exclude),
-        hits,
-        how,
-        opts,
-        mode,
-        Width::best(),
-    )
+    let rays = (rays, Excluded::Each(exclude));
+    closest_hits(scene, rays, hits, how, opts, mode, Width::best())
 }
 
 /// Any-hit queries: `occluded[i]` is true when something lies in ray i's `[tmin, tmax)`.
@@ -125,8 +108,8 @@ pub fn occluded(
     opts: &TraverseOptions,
     mode: QueryMode,
 ) -> TraversalStats {
-    let uniform = uniform_exclusions(opts, rays.len());
-    any_hits(scene, rays, uniform.as_deref(), occluded, how, opts, mode)
+    let rays = (rays, Excluded::All(opts.exclude));
+    any_hits(scene, rays, occluded, how, opts, mode)
 }
 
 /// [`occluded`] where ray `i` ignores primitive `exclude[i]` in place of `opts.exclude` (the
@@ -144,30 +127,23 @@ pub fn occluded_excluding(
     mode: QueryMode,
 ) -> TraversalStats {
     assert_eq!(exclude.len(), rays.len(), "one excluded primitive per ray");
-    any_hits(scene, rays, Some(exclude), occluded, how, opts, mode)
+    let rays = (rays, Excluded::Each(exclude));
+    any_hits(scene, rays, occluded, how, opts, mode)
 }
 
-/// `opts.exclude` for each of `n` rays, where it excludes something (`None`: nothing).
-fn uniform_exclusions(opts: &TraverseOptions, n: usize) -> Option<Vec<PrimIndex>> {
-    (opts.exclude != INVALID).then(|| vec![opts.exclude; n])
-}
-
-/// Closest hits in `mode`, ray `i` ignoring `exclude[i]` (nothing where `None`).
-#[allow(clippy::too_many_arguments)]
+/// Closest hits in `mode`; the rays carry what they exclude (`opts.exclude` is not read).
 fn closest_hits(
     scene: &Committed,
-    rays: &[Ray],
-    exclude: Option<&[PrimIndex]>,
+    rays: Rays,
     hits: &mut [Hit],
     how: Traversal,
     opts: &TraverseOptions,
     mode: QueryMode,
     width: Width,
 ) -> TraversalStats {
-    let (tree, prims) = (&scene.tree, &scene.prims);
-    let intersector = opts.intersector;
+    let (tree, prims, intersector) = (&scene.tree, &scene.prims, opts.intersector);
     traced(
-        (rays, exclude),
+        rays,
         hits,
         mode,
         Hit::MISS,
@@ -175,50 +151,36 @@ fn closest_hits(
             let opts = TraverseOptions { exclude, ..*opts };
             traverse::intersect(tree, prims, ray, how, &opts, stats)
         },
-        |r, e, h| {
-            packet::intersect(
-                tree,
-                prims,
-                r,
-                RayTests {
-                    intersector,
-                    exclude: e,
-                },
-                h,
-                width,
-            )
+        |rays, exclude, hits| {
+            let tests = RayTests {
+                intersector,
+                exclude,
+            };
+            packet::intersect(tree, prims, rays, tests, hits, width)
         },
-        |r, e, h| {
-            stream::intersect(
-                tree,
-                prims,
-                r,
-                RayTests {
-                    intersector,
-                    exclude: e,
-                },
-                h,
-                width,
-            )
-            .0
+        |rays, exclude, hits| {
+            let tests = RayTests {
+                intersector,
+                exclude,
+            };
+            stream::intersect(tree, prims, rays, tests, hits, width).0
         },
     )
 }
 
-/// Any-hit answers in `mode`, ray `i` ignoring `exclude[i]` (nothing where `None`).
+/// Any-hit answers in `mode`; the rays carry what they exclude (`opts.exclude` is not read).
 fn any_hits(
     scene: &Committed,
-    rays: &[Ray],
-    exclude: Option<&[PrimIndex]>,
+    rays: Rays,
     occluded: &mut [bool],
     how: Traversal,
     opts: &TraverseOptions,
     mode: QueryMode,
 ) -> TraversalStats {
-    let (tree, prims, width) = (&scene.tree, &scene.prims, Width::best());
-    let intersector = opts.intersector;
+    let (tree, prims, intersector) = (&scene.tree, &scene.prims, opts.intersector);
+    let width = Width::best();
     traced(
-        (rays, exclude),
+        rays,
         occluded,
         mode,
         false,
@@ -226,38 +188,25 @@ fn any_hits(
             let opts = TraverseOptions { exclude, ..*opts };
             traverse::occluded(tree, prims, ray, how, &opts, stats)
         },
-        |r, e, o| {
-            packet::occluded(
-                tree,
-                prims,
-                r,
-                RayTests {
-                    intersector,
-                    exclude: e,
-                },
-                o,
-                width,
-            )
+        |rays, exclude, out| {
+            let tests = RayTests {
+                intersector,
+                exclude,
+            };
+            packet::occluded(tree, prims, rays, tests, out, width)
         },
-        |r, e, o| {
-            stream::occluded(
-                tree,
-                prims,
-                r,
-                RayTests {
-                    intersector,
-                    exclude: e,
-                },
-                o,
-                width,
-            )
-            .0
+        |rays, exclude, out| {
+            let tests = RayTests {
+                intersector,
+                exclude,
+            };
+            stream::occluded(tree, prims, rays, tests, out, width).0
         },
     )
 }
 
-/// Rays and, where some are excluded, the primitive each ignores.
-type Rays<'a> = (&'a [Ray], Option<&'a [PrimIndex]>);
+/// Rays and the primitives they ignore.
+type Rays<'a> = (&'a [Ray], Excluded<'a>);
 
 /// A batch in `mode`: `single` answers one ray, `packet` and `stream` a slice of rays;
 /// streams fill from `empty` (see [`streamed`]).
@@ -267,8 +216,8 @@ fn traced<T: Copy + Send + Sync>(
     mode: QueryMode,
     empty: T,
     single: impl Fn(&Ray, PrimIndex, &mut TraversalStats) -> T + Sync,
-    packet: impl Fn(&[Ray], Option<&[PrimIndex]>, &mut [T]) -> TraversalStats + Sync,
-    stream: impl Fn(&[Ray], Option<&[PrimIndex]>, &mut [T]) -> TraversalStats + Sync,
+    packet: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
+    stream: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
     match mode {
         QueryMode::Single => chunked(rays, out, CHUNK, |r, e, o| serial((r, e), o, &single)),
@@ -283,12 +232,18 @@ fn chunked<T: Send>(
     (rays, exclude): Rays,
     out: &mut [T],
     chunk: usize,
-    trace: impl Fn(&[Ray], Option<&[PrimIndex]>, &mut [T]) -> TraversalStats + Sync,
+    trace: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
     rays.par_chunks(chunk)
         .zip(out.par_chunks_mut(chunk))
         .enumerate()
-        .map(|(k, (r, o))| trace(r, exclude.map(|e| &e[k * chunk..][..r.len()]), o))
+        .map(|(k, (r, o))| {
+            let exclude = match exclude {
+                Excluded::Each(e) => Excluded::Each(&e[k * chunk..][..r.len()]),
+                all => all,
+            };
+            trace(r, exclude, o)
+        })
         .reduce(TraversalStats::default, |mut a, b| {
             a.add(&b);
             a
@@ -303,7 +258,7 @@ fn serial<T>(
 ) -> TraversalStats {
     let mut stats = TraversalStats::default();
     for (i, (ray, o)) in rays.iter().zip(out).enumerate() {
-        *o = single(ray, exclude.map_or(INVALID, |e| e[i]), &mut stats);
+        *o = single(ray, exclude.of(i), &mut stats);
     }
     stats
 }
@@ -321,7 +276,7 @@ fn streamed<T: Copy + Send + Sync>(
     (rays, exclude): Rays,
     out: &mut [T],
     empty: T,
-    trace: impl Fn(&[Ray], Option<&[PrimIndex]>, &mut [T]) -> TraversalStats + Sync,
+    trace: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
     let size = rays
         .len()
@@ -353,10 +308,16 @@ fn streamed<T: Copy + Send + Sync>(
         .par_iter()
         .map(|part| {
             let part_rays: Vec<Ray> = part.iter().map(|&i| rays[i]).collect();
-            let part_exclude: Option<Vec<PrimIndex>> =
-                exclude.map(|e| part.iter().map(|&i| e[i]).collect());
+            let gathered: Vec<PrimIndex>;
+            let part_exclude = match exclude {
+                Excluded::Each(e) => {
+                    gathered = part.iter().map(|&i| e[i]).collect();
+                    Excluded::Each(&gathered)
+                }
+                all => all,
+            };
             let mut answers = vec![empty; part.len()];
-            let stats = trace(&part_rays, part_exclude.as_deref(), &mut answers);
+            let stats = trace(&part_rays, part_exclude, &mut answers);
             (stats, answers)
         })
         .collect();
