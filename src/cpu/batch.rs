@@ -20,12 +20,9 @@ use crate::kdtree::KdTree;
 use crate::precision::Intersector;
 
 /// The primitive test of a batch's rays: the ray–triangle test, and the primitive each ray
-/// ignores (`OffsetMode::ExcludePrim`'s secondary rays).
-///
-/// The SIMD leaf tests (N rays × 1 triangle in streams, 1 ray × N triangles in packets) compute
-/// the default, Möller–Trumbore with nothing excluded. Any other test runs the single-ray leaf
-/// test lane by lane, so that every mode still takes the standard traversal's decisions and
-/// returns its hits bit for bit: the traversal stays vectorised, the leaves do not.
+/// ignores (`OffsetMode::ExcludePrim`'s secondary rays). The SIMD leaf tests (N rays × 1
+/// triangle in streams, 1 ray × N triangles in packets) compute every combination bit for bit
+/// as the single-ray test does.
 #[derive(Clone, Copy, Debug)]
 pub struct RayTests<'a> {
     pub intersector: Intersector,
@@ -50,6 +47,17 @@ impl Excluded<'_> {
             Excluded::Each(e) => e[i],
         }
     }
+
+    /// The lanes of the rays `ids` that do not ignore primitive `p` (lanes past the rays:
+    /// any).
+    #[inline(always)]
+    fn keeping<const N: usize>(&self, p: PrimIndex, ids: &[u32; N]) -> u32 {
+        match self {
+            Excluded::All(e) if *e == p => 0,
+            Excluded::All(_) => first::<N>(N),
+            Excluded::Each(e) => lanes_where::<N>(|l| e.get(ids[l] as usize) != Some(&p)),
+        }
+    }
 }
 
 impl RayTests<'_> {
@@ -58,13 +66,6 @@ impl RayTests<'_> {
         intersector: Intersector::MollerTrumbore,
         exclude: Excluded::All(INVALID),
     };
-
-    /// Whether these are [`RayTests::PLAIN`]'s tests.
-    #[inline(always)]
-    fn plain(&self) -> bool {
-        self.intersector == Intersector::MollerTrumbore
-            && matches!(self.exclude, Excluded::All(INVALID))
-    }
 
     /// The test of ray `i`.
     #[inline(always)]
@@ -80,9 +81,10 @@ pub(crate) trait Answer {
     /// Tests the planes (outside the tree) against ray `i`, not degenerate. False when that
     /// answers the ray (any-hit): it needs no traversal.
     fn planes(&mut self, prims: &PrimitiveSet, i: usize, ray: &Ray, test: &RayTest) -> bool;
-    /// Tests ray `i` against a leaf's prepared primitives; `t_exit` is where the ray leaves the
-    /// leaf. True when the ray is finished (the standard traversal's stop rule). (The leaf, the
-    /// ray and the width's proof: a struct bundling them would only rename the arguments.)
+    /// Tests ray `i` (its test `test`) against a leaf's prepared primitives; `t_exit` is where
+    /// the ray leaves the leaf. True when the ray is finished (the standard traversal's stop
+    /// rule). (The leaf, the ray and the width's proof: a struct bundling them would only
+    /// rename the arguments.)
     #[allow(clippy::too_many_arguments)]
     fn leaf<const N: usize>(
         &mut self,
@@ -91,12 +93,13 @@ pub(crate) trait Answer {
         leaf: &LeafPrims<N>,
         i: usize,
         ray: &Ray,
+        test: &RayTest,
         t_exit: f32,
         stats: &mut TraversalStats,
     ) -> bool;
-    /// Tests the rays `ids` (lanes `live`) against a leaf's primitives `leaf`, N rays per
-    /// triangle, primitives in leaf order as the single-ray test; `t_exit` is where each ray
-    /// leaves the leaf. Returns the lanes that are finished.
+    /// Tests the rays `ids` (lanes `live`, their tests `tests`) against a leaf's primitives
+    /// `leaf`, N rays per triangle, primitives in leaf order as the single-ray test; `t_exit`
+    /// is where each ray leaves the leaf. Returns the lanes that are finished.
     #[allow(clippy::too_many_arguments)]
     fn leaf_rays<const N: usize>(
         &mut self,
@@ -104,24 +107,11 @@ pub(crate) trait Answer {
         prims: &PrimitiveSet,
         leaf: &[u32],
         rays: &[Ray],
+        tests: &RayTests,
         ids: &[u32; N],
         live: u32,
         t_exit: &[f32; N],
     ) -> u32;
-    /// Tests ray `i` against the primitives `leaf` one at a time with its own `test`, as the
-    /// single-ray traversal does (tests the SIMD leaves do not compute: [`RayTests`]). True
-    /// when the ray is finished.
-    #[allow(clippy::too_many_arguments)]
-    fn leaf_one(
-        &mut self,
-        prims: &PrimitiveSet,
-        leaf: &[u32],
-        i: usize,
-        ray: &Ray,
-        test: &RayTest,
-        t_exit: f32,
-        stats: &mut TraversalStats,
-    ) -> bool;
     /// Ray `i` through the subtree `start` alone, with the standard single-ray traversal.
     /// True when the ray is finished.
     #[allow(clippy::too_many_arguments)]
@@ -160,6 +150,7 @@ impl Answer for Closest<'_> {
         leaf: &LeafPrims<N>,
         i: usize,
         ray: &Ray,
+        test: &RayTest,
         t_exit: f32,
         stats: &mut TraversalStats,
     ) -> bool {
@@ -167,9 +158,9 @@ impl Answer for Closest<'_> {
         stats.prim_tests += (leaf.count - leaf.others.len()) as u64;
         let hit = &mut self.0[i];
         for b in &leaf.blocks {
-            b.intersect(isa, ray, hit);
+            b.intersect(isa, ray, test, hit);
         }
-        closest_among(prims, ray, &RayTest::PLAIN, &leaf.others, hit, stats);
+        closest_among(prims, ray, test, &leaf.others, hit, stats);
         // Strictly before the exit, as `traverse::common::Closest`.
         hit.t < t_exit
     }
@@ -181,11 +172,13 @@ impl Answer for Closest<'_> {
         prims: &PrimitiveSet,
         leaf: &[u32],
         rays: &[Ray],
+        tests: &RayTests,
         ids: &[u32; N],
         live: u32,
         t_exit: &[f32; N],
     ) -> u32 {
         let lanes = RayLanes::gather(rays, ids);
+        let lane_tests = lanes.tests(tests.intersector);
         // Each lane's closest `t` so far and its `Hit::bound`, kept beside the hits and updated
         // only when a lane's hit changes: recomputed for every lane at every triangle, the
         // bound (a `next_up` per lane) cost a twentieth of a stream's instructions.
@@ -198,41 +191,25 @@ impl Answer for Closest<'_> {
             update(&self.0[ids[l] as usize], l, &mut hit_t, &mut bound)
         });
         for &p in leaf {
-            if let Some(tri) = prims.triangles.get(p as usize) {
-                let (t, u, v) = lanes.triangle(tri, &bound);
+            if (p as usize) < prims.triangles.len() {
+                let rows = prims.triangle_rows(p as usize, tests.intersector);
+                let (t, u, v) = lanes.triangle(rows, &lane_tests, &bound);
                 let hits = lanes_less(isa, &t, &[f32::INFINITY; N]);
-                for_lanes(live & hits, |l| {
+                for_lanes(live & hits & tests.exclude.keeping(p, ids), |l| {
                     let hit = &mut self.0[ids[l] as usize];
                     hit.offer(t[l], u[l], v[l], p);
                     update(hit, l, &mut hit_t, &mut bound);
                 });
             } else {
                 for_lanes(live, |l| {
-                    let hit = &mut self.0[ids[l] as usize];
-                    prims.intersect(p, &rays[ids[l] as usize], &RayTest::PLAIN, hit);
+                    let (i, hit) = (ids[l] as usize, &mut self.0[ids[l] as usize]);
+                    prims.intersect(p, &rays[i], &tests.of(i, &rays[i]), hit);
                     update(hit, l, &mut hit_t, &mut bound);
                 });
             }
         }
         // Strictly before the exit, as `traverse::common::Closest`.
         live & lanes_less(isa, &hit_t, t_exit)
-    }
-
-    #[inline(always)]
-    fn leaf_one(
-        &mut self,
-        prims: &PrimitiveSet,
-        leaf: &[u32],
-        i: usize,
-        ray: &Ray,
-        test: &RayTest,
-        t_exit: f32,
-        stats: &mut TraversalStats,
-    ) -> bool {
-        let hit = &mut self.0[i];
-        closest_among(prims, ray, test, leaf, hit, stats);
-        // Strictly before the exit, as `traverse::common::Closest`.
-        hit.t < t_exit
     }
 
     #[inline(always)]
@@ -280,13 +257,14 @@ impl Answer for AnyHit<'_> {
         leaf: &LeafPrims<N>,
         i: usize,
         ray: &Ray,
+        test: &RayTest,
         _t_exit: f32,
         stats: &mut TraversalStats,
     ) -> bool {
         // The blocks' triangles here; the rest are counted by the single-ray leaf test.
         stats.prim_tests += (leaf.count - leaf.others.len()) as u64;
-        let found = leaf.blocks.iter().any(|b| b.occludes(isa, ray))
-            || any_among(prims, ray, &RayTest::PLAIN, &leaf.others, stats);
+        let found = leaf.blocks.iter().any(|b| b.occludes(isa, ray, test))
+            || any_among(prims, ray, test, &leaf.others, stats);
         self.0[i] = found;
         found
     }
@@ -298,20 +276,23 @@ impl Answer for AnyHit<'_> {
         prims: &PrimitiveSet,
         leaf: &[u32],
         rays: &[Ray],
+        tests: &RayTests,
         ids: &[u32; N],
         live: u32,
         _t_exit: &[f32; N],
     ) -> u32 {
         let lanes = RayLanes::gather(rays, ids);
+        let lane_tests = lanes.tests(tests.intersector);
         let mut found = 0u32;
         for &p in leaf {
-            if let Some(tri) = prims.triangles.get(p as usize) {
-                let (t, _, _) = lanes.triangle(tri, &lanes.tmax);
-                found |= lanes_less(isa, &t, &[f32::INFINITY; N]);
+            if (p as usize) < prims.triangles.len() {
+                let rows = prims.triangle_rows(p as usize, tests.intersector);
+                let (t, _, _) = lanes.triangle(rows, &lane_tests, &lanes.tmax);
+                found |= lanes_less(isa, &t, &[f32::INFINITY; N]) & tests.exclude.keeping(p, ids);
             } else {
                 for_lanes(live & !found, |l| {
-                    let mut hit = Hit::MISS;
-                    if prims.intersect(p, &rays[ids[l] as usize], &RayTest::PLAIN, &mut hit) {
+                    let (i, mut hit) = (ids[l] as usize, Hit::MISS);
+                    if prims.intersect(p, &rays[i], &tests.of(i, &rays[i]), &mut hit) {
                         found |= 1 << l;
                     }
                 });
@@ -320,21 +301,6 @@ impl Answer for AnyHit<'_> {
         let found = found & live;
         for_lanes(live, |l| self.0[ids[l] as usize] = found >> l & 1 == 1);
         found
-    }
-
-    #[inline(always)]
-    fn leaf_one(
-        &mut self,
-        prims: &PrimitiveSet,
-        leaf: &[u32],
-        i: usize,
-        ray: &Ray,
-        test: &RayTest,
-        _t_exit: f32,
-        stats: &mut TraversalStats,
-    ) -> bool {
-        self.0[i] = any_among(prims, ray, test, leaf, stats);
-        self.0[i]
     }
 
     #[inline(always)]
@@ -359,7 +325,11 @@ impl Answer for AnyHit<'_> {
 /// The batch: rays, their origins and reciprocal directions by axis (one array per axis, so a
 /// node step gathers one pair per ray: origin and reciprocal direction share a cache line), the
 /// finished flags and the answer.
-pub(crate) struct Batch<'a, A> {
+///
+/// `WATERTIGHT` is the rays' intersector as a constant (the watertight test or
+/// Möller–Trumbore), so that each is compiled without the other's branches in its leaf tests:
+/// read from the batch, it cost the default path 6–10% on the bunny's streams.
+pub(crate) struct Batch<'a, A, const WATERTIGHT: bool> {
     pub tree: &'a KdTree,
     pub prims: &'a PrimitiveSet,
     pub rays: &'a [Ray],
@@ -371,8 +341,8 @@ pub(crate) struct Batch<'a, A> {
     /// How many rays are done so far: a list written when it was this value needs no filtering.
     pub finished: usize,
     pub answer: A,
-    /// The rays' primitive tests; the SIMD leaf tests serve only [`RayTests::PLAIN`].
-    pub tests: RayTests<'a>,
+    /// The primitives the rays ignore.
+    pub exclude: Excluded<'a>,
     pub stats: TraversalStats,
 }
 
@@ -384,7 +354,24 @@ pub(crate) struct Root {
     pub t1: f32,
 }
 
-impl<'a, A: Answer> Batch<'a, A> {
+impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
+    /// The rays' ray–triangle test.
+    pub const INTERSECTOR: Intersector = if WATERTIGHT {
+        Intersector::Watertight
+    } else {
+        Intersector::MollerTrumbore
+    };
+
+    /// The rays' primitive tests, built where they are used (not read from the batch), so that
+    /// the intersector stays a constant.
+    #[inline(always)]
+    fn tests(&self) -> RayTests<'a> {
+        RayTests {
+            intersector: Self::INTERSECTOR,
+            exclude: self.exclude,
+        }
+    }
+
     /// Prepares the rays and returns them grouped by octant (the signs of the direction, `-0.0`
     /// negative as in `TRay::positive`): within a group every node has the same near child for
     /// every ray, so the group can be traversed front to back at once (paper: ≤ 8 traversals).
@@ -399,9 +386,13 @@ impl<'a, A: Answer> Batch<'a, A> {
         tree: &'a KdTree,
         prims: &'a PrimitiveSet,
         rays: &'a [Ray],
-        tests: RayTests<'a>,
+        exclude: Excluded<'a>,
         mut answer: A,
     ) -> (Self, [Vec<Root>; 8]) {
+        let tests = RayTests {
+            intersector: Self::INTERSECTOR,
+            exclude,
+        };
         let n = rays.len();
         assert!(
             u32::try_from(n).is_ok(),
@@ -454,16 +445,10 @@ impl<'a, A: Answer> Batch<'a, A> {
             done: vec![false; n],
             finished: 0,
             answer,
-            tests,
+            exclude,
             stats: TraversalStats::default(),
         };
         (batch, groups)
-    }
-
-    /// Whether the rays take the plain test, which the SIMD leaf tests compute.
-    #[inline(always)]
-    pub fn tests_plain(&self) -> bool {
-        self.tests.plain()
     }
 
     /// Starts loading ray `i` and its answer, a few rays before [`Batch::visit_leaf`] needs them.
@@ -487,18 +472,19 @@ impl<'a, A: Answer> Batch<'a, A> {
         live: u32,
         t_exit: &[f32; N],
     ) {
-        if !self.tests.plain() {
-            for_lanes(live, |l| {
-                self.visit_leaf_one(leaf, ids[l], t_exit[l]);
-            });
-            return;
-        }
         let n = live.count_ones() as u64;
         self.stats.leaves_visited += n;
         self.stats.prim_tests += n * leaf.len() as u64;
-        let done = self
-            .answer
-            .leaf_rays(isa, self.prims, leaf, self.rays, ids, live, t_exit);
+        let done = self.answer.leaf_rays(
+            isa,
+            self.prims,
+            leaf,
+            self.rays,
+            &self.tests(),
+            ids,
+            live,
+            t_exit,
+        );
         for_lanes(live, |l| self.done[ids[l] as usize] = done >> l & 1 == 1);
         self.finished += done.count_ones() as usize;
     }
@@ -513,7 +499,7 @@ impl<'a, A: Answer> Batch<'a, A> {
             self.prims,
             i,
             ray,
-            &self.tests.of(i, ray),
+            &self.tests().of(i, ray),
             start,
             &mut self.stats,
         );
@@ -521,8 +507,7 @@ impl<'a, A: Answer> Batch<'a, A> {
         self.finished += done as usize;
     }
 
-    /// Tests ray `i` against a prepared leaf (SIMD blocks: [`RayTests::PLAIN`] only) and marks it
-    /// done when finished.
+    /// Tests ray `i` against a prepared leaf and marks it done when finished.
     #[inline(always)]
     pub fn visit_leaf<const N: usize>(
         &mut self,
@@ -531,33 +516,18 @@ impl<'a, A: Answer> Batch<'a, A> {
         i: u32,
         t_exit: f32,
     ) -> bool {
-        let i = i as usize;
+        let (i, ray) = (i as usize, &self.rays[i as usize]);
         self.stats.leaves_visited += 1;
         let done = self.answer.leaf(
             isa,
             self.prims,
             leaf,
             i,
-            &self.rays[i],
+            ray,
+            &self.tests().of(i, ray),
             t_exit,
             &mut self.stats,
         );
-        self.done[i] = done;
-        self.finished += done as usize;
-        done
-    }
-
-    /// Tests ray `i` against the leaf primitives `list` one at a time with the ray's own test
-    /// (what the SIMD blocks do not compute) and marks it done when finished.
-    #[inline(always)]
-    pub fn visit_leaf_one(&mut self, list: &[u32], i: u32, t_exit: f32) -> bool {
-        let i = i as usize;
-        self.stats.leaves_visited += 1;
-        let ray = &self.rays[i];
-        let test = self.tests.of(i, ray);
-        let done = self
-            .answer
-            .leaf_one(self.prims, list, i, ray, &test, t_exit, &mut self.stats);
         self.done[i] = done;
         self.finished += done as usize;
         done
@@ -616,9 +586,9 @@ pub(crate) fn octant(ray: &Ray) -> usize {
 /// octant groups of a prepared [`Batch`].
 pub(crate) trait Mode {
     type Out;
-    fn trace<const N: usize, A: Answer>(
+    fn trace<const N: usize, A: Answer, const WATERTIGHT: bool>(
         isa: Isa<N>,
-        b: &mut Batch<A>,
+        b: &mut Batch<A, WATERTIGHT>,
         groups: &[Vec<Root>; 8],
     ) -> Self::Out;
 }
@@ -633,40 +603,55 @@ pub(crate) fn run<M: Mode, A: Answer>(
     answer: A,
     width: Width,
 ) -> M::Out {
-    struct Job<'a, A, M> {
+    struct Job<'a, A, M, const WATERTIGHT: bool> {
         tree: &'a KdTree,
         prims: &'a PrimitiveSet,
         rays: &'a [Ray],
-        tests: RayTests<'a>,
+        exclude: Excluded<'a>,
         answer: A,
         mode: std::marker::PhantomData<M>,
     }
-    impl<A: Answer, M: Mode> Kernel for Job<'_, A, M> {
+    impl<A: Answer, M: Mode, const WATERTIGHT: bool> Kernel for Job<'_, A, M, WATERTIGHT> {
         type Out = M::Out;
         #[inline(always)]
         fn run<const N: usize>(self, isa: Isa<N>) -> M::Out {
-            let (mut b, groups) = Batch::new(
+            let (mut b, groups) = Batch::<A, WATERTIGHT>::new(
                 isa,
                 self.tree,
                 self.prims,
                 self.rays,
-                self.tests,
+                self.exclude,
                 self.answer,
             );
             M::trace(isa, &mut b, &groups)
         }
     }
-    simd::dispatch(
-        width,
-        Job::<A, M> {
+    fn job<'a, A, M, const WATERTIGHT: bool>(
+        (tree, prims, rays): (&'a KdTree, &'a PrimitiveSet, &'a [Ray]),
+        exclude: Excluded<'a>,
+        answer: A,
+    ) -> Job<'a, A, M, WATERTIGHT> {
+        Job {
             tree,
             prims,
             rays,
-            tests,
+            exclude,
             answer,
             mode: std::marker::PhantomData,
-        },
-    )
+        }
+    }
+    // One kernel per intersector (see `Batch`), each its own function: both in one made the
+    // default path's code slower (a function too large for LLVM to keep its values in
+    // registers).
+    let scene = (tree, prims, rays);
+    match tests.intersector {
+        Intersector::MollerTrumbore => {
+            simd::dispatch(width, job::<A, M, false>(scene, tests.exclude, answer))
+        }
+        Intersector::Watertight => {
+            simd::dispatch(width, job::<A, M, true>(scene, tests.exclude, answer))
+        }
+    }
 }
 
 /// Whether the direction is positive on each axis, for the rays of octant `o`.

@@ -78,9 +78,9 @@ impl<const N: usize> Scratch<N> {
 /// cases a step meets (near, far, both) mispredicted often: a packet's crossings are close to
 /// random.
 #[inline(always)]
-pub(crate) fn traverse<const N: usize, A: Answer>(
+pub(crate) fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
     isa: Isa<N>,
-    b: &mut Batch<A>,
+    b: &mut Batch<A, WATERTIGHT>,
     s: &mut Scratch<N>,
     node: u32,
     p: Lanes<N>,
@@ -144,21 +144,17 @@ pub(crate) fn traverse<const N: usize, A: Answer>(
             continue;
         }
         let list = tree.leaf_prims(n);
-        // The SIMD blocks serve the plain test only (`RayTests`).
-        let plain = b.tests_plain();
-        if plain {
-            s.leaf
-                .gather(&b.prims.triangles, list, live.count_ones() as usize);
-        }
+        s.leaf.gather(
+            b.prims,
+            list,
+            live.count_ones() as usize,
+            Batch::<A, WATERTIGHT>::INTERSECTOR,
+        );
         let mut m = live;
         while m != 0 {
             let l = m.trailing_zeros() as usize;
             m &= m - 1;
-            let done = if plain {
-                b.visit_leaf(isa, &s.leaf, id[l], cur.t1[l])
-            } else {
-                b.visit_leaf_one(list, id[l], cur.t1[l])
-            };
+            let done = b.visit_leaf(isa, &s.leaf, id[l], cur.t1[l]);
             if done {
                 dead |= 1 << l;
             }
@@ -184,9 +180,9 @@ struct PacketMode;
 impl Mode for PacketMode {
     type Out = TraversalStats;
     #[inline(always)]
-    fn trace<const N: usize, A: Answer>(
+    fn trace<const N: usize, A: Answer, const WATERTIGHT: bool>(
         isa: Isa<N>,
-        b: &mut Batch<A>,
+        b: &mut Batch<A, WATERTIGHT>,
         groups: &[Vec<Root>; 8],
     ) -> Self::Out {
         let mut s = Scratch::<N>::new();

@@ -1,15 +1,22 @@
-//! SIMD lane width, the Möller–Trumbore tests of the vectorised-traversal paper (Noguera & Ureña,
+//! SIMD lane width, the triangle tests of the vectorised-traversal paper (Noguera & Ureña,
 //! seeds/000, "intersección rayo–triángulo": the precomputed 1 ray × 4 triangles variant, and N
-//! rays × 1 triangle for stream leaves) and the stream compaction.
+//! rays × 1 triangle for stream leaves), for Möller–Trumbore and the watertight test, and the
+//! stream compaction.
 //!
 //! The code is portable: fixed-size `[f32; N]` lanes written as straight-line loops that LLVM
 //! turns into vector instructions; only the compaction and the lane masks ([`lanes_less`]) have
 //! x86 intrinsics, each with a portable loop. [`dispatch`] picks `N` at run time from the CPU's
 //! features and runs the whole kernel (traversal included, inlined) inside a `#[target_feature]`
-//! function, so the same source becomes SSE (4 lanes), AVX2 (8) or AVX-512 (16) code.
+//! function, so the same source becomes SSE (4 lanes), AVX2 (8) or AVX-512 (16) code. A function
+//! the kernel calls without inlining is compiled without those features: hot code here avoids
+//! `array::map` and `array::from_fn` with large elements, whose closures LLVM left as calls.
 
 use super::batch::{for_lanes, lanes_where};
-use crate::geometry::{Hit, PrimIndex, Ray, Triangle, INVALID};
+use crate::geometry::{
+    shear_axes, watertight, watertight_f32, Hit, PrimIndex, PrimitiveSet, Ray, RayTest,
+    TriangleTest, INVALID,
+};
+use crate::precision::Intersector;
 
 /// Lane width of packets, stream lists and triangle blocks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -122,59 +129,64 @@ unsafe fn run_avx512<K: Kernel>(k: K) -> K::Out {
     k.run::<16>(Isa(()))
 }
 
-/// N triangles in structure-of-arrays form (`v0`, `e1`, `e2` per axis). Unused lanes hold a
-/// zero triangle, whose determinant is 0: never hit.
+/// N triangles in structure-of-arrays form: per lane, the three rows the block's test reads
+/// ([`PrimitiveSet::triangle_rows`]: Möller–Trumbore's `v0, e1, e2`, or the watertight test's
+/// corners). Unused lanes hold a zero triangle, whose determinant is 0: never hit.
 #[derive(Clone, Copy, Debug)]
 pub struct TriBlock<const N: usize> {
-    v0: [[f32; N]; 3],
-    e1: [[f32; N]; 3],
-    e2: [[f32; N]; 3],
+    /// `rows[r][axis][lane]`.
+    rows: [[[f32; N]; 3]; 3],
     prim: [PrimIndex; N],
 }
 
 impl<const N: usize> TriBlock<N> {
     const EMPTY: Self = TriBlock {
-        v0: [[0.0; N]; 3],
-        e1: [[0.0; N]; 3],
-        e2: [[0.0; N]; 3],
+        rows: [[[0.0; N]; 3]; 3],
         prim: [INVALID; N],
     };
 
-    /// The triangles `triangles[p]` for the first N indices of `ids` (every one a triangle
-    /// index); lanes past `ids.len()` hold the zero triangle and `INVALID`.
+    /// The triangles `ids` (the first N, every one a triangle index) as `intersector` reads
+    /// them; lanes past `ids.len()` hold the zero triangle and `INVALID`.
     #[inline(always)]
-    pub fn from_triangles(triangles: &[Triangle], ids: &[u32]) -> Self {
-        const ZERO: Triangle = Triangle {
-            v0: [0.0; 3],
-            e1: [0.0; 3],
-            e2: [0.0; 3],
-        };
-        let tris: [&Triangle; N] =
-            std::array::from_fn(|l| ids.get(l).map_or(&ZERO, |&p| &triangles[p as usize]));
+    pub fn from_prims(set: &PrimitiveSet, ids: &[u32], intersector: Intersector) -> Self {
+        const ZERO: [[f32; 3]; 3] = [[0.0; 3]; 3];
+        let stored: [&[[f32; 3]; 3]; N] = std::array::from_fn(|l| {
+            ids.get(l)
+                .map_or(&ZERO, |&p| set.stored_rows(p as usize, intersector))
+        });
         // Each column built whole (in registers) rather than lane by lane in memory: a vector
         // load of lanes just stored one by one waits for the stores to drain (no forwarding),
         // which cost a tenth of a single ray's time.
-        let column = |f: fn(&Triangle) -> [f32; 3], a: usize| -> [f32; N] {
-            std::array::from_fn(|l| f(tris[l])[a])
-        };
-        let v0 = |t: &Triangle| t.v0;
-        let e1 = |t: &Triangle| t.e1;
-        let e2 = |t: &Triangle| t.e2;
+        let column = |r: usize, a: usize| -> [f32; N] { std::array::from_fn(|l| stored[l][r][a]) };
+        let mut rows = [
+            [column(0, 0), column(0, 1), column(0, 2)],
+            [column(1, 0), column(1, 1), column(1, 2)],
+            [column(2, 0), column(2, 1), column(2, 2)],
+        ];
+        if set.rebuilds_corners(intersector) {
+            // `PrimitiveSet::triangle_rows`'s corners, `v0 + e1` and `v0 + e2`, lane by lane.
+            let [v0, e1, e2] = &mut rows;
+            for edge in [e1, e2] {
+                for (e, v) in edge.iter_mut().zip(v0.iter()) {
+                    for (e, v) in e.iter_mut().zip(v) {
+                        *e += v;
+                    }
+                }
+            }
+        }
         TriBlock {
-            v0: [column(v0, 0), column(v0, 1), column(v0, 2)],
-            e1: [column(e1, 0), column(e1, 1), column(e1, 2)],
-            e2: [column(e2, 0), column(e2, 1), column(e2, 2)],
+            rows,
             prim: std::array::from_fn(|l| ids.get(l).copied().unwrap_or(INVALID)),
         }
     }
 
     /// Closest-hit test of one ray against the block, offered to `hit` lane by lane. Every lane
-    /// does the scalar [`Triangle::intersect`]'s operations in the same order (no fused
-    /// multiply-add), so `t`, `u`, `v` are bit-identical to the single-ray path.
+    /// does the scalar test's operations in the same order (no fused multiply-add), so `t`,
+    /// `u`, `v` are bit-identical to the single-ray path.
     #[inline(always)]
-    pub fn intersect(&self, isa: Isa<N>, ray: &Ray, hit: &mut Hit) {
+    pub fn intersect(&self, isa: Isa<N>, ray: &Ray, test: &RayTest, hit: &mut Hit) {
         let tmax = hit.bound(ray);
-        let (t, u, v) = self.lanes(ray, tmax);
+        let (t, u, v) = self.lanes(ray, test, tmax);
         // The lanes hit, as one mask first: a test per lane inside the loop lets LLVM move the
         // whole computation into per-lane branches.
         let hits = lanes_less(isa, &t, &[f32::INFINITY; N]);
@@ -185,50 +197,73 @@ impl<const N: usize> TriBlock<N> {
 
     /// Any-hit test: whether some lane is hit in `[tmin, tmax)`.
     #[inline(always)]
-    pub fn occludes(&self, isa: Isa<N>, ray: &Ray) -> bool {
-        let (t, _, _) = self.lanes(ray, ray.tmax);
+    pub fn occludes(&self, isa: Isa<N>, ray: &Ray, test: &RayTest) -> bool {
+        let (t, _, _) = self.lanes(ray, test, ray.tmax);
         lanes_less(isa, &t, &[f32::INFINITY; N]) != 0
     }
 
-    /// Möller–Trumbore on every lane; `t = inf` marks a miss.
+    /// The test `test` asks for on every lane; `t = inf` marks a miss, and the excluded
+    /// primitive is missed.
     #[inline(always)]
-    fn lanes(&self, ray: &Ray, tmax: f32) -> ([f32; N], [f32; N], [f32; N]) {
+    fn lanes(&self, ray: &Ray, test: &RayTest, tmax: f32) -> ([f32; N], [f32; N], [f32; N]) {
         let (o, d) = (ray.org.to_array(), ray.dir.to_array());
-        let (mut t_out, mut u_out, mut v_out) = ([0.0; N], [0.0; N], [0.0; N]);
-        for l in 0..N {
-            let tri = Triangle {
-                v0: [self.v0[0][l], self.v0[1][l], self.v0[2][l]],
-                e1: [self.e1[0][l], self.e1[1][l], self.e1[2][l]],
-                e2: [self.e2[0][l], self.e2[1][l], self.e2[2][l]],
-            };
-            (t_out[l], u_out[l], v_out[l]) = moller_trumbore(&tri, o, d, ray.tmin, tmax);
+        let (mut t, mut u, mut v) = ([0.0; N], [0.0; N], [0.0; N]);
+        let row = |r: usize, l: usize| [self.rows[r][0][l], self.rows[r][1][l], self.rows[r][2][l]];
+        let rows = |l: usize| [row(0, l), row(1, l), row(2, l)];
+        match test.triangle {
+            TriangleTest::MollerTrumbore => {
+                for l in 0..N {
+                    (t[l], u[l], v[l]) = moller_trumbore(rows(l), o, d, ray.tmin, tmax);
+                }
+            }
+            TriangleTest::Watertight { k, s } => {
+                let mut exact = [false; N];
+                for l in 0..N {
+                    (t[l], u[l], v[l], exact[l]) = watertight_f32(rows(l), o, k, s, ray.tmin, tmax);
+                }
+                // The padding's zero triangle has zero edge functions too, and is never hit.
+                let redo = lanes_where::<N>(|l| exact[l] && self.prim[l] != INVALID);
+                for_lanes(redo, |l| {
+                    (t[l], u[l], v[l]) =
+                        watertight(rows(l), ray, k, s, tmax).unwrap_or((f32::INFINITY, 0.0, 0.0));
+                });
+            }
         }
-        (t_out, u_out, v_out)
+        if test.exclude != INVALID {
+            for (t, &p) in t.iter_mut().zip(&self.prim) {
+                if p == test.exclude {
+                    *t = f32::INFINITY;
+                }
+            }
+        }
+        (t, u, v)
     }
 }
 
-/// One ray against one triangle with the scalar [`Triangle::intersect`]'s operations in the
-/// same order (no fused multiply-add), its rejections as masks rather than early returns, so
-/// `t`, `u`, `v` are bit-identical to the single-ray path; `t = inf` marks a miss. Both lane
-/// orders ([`TriBlock`]: 1 ray × N triangles, [`RayLanes`]: N rays × 1 triangle) run it per lane.
+/// One ray against one triangle (`rows`: `v0, e1, e2`) with the scalar
+/// [`Triangle::intersect`]'s operations in the same order (no fused multiply-add), its
+/// rejections as masks rather than early returns, so `t`, `u`, `v` are bit-identical to the
+/// single-ray path; `t = inf` marks a miss. Both lane orders ([`TriBlock`]: 1 ray × N
+/// triangles, [`RayLanes`]: N rays × 1 triangle) run it per lane.
+///
+/// [`Triangle::intersect`]: crate::geometry::Triangle::intersect
 #[inline(always)]
 fn moller_trumbore(
-    tri: &Triangle,
+    [v0, [e1x, e1y, e1z], [e2x, e2y, e2z]]: [[f32; 3]; 3],
     o: [f32; 3],
     d: [f32; 3],
     tmin: f32,
     tmax: f32,
 ) -> (f32, f32, f32) {
-    let ([e1x, e1y, e1z], [e2x, e2y, e2z]) = (tri.e1, tri.e2);
     // p = dir × e2 (glam's Vec3::cross order), det = e1 · p.
     let px = d[1] * e2z - e2y * d[2];
     let py = d[2] * e2x - e2z * d[0];
     let pz = d[0] * e2y - e2x * d[1];
     let det = (e1x * px) + (e1y * py) + (e1z * pz);
     let inv = 1.0 / det;
-    let sx = o[0] - tri.v0[0];
-    let sy = o[1] - tri.v0[1];
-    let sz = o[2] - tri.v0[2];
+    let sx = o[0] - v0[0];
+    let sy = o[1] - v0[1];
+    let sz = o[2] - v0[2];
     let u = ((sx * px) + (sy * py) + (sz * pz)) * inv;
     // q = s × e1
     let qx = sy * e1z - e1y * sz;
@@ -254,6 +289,13 @@ pub struct RayLanes<const N: usize> {
     pub tmax: [f32; N],
 }
 
+/// The per-ray part of every lane's triangle test ([`TriangleTest`] in structure-of-arrays
+/// form), computed once per leaf visit of the lanes.
+pub enum LaneTests<const N: usize> {
+    MollerTrumbore,
+    Watertight { k: [[u32; N]; 3], s: [[f32; N]; 3] },
+}
+
 impl<const N: usize> RayLanes<N> {
     /// The rays `rays[ids[l]]` (an index past the end reads the last ray: lanes past a list's
     /// end hold stale indices).
@@ -261,7 +303,7 @@ impl<const N: usize> RayLanes<N> {
     pub fn gather(rays: &[Ray], ids: &[u32; N]) -> Self {
         let last = rays.len() - 1;
         let rs: [&Ray; N] = std::array::from_fn(|l| &rays[(ids[l] as usize).min(last)]);
-        // Columns built whole, as in `TriBlock::from_triangles` (no store-forwarding stall).
+        // Columns built whole, as in `TriBlock::from_prims` (no store-forwarding stall).
         let column = |f: fn(&Ray) -> f32| -> [f32; N] { std::array::from_fn(|l| f(rs[l])) };
         RayLanes {
             org: [
@@ -279,16 +321,68 @@ impl<const N: usize> RayLanes<N> {
         }
     }
 
-    /// Möller–Trumbore of every lane against `tri`, candidates below `tmax` per lane.
+    /// Lane `l`'s origin and direction.
     #[inline(always)]
-    pub fn triangle(&self, tri: &Triangle, tmax: &[f32; N]) -> ([f32; N], [f32; N], [f32; N]) {
-        let (mut t_out, mut u_out, mut v_out) = ([0.0; N], [0.0; N], [0.0; N]);
-        for l in 0..N {
-            let o = [self.org[0][l], self.org[1][l], self.org[2][l]];
-            let d = [self.dir[0][l], self.dir[1][l], self.dir[2][l]];
-            (t_out[l], u_out[l], v_out[l]) = moller_trumbore(tri, o, d, self.tmin[l], tmax[l]);
+    fn ray(&self, l: usize) -> ([f32; 3], [f32; 3]) {
+        let (o, d) = (&self.org, &self.dir);
+        ([o[0][l], o[1][l], o[2][l]], [d[0][l], d[1][l], d[2][l]])
+    }
+
+    /// Every lane's per-ray setup of `intersector`'s test.
+    #[inline(always)]
+    pub fn tests(&self, intersector: Intersector) -> LaneTests<N> {
+        match intersector {
+            Intersector::MollerTrumbore => LaneTests::MollerTrumbore,
+            Intersector::Watertight => {
+                let (mut k, mut s) = ([[0; N]; 3], [[0.0; N]; 3]);
+                for l in 0..N {
+                    let (kl, sl) = shear_axes(self.ray(l).1);
+                    for a in 0..3 {
+                        (k[a][l], s[a][l]) = (kl[a], sl[a]);
+                    }
+                }
+                LaneTests::Watertight { k, s }
+            }
         }
-        (t_out, u_out, v_out)
+    }
+
+    /// The test `tests` of every lane against the triangle `rows` ([`PrimitiveSet::triangle_rows`]
+    /// for the same intersector), candidates below `tmax` per lane; `t = inf` marks a miss.
+    #[inline(always)]
+    pub fn triangle(
+        &self,
+        rows: [[f32; 3]; 3],
+        tests: &LaneTests<N>,
+        tmax: &[f32; N],
+    ) -> ([f32; N], [f32; N], [f32; N]) {
+        let (mut t, mut u, mut v) = ([0.0; N], [0.0; N], [0.0; N]);
+        match tests {
+            LaneTests::MollerTrumbore => {
+                for l in 0..N {
+                    let (o, d) = self.ray(l);
+                    (t[l], u[l], v[l]) = moller_trumbore(rows, o, d, self.tmin[l], tmax[l]);
+                }
+            }
+            LaneTests::Watertight { k, s } => {
+                let mut exact = [false; N];
+                let lane = |l: usize| ([k[0][l], k[1][l], k[2][l]], [s[0][l], s[1][l], s[2][l]]);
+                for l in 0..N {
+                    let (kl, sl) = lane(l);
+                    (t[l], u[l], v[l], exact[l]) =
+                        watertight_f32(rows, self.ray(l).0, kl, sl, self.tmin[l], tmax[l]);
+                }
+                for_lanes(lanes_where::<N>(|l| exact[l]), |l| {
+                    let ((o, d), (kl, sl)) = (self.ray(l), lane(l));
+                    let ray = Ray::new(o.into(), d.into(), self.tmin[l], tmax[l]);
+                    (t[l], u[l], v[l]) = watertight(rows, &ray, kl, sl, tmax[l]).unwrap_or((
+                        f32::INFINITY,
+                        0.0,
+                        0.0,
+                    ));
+                });
+            }
+        }
+        (t, u, v)
     }
 }
 
@@ -316,11 +410,17 @@ impl<const N: usize> LeafPrims<N> {
     /// triangle, so for fewer than [`GATHER_MIN_RAYS`] rays every primitive stays an index.
     ///
     /// Lanes are written one by one into the reused blocks rather than built by
-    /// [`TriBlock::from_triangles`], which suits a block tested at once by one ray: these blocks
+    /// [`TriBlock::from_prims`], which suits a block tested at once by one ray: these blocks
     /// are read by several rays well after the stores, and building them through
-    /// `from_triangles` (after splitting off the other kinds) made 8-ray packets slower.
+    /// `from_prims` (after splitting off the other kinds) made 8-ray packets slower.
     #[inline(always)]
-    pub fn gather(&mut self, triangles: &[Triangle], prims: &[u32], rays: usize) {
+    pub fn gather(
+        &mut self,
+        set: &PrimitiveSet,
+        prims: &[u32],
+        rays: usize,
+        intersector: Intersector,
+    ) {
         self.blocks.clear();
         self.others.clear();
         self.count = prims.len();
@@ -330,19 +430,20 @@ impl<const N: usize> LeafPrims<N> {
         }
         let mut lane = N;
         for &p in prims {
-            let Some(tri) = triangles.get(p as usize) else {
+            if p as usize >= set.triangles.len() {
                 self.others.push(p);
                 continue;
-            };
+            }
             if lane == N {
                 self.blocks.push(TriBlock::EMPTY);
                 lane = 0;
             }
             let b = self.blocks.last_mut().expect("a block was just pushed");
-            for a in 0..3 {
-                b.v0[a][lane] = tri.v0[a];
-                b.e1[a][lane] = tri.e1[a];
-                b.e2[a][lane] = tri.e2[a];
+            let rows = set.triangle_rows(p as usize, intersector);
+            for (dst, row) in b.rows.iter_mut().zip(&rows) {
+                for (d, &x) in dst.iter_mut().zip(row) {
+                    d[lane] = x;
+                }
             }
             b.prim[lane] = p;
             lane += 1;
@@ -601,16 +702,26 @@ mod tests {
             };
             Ray::new(org, dir, 0.0, tmax)
         }
+
+        /// A ray through a corner or an edge's midpoint of one of the triangles `corners` (every
+        /// other one), or [`Grid::ray`]: rays on an edge take the watertight test's f64 path.
+        fn ray_near(&mut self, corners: &[[glam::Vec3; 3]]) -> Ray {
+            let mut ray = self.ray();
+            if self.0.next() < 0.5 {
+                let pick = |x: f32, n: usize| ((x * n as f32) as usize).min(n - 1);
+                let c = corners[pick(self.0.next(), corners.len())];
+                let (i, j) = (pick(self.0.next(), 3), pick(self.0.next(), 3));
+                ray.dir = (c[i] + c[j]) * 0.5 - ray.org;
+            }
+            ray
+        }
     }
 
-    /// The scalar test's closest hit among `tris`, offered in index order.
-    fn scalar(tris: &[Triangle], ray: &Ray) -> Hit {
+    /// The scalar test's closest hit among the triangles of `set`, offered in index order.
+    fn scalar(set: &PrimitiveSet, ray: &Ray, test: &RayTest) -> Hit {
         let mut hit = Hit::MISS;
-        for (p, tri) in tris.iter().enumerate() {
-            let how = crate::geometry::TriangleTest::MollerTrumbore;
-            if let Some((t, u, v)) = tri.intersect(ray, &how, hit.bound(ray)) {
-                hit.offer(t, u, v, p as u32);
-            }
+        for p in 0..set.triangles.len() {
+            set.intersect(p as u32, ray, test, &mut hit);
         }
         hit
     }
@@ -621,55 +732,95 @@ mod tests {
             && a.2.to_bits() == b.2.to_bits()
     }
 
-    /// Both lane orders (1 ray × N triangles, N rays × 1 triangle) against the scalar
-    /// Möller–Trumbore, bit for bit, at every width this CPU runs.
+    /// The ways a lane test can be asked for: Möller–Trumbore, the watertight test with its
+    /// corners rebuilt from the edges, and with exact corners kept.
+    const WAYS: [(Intersector, bool); 3] = [
+        (Intersector::MollerTrumbore, false),
+        (Intersector::Watertight, false),
+        (Intersector::Watertight, true),
+    ];
+
+    /// Both lane orders (1 ray × N triangles, N rays × 1 triangle) against the scalar test, bit
+    /// for bit, at every width this CPU runs, in every way of [`WAYS`]; the blocks also with a
+    /// primitive excluded. Counts the watertight hits on an edge (an edge function exactly
+    /// zero, redone in f64).
     #[test]
     fn lane_tests_match_the_scalar_test_bit_for_bit() {
         struct Job;
         impl Kernel for Job {
-            type Out = usize;
-            fn run<const N: usize>(self, isa: Isa<N>) -> usize {
+            type Out = (usize, usize);
+            fn run<const N: usize>(self, isa: Isa<N>) -> (usize, usize) {
                 let mut g = Grid(crate::scene::builtin::Rng(N as u64));
-                let mut hits = 0;
-                for _ in 0..4000 {
-                    let tris: Vec<Triangle> = (0..N)
-                        .map(|_| Triangle::from_vertices(g.point(), g.point(), g.point()))
-                        .collect();
-                    let ray = g.ray();
+                let (mut hits, mut on_edge) = (0, 0);
+                for round in 0..12000 {
+                    let (intersector, exact) = WAYS[round % 3];
+                    let corners: Vec<[glam::Vec3; 3]> =
+                        (0..N).map(|_| [g.point(), g.point(), g.point()]).collect();
+                    let set = PrimitiveSet {
+                        triangles: corners
+                            .iter()
+                            .map(|&[a, b, c]| crate::geometry::Triangle::from_vertices(a, b, c))
+                            .collect(),
+                        vertices: match exact {
+                            true => corners.iter().map(|c| c.map(|v| v.to_array())).collect(),
+                            false => Vec::new(),
+                        },
+                        ..PrimitiveSet::default()
+                    };
+                    let ray = g.ray_near(&corners);
                     let ids: Vec<u32> = (0..N as u32).collect();
-                    let block = TriBlock::<N>::from_triangles(&tris, &ids);
-                    let mut simd = Hit::MISS;
-                    block.intersect(isa, &ray, &mut simd);
-                    let want = scalar(&tris, &ray);
-                    assert!(
-                        simd.prim == want.prim
-                            && same_bits((simd.t, simd.u, simd.v), (want.t, want.u, want.v)),
-                        "{N} lanes, {ray:?}: block {simd:?}, scalar {want:?}"
-                    );
-                    assert_eq!(block.occludes(isa, &ray), want.is_hit());
+                    let block = TriBlock::<N>::from_prims(&set, &ids, intersector);
+                    let plain = RayTest::new(&ray, intersector, INVALID);
+                    let want = scalar(&set, &ray, &plain);
+                    // Excluding the closest triangle makes the block find the one behind.
+                    let excluding = RayTest::new(&ray, intersector, want.prim);
+                    for test in [plain, excluding] {
+                        let want = scalar(&set, &ray, &test);
+                        let mut simd = Hit::MISS;
+                        block.intersect(isa, &ray, &test, &mut simd);
+                        assert!(
+                            simd.prim == want.prim
+                                && same_bits((simd.t, simd.u, simd.v), (want.t, want.u, want.v)),
+                            "{N} lanes, {intersector:?}, exact corners {exact}, {ray:?}, \
+                             excluding {}: block {simd:?}, scalar {want:?}",
+                            test.exclude
+                        );
+                        assert_eq!(block.occludes(isa, &ray, &test), want.is_hit());
+                    }
                     hits += want.is_hit() as usize;
 
-                    let rays: Vec<Ray> = (0..N).map(|_| g.ray()).collect();
+                    let rays: Vec<Ray> = (0..N).map(|_| g.ray_near(&corners[..1])).collect();
                     let lanes = RayLanes::<N>::gather(&rays, &std::array::from_fn(|l| l as u32));
-                    let (t, u, v) = lanes.triangle(&tris[0], &lanes.tmax);
+                    let rows = set.triangle_rows(0, intersector);
+                    let (t, u, v) = lanes.triangle(rows, &lanes.tests(intersector), &lanes.tmax);
                     for (l, ray) in rays.iter().enumerate() {
-                        let how = crate::geometry::TriangleTest::MollerTrumbore;
-                        match tris[0].intersect(ray, &how, ray.tmax) {
-                            Some(want) => assert!(
-                                same_bits((t[l], u[l], v[l]), want),
-                                "{N} lanes, {ray:?}: lane {:?}, scalar {want:?}",
-                                (t[l], u[l], v[l])
-                            ),
-                            None => assert_eq!(t[l], f32::INFINITY, "{N} lanes, {ray:?}"),
+                        let mut want = Hit::MISS;
+                        set.intersect(0, ray, &RayTest::new(ray, intersector, INVALID), &mut want);
+                        let lane = (t[l], u[l], v[l]);
+                        if want.is_hit() {
+                            assert!(
+                                same_bits(lane, (want.t, want.u, want.v)),
+                                "{N} lanes, {intersector:?}, exact corners {exact}, {ray:?}: \
+                                 lane {lane:?}, scalar {want:?}"
+                            );
+                            let edge = want.u == 0.0 || want.v == 0.0;
+                            on_edge += (intersector == Intersector::Watertight && edge) as usize;
+                        } else {
+                            assert_eq!(t[l], f32::INFINITY, "{N} lanes, {ray:?}");
                         }
                     }
                 }
-                hits
+                (hits, on_edge)
             }
         }
         for w in Width::ALL {
-            // Enough rays hit for the comparison to mean something.
-            assert!(dispatch(w, Job) > 100, "{w:?}");
+            // Enough rays hit, and enough of them on an edge, for the comparison to mean
+            // something.
+            let (hits, on_edge) = dispatch(w, Job);
+            assert!(
+                hits > 1000 && on_edge > 1000,
+                "{w:?}: {hits} hits, {on_edge} on an edge"
+            );
         }
     }
 

@@ -122,9 +122,9 @@ const SINGLE_MAX: usize = 2;
 
 /// Walks the tree once with all the rays of one octant group.
 #[inline(always)]
-fn traverse<const N: usize, A: Answer>(
+fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
     isa: Isa<N>,
-    b: &mut Batch<A>,
+    b: &mut Batch<A, WATERTIGHT>,
     lists: &mut Lists,
     frames: &mut Vec<Frame>,
     scratch: &mut packet::Scratch<N>,
@@ -299,9 +299,9 @@ struct StreamMode;
 impl Mode for StreamMode {
     type Out = (TraversalStats, StreamMemory);
     #[inline(always)]
-    fn trace<const N: usize, A: Answer>(
+    fn trace<const N: usize, A: Answer, const WATERTIGHT: bool>(
         isa: Isa<N>,
-        b: &mut Batch<A>,
+        b: &mut Batch<A, WATERTIGHT>,
         groups: &[Vec<Root>; 8],
     ) -> Self::Out {
         let mut lists = Lists::default();

@@ -13,4 +13,5 @@ pub use analytic::{box_intersect, box_normal, Ellipsoid, Plane, Sphere};
 pub use primitives::{PrimKind, PrimitiveSet, RayTest};
 pub use ray::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
 pub use scale::{power_of_two_scale, unit};
+pub(crate) use triangle::{shear_axes, watertight, watertight_f32};
 pub use triangle::{Triangle, TriangleTest};

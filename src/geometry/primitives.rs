@@ -119,11 +119,17 @@ impl PrimitiveSet {
         }
         let tmax = hit.bound(ray);
         let found = match self.locate(i as usize) {
-            (PrimKind::Triangle, k) => match (&test.triangle, self.vertices.get(k)) {
-                (TriangleTest::Watertight { k: axes, s }, Some(v)) => {
-                    watertight(v.map(Vec3::from), ray, *axes, *s, tmax)
+            (PrimKind::Triangle, k) => match test.triangle {
+                TriangleTest::Watertight { k: axes, s } => watertight(
+                    self.triangle_rows(k, Intersector::Watertight),
+                    ray,
+                    axes,
+                    s,
+                    tmax,
+                ),
+                TriangleTest::MollerTrumbore => {
+                    self.triangles[k].intersect(ray, &test.triangle, tmax)
                 }
-                _ => self.triangles[k].intersect(ray, &test.triangle, tmax),
             },
             (PrimKind::Sphere, k) => self.spheres[k].intersect(ray, tmax).map(|t| (t, 0.0, 0.0)),
             (PrimKind::Ellipsoid, k) => self.ellipsoids[k]
@@ -135,6 +141,37 @@ impl PrimitiveSet {
             Some((t, u, v)) => hit.offer(t, u, v, i),
             None => false,
         }
+    }
+
+    /// What `intersector`'s test reads of triangle `k`, as three rows: Möller–Trumbore's
+    /// `v0, e1, e2`, or the watertight test's corners (the exact ones when kept, rebuilt as
+    /// `v0 + e1`, `v0 + e2` otherwise).
+    #[inline(always)]
+    pub fn triangle_rows(&self, k: usize, intersector: Intersector) -> [[f32; 3]; 3] {
+        let [a, b, c] = *self.stored_rows(k, intersector);
+        if self.rebuilds_corners(intersector) {
+            let add = |p: [f32; 3], e: [f32; 3]| [p[0] + e[0], p[1] + e[1], p[2] + e[2]];
+            [a, add(a, b), add(a, c)]
+        } else {
+            [a, b, c]
+        }
+    }
+
+    /// The rows [`Self::triangle_rows`] starts from, as stored: the exact corners, or the
+    /// triangle's `v0, e1, e2` (a reference, so that SIMD blocks gather them lane by lane).
+    #[inline(always)]
+    pub fn stored_rows(&self, k: usize, intersector: Intersector) -> &[[f32; 3]; 3] {
+        match (intersector, self.vertices.get(k)) {
+            (Intersector::Watertight, Some(v)) => v,
+            _ => bytemuck::cast_ref(&self.triangles[k]),
+        }
+    }
+
+    /// Whether [`Self::triangle_rows`] rebuilds the corners from the stored rows (`v0 + e1`,
+    /// `v0 + e2`): the watertight test without exact corners.
+    #[inline(always)]
+    pub fn rebuilds_corners(&self, intersector: Intersector) -> bool {
+        intersector == Intersector::Watertight && self.vertices.is_empty()
     }
 
     /// Tests every plane (they are outside the tree); plane `k` has global index `len() + k`.

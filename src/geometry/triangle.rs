@@ -4,7 +4,7 @@
 
 use super::{Aabb, Ray};
 use crate::precision::Intersector;
-use glam::{DVec2, Vec3};
+use glam::Vec3;
 
 /// The per-ray part of a triangle test, computed once per ray (Woop et al.'s shear: the
 /// dominant axis `kz` of the direction, the two others in an order that keeps the winding,
@@ -12,7 +12,7 @@ use glam::{DVec2, Vec3};
 #[derive(Clone, Copy, Debug)]
 pub enum TriangleTest {
     MollerTrumbore,
-    Watertight { k: [usize; 3], s: Vec3 },
+    Watertight { k: [u32; 3], s: [f32; 3] },
 }
 
 impl TriangleTest {
@@ -20,18 +20,47 @@ impl TriangleTest {
         match intersector {
             Intersector::MollerTrumbore => TriangleTest::MollerTrumbore,
             Intersector::Watertight => {
-                let kz = ray.dir.abs().max_position();
-                let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
-                if ray.dir[kz] < 0.0 {
-                    std::mem::swap(&mut kx, &mut ky);
-                }
-                let d = ray.dir;
-                TriangleTest::Watertight {
-                    k: [kx, ky, kz],
-                    s: Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]),
-                }
+                let (k, s) = shear_axes(ray.dir.to_array());
+                TriangleTest::Watertight { k, s }
             }
         }
+    }
+
+    /// The intersector this is the per-ray part of.
+    pub fn intersector(&self) -> Intersector {
+        match self {
+            TriangleTest::MollerTrumbore => Intersector::MollerTrumbore,
+            TriangleTest::Watertight { .. } => Intersector::Watertight,
+        }
+    }
+}
+
+/// Woop et al.'s per-ray setup for direction `d`: the axes `[kx, ky, kz]` and the shear
+/// constants. Written with selects rather than indexing, so that a loop over lanes (N rays
+/// at once, `cpu::simd::RayLanes`) vectorises; `kz` is the first axis of largest `|d|`.
+#[inline(always)]
+pub(crate) fn shear_axes(d: [f32; 3]) -> ([u32; 3], [f32; 3]) {
+    // No `array::map` here or below: its closure is not always inlined, and these run inside
+    // the SIMD kernels, where a call is compiled without their target features.
+    let a = [d[0].abs(), d[1].abs(), d[2].abs()];
+    let (m, i) = if a[1] > a[0] { (a[1], 1) } else { (a[0], 0) };
+    let kz = if a[2] > m { 2 } else { i };
+    let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
+    let dz = pick(d, kz);
+    let (kx, ky) = if dz < 0.0 { (ky, kx) } else { (kx, ky) };
+    let s = [pick(d, kx) / dz, pick(d, ky) / dz, 1.0 / dz];
+    ([kx, ky, kz], s)
+}
+
+/// `p[k]` as selects (see [`shear_axes`]).
+#[inline(always)]
+pub(crate) fn pick(p: [f32; 3], k: u32) -> f32 {
+    if k == 0 {
+        p[0]
+    } else if k == 1 {
+        p[1]
+    } else {
+        p[2]
     }
 }
 
@@ -71,7 +100,9 @@ impl Triangle {
     pub fn intersect(&self, ray: &Ray, how: &TriangleTest, tmax: f32) -> Option<(f32, f32, f32)> {
         match how {
             TriangleTest::MollerTrumbore => self.moller_trumbore(ray, tmax),
-            TriangleTest::Watertight { k, s } => watertight(self.vertices(), ray, *k, *s, tmax),
+            TriangleTest::Watertight { k, s } => {
+                watertight(self.vertices().map(|v| v.to_array()), ray, *k, *s, tmax)
+            }
         }
     }
 
@@ -187,42 +218,96 @@ impl Triangle {
 /// sharing an edge always see opposite signs (or zero) for it. Degenerate triangles have
 /// `U + V + W == 0` and are never hit.
 #[inline]
-pub(super) fn watertight(
-    corners: [Vec3; 3],
+pub(crate) fn watertight(
+    corners: [[f32; 3]; 3],
     ray: &Ray,
-    k: [usize; 3],
-    s: Vec3,
+    k: [u32; 3],
+    s: [f32; 3],
     tmax: f32,
 ) -> Option<(f32, f32, f32)> {
-    let [kx, ky, kz] = k;
-    let [a, b, c] = corners.map(|p| p - ray.org);
-    let shear = |p: Vec3| (p[kx] - s.x * p[kz], p[ky] - s.y * p[kz]);
-    let ((ax, ay), (bx, by), (cx, cy)) = (shear(a), shear(b), shear(c));
-    let mut u = cx * by - cy * bx;
-    let mut v = ax * cy - ay * cx;
-    let mut w = bx * ay - by * ax;
-    if u == 0.0 || v == 0.0 || w == 0.0 {
-        let cross = |p: (f32, f32), q: (f32, f32)| {
-            let (p, q) = (
-                DVec2::new(p.0 as f64, p.1 as f64),
-                DVec2::new(q.0 as f64, q.1 as f64),
-            );
-            (p.x * q.y - p.y * q.x) as f32
+    let sheared = Sheared::new(corners, ray.org.to_array(), k, s);
+    let mut uvw = sheared.edges();
+    if uvw.contains(&0.0) {
+        uvw = sheared.edges_exact();
+    }
+    let (t, u, v) = sheared.hit(uvw, s[2], ray.tmin, tmax);
+    (t < f32::INFINITY).then_some((t, u, v))
+}
+
+/// [`watertight`] with the f32 edge functions only, for one SIMD lane: `(t, u, v)` with
+/// `t = inf` for a miss, and whether an edge function is exactly zero, in which case the
+/// answer is not final: the lane must take [`watertight`], which redoes it in f64. The
+/// operations are [`watertight`]'s, in the same order, so the lanes' answers are its bits.
+#[inline(always)]
+pub(crate) fn watertight_f32(
+    corners: [[f32; 3]; 3],
+    org: [f32; 3],
+    k: [u32; 3],
+    s: [f32; 3],
+    tmin: f32,
+    tmax: f32,
+) -> (f32, f32, f32, bool) {
+    let sheared = Sheared::new(corners, org, k, s);
+    let uvw = sheared.edges();
+    let (t, u, v) = sheared.hit(uvw, s[2], tmin, tmax);
+    (t, u, v, uvw[0] == 0.0 || uvw[1] == 0.0 || uvw[2] == 0.0)
+}
+
+/// The corners `a, b, c` relative to the ray's origin in the ray's sheared frame: `x`, `y`
+/// across the ray (sheared), `z` along its dominant axis (not yet scaled by `Sz`).
+struct Sheared {
+    x: [f32; 3],
+    y: [f32; 3],
+    z: [f32; 3],
+}
+
+impl Sheared {
+    #[inline(always)]
+    fn new(corners: [[f32; 3]; 3], org: [f32; 3], k: [u32; 3], s: [f32; 3]) -> Self {
+        let rel = |i: usize| {
+            let c = corners[i];
+            [c[0] - org[0], c[1] - org[1], c[2] - org[2]]
         };
-        u = cross((cx, cy), (bx, by));
-        v = cross((ax, ay), (cx, cy));
-        w = cross((bx, by), (ax, ay));
+        let (a, b, c) = (rel(0), rel(1), rel(2));
+        let z = [pick(a, k[2]), pick(b, k[2]), pick(c, k[2])];
+        let across = |p: [f32; 3], i: usize, axis: usize| pick(p, k[axis]) - s[axis] * z[i];
+        Sheared {
+            x: [across(a, 0, 0), across(b, 1, 0), across(c, 2, 0)],
+            y: [across(a, 0, 1), across(b, 1, 1), across(c, 2, 1)],
+            z,
+        }
     }
-    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-        return None;
+
+    /// The edge functions `U, V, W` in f32.
+    #[inline(always)]
+    fn edges(&self) -> [f32; 3] {
+        let ([ax, bx, cx], [ay, by, cy]) = (self.x, self.y);
+        [cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax]
     }
-    let det = u + v + w;
-    if det == 0.0 || !det.is_finite() {
-        return None;
+
+    /// The edge functions in f64, where the products of f32 values are exact.
+    fn edges_exact(&self) -> [f32; 3] {
+        let ([ax, bx, cx], [ay, by, cy]) = (self.x, self.y);
+        let [ax, bx, cx, ay, by, cy] = [ax, bx, cx, ay, by, cy].map(f64::from);
+        [
+            (cx * by - cy * bx) as f32,
+            (ax * cy - ay * cx) as f32,
+            (bx * ay - by * ax) as f32,
+        ]
     }
-    let t_scaled = s.z * (u * a[kz] + v * b[kz] + w * c[kz]);
-    let inv = 1.0 / det;
-    let t = t_scaled * inv;
-    // `u` weighs vertex 1 (`b`) and `v` vertex 2 (`c`), as Möller–Trumbore's.
-    (t >= ray.tmin && t < tmax).then_some((t, v * inv, w * inv))
+
+    /// The rest of the test from the edge functions `uvw`, without branches: `(t, u, v)` with
+    /// `t = inf` unless the ray crosses the triangle in `[tmin, tmax)`.
+    #[inline(always)]
+    fn hit(&self, [u, v, w]: [f32; 3], sz: f32, tmin: f32, tmax: f32) -> (f32, f32, f32) {
+        let outside = (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0);
+        let det = u + v + w;
+        let [az, bz, cz] = self.z;
+        let t_scaled = sz * (u * az + v * bz + w * cz);
+        let inv = 1.0 / det;
+        let t = t_scaled * inv;
+        let ok = !outside & (det != 0.0) & det.is_finite() & (t >= tmin) & (t < tmax);
+        // `u` weighs vertex 1 (`b`) and `v` vertex 2 (`c`), as Möller–Trumbore's.
+        (if ok { t } else { f32::INFINITY }, v * inv, w * inv)
+    }
 }

@@ -7,9 +7,7 @@
 //! exit distance and on every side decision.
 
 use crate::cpu::simd::{lanes_less, lanes_less_eq, Isa, TriBlock};
-use crate::geometry::{
-    Aabb, Hit, PrimitiveSet, Ray, RayTest, TraversalStats, TriangleTest, INVALID,
-};
+use crate::geometry::{Aabb, Hit, PrimitiveSet, Ray, RayTest, TraversalStats, TriangleTest};
 use crate::kdtree::{KdNode, KdTree};
 
 /// The ray as the traversals read it, with the reciprocal direction (`±inf` for `±0` components).
@@ -236,8 +234,8 @@ pub(crate) fn closest_among(
     }
     impl GroupTest for Offer<'_> {
         #[inline(always)]
-        fn block(&mut self, b: &TriBlock<BLOCK>) -> bool {
-            b.intersect(Isa::baseline(), self.ray, self.hit);
+        fn block(&mut self, b: &TriBlock<BLOCK>, test: &RayTest) -> bool {
+            b.intersect(Isa::baseline(), self.ray, test, self.hit);
             false
         }
         #[inline(always)]
@@ -271,8 +269,8 @@ pub(crate) fn any_among(
     }
     impl GroupTest for Any<'_> {
         #[inline(always)]
-        fn block(&mut self, b: &TriBlock<BLOCK>) -> bool {
-            b.occludes(Isa::baseline(), self.ray)
+        fn block(&mut self, b: &TriBlock<BLOCK>, test: &RayTest) -> bool {
+            b.occludes(Isa::baseline(), self.ray, test)
         }
         #[inline(always)]
         fn one(&mut self, p: u32) -> bool {
@@ -290,17 +288,16 @@ const BLOCK: usize = 4;
 /// What a leaf test does with its groups of primitives; each returns true to stop. A trait
 /// rather than a closure, so that both are inlined into every traversal.
 trait GroupTest {
-    /// Up to [`BLOCK`] triangles at once.
-    fn block(&mut self, b: &TriBlock<BLOCK>) -> bool;
+    /// Up to [`BLOCK`] triangles at once, with the ray's test `test`.
+    fn block(&mut self, b: &TriBlock<BLOCK>, test: &RayTest) -> bool;
     /// One primitive alone.
     fn one(&mut self, p: u32) -> bool;
 }
 
 /// Runs `t` on the leaf's primitives in order, triangles gathered into SIMD blocks (1 ray ×
-/// 4 triangles, the vectorised-traversal paper's test) wherever the ray takes the default test
-/// (Möller–Trumbore, nothing excluded), which the blocks compute bit-identically to the scalar
-/// test; other primitives and tests one at a time. Stops when `t` says so and returns whether
-/// it did. Counts the primitives tested.
+/// 4 triangles, the vectorised-traversal paper's test), which compute the scalar test bit for
+/// bit; other primitives one at a time. Stops when `t` says so and returns whether it did.
+/// Counts the primitives tested.
 #[inline(always)]
 fn test_groups(
     set: &PrimitiveSet,
@@ -309,24 +306,36 @@ fn test_groups(
     stats: &mut TraversalStats,
     t: &mut impl GroupTest,
 ) -> bool {
-    let triangles = &set.triangles;
-    let blocks = matches!(test.triangle, TriangleTest::MollerTrumbore)
-        && test.exclude == INVALID
-        && !triangles.is_empty();
-    if !blocks {
-        // A scene of analytic primitives, or a test the blocks do not compute.
-        for &p in prims {
-            stats.prim_tests += 1;
-            if t.one(p) {
-                return true;
-            }
+    // One loop per intersector, each with a copy of the test whose kind is a constant, so that
+    // neither carries the other's branches (as `cpu::batch::Batch`'s `WATERTIGHT`).
+    let exclude = test.exclude;
+    match test.triangle {
+        TriangleTest::MollerTrumbore => {
+            let triangle = TriangleTest::MollerTrumbore;
+            test_groups_with(set, &RayTest { triangle, exclude }, prims, stats, t)
         }
-        return false;
+        TriangleTest::Watertight { k, s } => {
+            let triangle = TriangleTest::Watertight { k, s };
+            test_groups_with(set, &RayTest { triangle, exclude }, prims, stats, t)
+        }
     }
+}
+
+/// [`test_groups`] for one intersector.
+#[inline(always)]
+fn test_groups_with(
+    set: &PrimitiveSet,
+    test: &RayTest,
+    prims: &[u32],
+    stats: &mut TraversalStats,
+    t: &mut impl GroupTest,
+) -> bool {
+    let triangles = set.triangles.len();
+    let intersector = test.triangle.intersector();
     for group in prims.chunks(BLOCK) {
-        if group.iter().all(|&p| (p as usize) < triangles.len()) {
+        if group.iter().all(|&p| (p as usize) < triangles) {
             stats.prim_tests += group.len() as u64;
-            if t.block(&TriBlock::from_triangles(triangles, group)) {
+            if t.block(&TriBlock::from_prims(set, group, intersector), test) {
                 return true;
             }
         } else {
