@@ -40,8 +40,7 @@ pub enum Rt2Traversal {
 
 /// How a batch of rays is traced (`rt2_query_options.mode`). Every mode returns the same closest
 /// hits, bit for bit, with either intersector; they differ in speed (`rt2 bench streams`). The
-/// SIMD leaf tests of packets and streams are Möller–Trumbore's: with the watertight test their
-/// traversal stays SIMD and the leaves are tested one ray at a time.
+/// leaf tests of packets and streams are SIMD with either intersector.
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Rt2QueryMode {
