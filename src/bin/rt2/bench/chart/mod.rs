@@ -247,8 +247,8 @@ pub(super) fn chart(a: &Args) -> Result<String> {
          Modes (the `mode` column; marker on the chart): **single** = `QueryMode::Single`, one ray \
          at a time, every traversal × intersector (circles); **packet** = `QueryMode::Packet` \
          (triangles) and **stream** = `QueryMode::Stream` (squares), which follow the standard \
-         traversal's order with either intersector (the watertight test one ray at a time in \
-         the leaves); **gpu** = the GPU backend (diamonds), every traversal \
+         traversal's order with either intersector (both tested on 16 rays or triangles at \
+         once in the leaves, where the CPU has AVX-512); **gpu** = the GPU backend (diamonds), every traversal \
          kernel, Möller–Trumbore and the epsilon offset only (all its kernels have); its \
          Möller–Trumbore rounds differently from the CPU's near edges (Vulkan lets a division \
          be off by 2.5 ULP and a shader compiler fuse multiply-adds), so its leak count on the \
