@@ -408,8 +408,19 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         answer.reset();
         for start in (0..n).step_by(N) {
             let live = first::<N>(n - start);
-            let r = RayLanes::<N>::gather(rays, &std::array::from_fn(|l| (start + l) as u32));
-            let inv = r.dir.map(|d| d.map(|d| 1.0 / d));
+            // Loops rather than `array::from_fn` and `array::map`, which LLVM left as calls here,
+            // compiled without the kernel's SIMD features (see `simd`).
+            let mut ids = [0u32; N];
+            for (l, id) in ids.iter_mut().enumerate() {
+                *id = (start + l) as u32;
+            }
+            let r = RayLanes::<N>::gather(rays, &ids);
+            let mut inv = [[0.0f32; N]; 3];
+            for (inv, dir) in inv.iter_mut().zip(&r.dir) {
+                for (i, d) in inv.iter_mut().zip(dir) {
+                    *i = 1.0 / d;
+                }
+            }
             for a in 0..3 {
                 split[a].extend((0..(n - start).min(N)).map(|l| [r.org[a][l], inv[a][l]]));
             }

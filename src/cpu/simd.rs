@@ -302,7 +302,11 @@ impl<const N: usize> RayLanes<N> {
     #[inline(always)]
     pub fn gather(rays: &[Ray], ids: &[u32; N]) -> Self {
         let last = rays.len() - 1;
-        let rs: [&Ray; N] = std::array::from_fn(|l| &rays[(ids[l] as usize).min(last)]);
+        // A loop, not `array::from_fn` (left as a call: see the module's note).
+        let mut rs = [&rays[last]; N];
+        for (r, &id) in rs.iter_mut().zip(ids) {
+            *r = &rays[(id as usize).min(last)];
+        }
         // Columns built whole, as in `TriBlock::from_prims` (no store-forwarding stall).
         let column = |f: fn(&Ray) -> f32| -> [f32; N] { std::array::from_fn(|l| f(rs[l])) };
         RayLanes {
