@@ -161,17 +161,19 @@ impl PrimitiveSet {
     /// triangle's `v0, e1, e2` (a reference, so that SIMD blocks gather them lane by lane).
     #[inline(always)]
     pub fn stored_rows(&self, k: usize, intersector: Intersector) -> &[[f32; 3]; 3] {
-        match (intersector, self.vertices.get(k)) {
-            (Intersector::Watertight, Some(v)) => v,
-            _ => bytemuck::cast_ref(&self.triangles[k]),
+        if intersector == Intersector::Watertight && !self.rebuilds_corners(intersector) {
+            &self.vertices[k]
+        } else {
+            bytemuck::cast_ref(&self.triangles[k])
         }
     }
 
     /// Whether [`Self::triangle_rows`] rebuilds the corners from the stored rows (`v0 + e1`,
-    /// `v0 + e2`): the watertight test without exact corners.
+    /// `v0 + e2`): the watertight test without exact corners for every triangle (all or none,
+    /// so that a SIMD block of triangles reads one kind of row).
     #[inline(always)]
     pub fn rebuilds_corners(&self, intersector: Intersector) -> bool {
-        intersector == Intersector::Watertight && self.vertices.is_empty()
+        intersector == Intersector::Watertight && self.vertices.len() != self.triangles.len()
     }
 
     /// Tests every plane (they are outside the tree); plane `k` has global index `len() + k`.
