@@ -491,6 +491,29 @@ typedef struct rt2_render_options {
 } rt2_render_options;
 
 /**
+ * The closest hit of one ray. A miss has `t = +inf` and `object = prim = RT2_INVALID_ID`.
+ */
+typedef struct rt2_hit {
+  float t;
+  /**
+   * Barycentric weight of the triangle's vertex 1 (0 for analytic primitives).
+   */
+  float u;
+  /**
+   * Barycentric weight of vertex 2.
+   */
+  float v;
+  /**
+   * Object id as returned by the `rt2_scene_add_*` call.
+   */
+  uint32_t object;
+  /**
+   * Triangle index inside a mesh (file face order for loaded meshes); 0 otherwise.
+   */
+  uint32_t prim;
+} rt2_hit;
+
+/**
  * Per-call options of the ray queries.
  */
 typedef struct rt2_query_options {
@@ -515,6 +538,15 @@ typedef struct rt2_query_options {
    * An `rt2_intersector` value (default MOLLER_TRUMBORE).
    */
   uint32_t intersector;
+  /**
+   * NULL (default), or one hit per ray: ray i ignores the primitive `exclude[i]` names by
+   * its `object` and `prim` (`t`, `u`, `v` are not read), e.g. the hit a secondary ray
+   * leaves (the exclude-prim offset of renders). A miss (both `RT2_INVALID_ID`) excludes
+   * nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. CPU only: a
+   * GPU context runs such a query on the CPU under AUTO and refuses it (UNSUPPORTED) when
+   * the GPU was asked for. The first use builds a lookup of 4 bytes per primitive.
+   */
+  const struct rt2_hit *exclude;
 } rt2_query_options;
 
 /**
@@ -527,29 +559,6 @@ typedef struct rt2_ray {
   float dir[3];
   float tmax;
 } rt2_ray;
-
-/**
- * The closest hit of one ray. A miss has `t = +inf` and `object = prim = RT2_INVALID_ID`.
- */
-typedef struct rt2_hit {
-  float t;
-  /**
-   * Barycentric weight of the triangle's vertex 1 (0 for analytic primitives).
-   */
-  float u;
-  /**
-   * Barycentric weight of vertex 2.
-   */
-  float v;
-  /**
-   * Object id as returned by the `rt2_scene_add_*` call.
-   */
-  uint32_t object;
-  /**
-   * Triangle index inside a mesh (file face order for loaded meshes); 0 otherwise.
-   */
-  uint32_t prim;
-} rt2_hit;
 
 /**
  * Work done by a query (the thesis' table 1 counters), summed over the batch.
@@ -609,6 +618,12 @@ typedef struct rt2_scene_statistics {
   uint64_t bytes_ropes;
   uint64_t bytes_leaf_boxes;
   uint64_t bytes_primitives;
+  /**
+   * The lookup from `(object, prim)` to the library's primitive index that
+   * `rt2_query_options.exclude` needs: 4 bytes per primitive and 8 per object; 0 until a
+   * query names primitives to exclude.
+   */
+  uint64_t bytes_prim_lookup;
 } rt2_scene_statistics;
 
 #ifdef __cplusplus

@@ -7,7 +7,7 @@ use crate::cpu::traverse::TraverseOptions;
 use crate::dispatch::{self, BackendRequest, Decision};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
-use crate::geometry::{Hit, Ray, TraversalStats};
+use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats};
 use crate::gpu::{self, Gpu, GpuOptions, GpuResult};
 use crate::precision::{Intersector, OffsetMode};
 use crate::render::{GpuPathRequest, RenderOptions};
@@ -255,19 +255,20 @@ impl Context {
         hits: &mut [Hit],
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
-        q.validate()?;
-        self.job(
-            hits,
-            gpu_lacks(q.intersector, OffsetMode::Epsilon),
-            |g, hits, choices| {
-                let how = gpu_query_traversal(scene, q, choices);
-                gpu::intersect(g, scene, rays, hits, how, q.short_stack_size)
-            },
-            |hits, choices| {
-                let (how, opts) = self.query_setup(scene, q, choices);
-                self.install(|| cpu::query::intersect(scene, rays, hits, how, &opts, q.mode))
-            },
-        )
+        self.closest(scene, (rays, None), hits, q)
+    }
+
+    /// [`Context::intersect`] where ray `i` ignores primitive `exclude[i]` (`INVALID`: none),
+    /// e.g. the one a secondary ray leaves. On the CPU: the GPU kernels take no exclusions.
+    pub fn intersect_excluding(
+        &self,
+        scene: &Committed,
+        rays: &[Ray],
+        exclude: &[PrimIndex],
+        hits: &mut [Hit],
+        q: &QueryOptions,
+    ) -> Result<TraversalStats> {
+        self.closest(scene, (rays, Some(exclude)), hits, q)
     }
 
     /// Any-hit queries for a batch of rays.
@@ -278,17 +279,74 @@ impl Context {
         out: &mut [bool],
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
+        self.any(scene, (rays, None), out, q)
+    }
+
+    /// [`Context::occluded`] where ray `i` ignores primitive `exclude[i]`, as
+    /// [`Context::intersect_excluding`].
+    pub fn occluded_excluding(
+        &self,
+        scene: &Committed,
+        rays: &[Ray],
+        exclude: &[PrimIndex],
+        out: &mut [bool],
+        q: &QueryOptions,
+    ) -> Result<TraversalStats> {
+        self.any(scene, (rays, Some(exclude)), out, q)
+    }
+
+    fn closest(
+        &self,
+        scene: &Committed,
+        (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
+        hits: &mut [Hit],
+        q: &QueryOptions,
+    ) -> Result<TraversalStats> {
         q.validate()?;
+        check_exclusions(rays, exclude)?;
+        self.job(
+            hits,
+            gpu_lacks_query(q, exclude),
+            |g, hits, choices| {
+                let how = gpu_query_traversal(scene, q, choices);
+                gpu::intersect(g, scene, rays, hits, how, q.short_stack_size)
+            },
+            |hits, choices| {
+                let (how, opts) = self.query_setup(scene, q, choices);
+                self.install(|| match exclude {
+                    None => cpu::query::intersect(scene, rays, hits, how, &opts, q.mode),
+                    Some(e) => {
+                        cpu::query::intersect_excluding(scene, rays, e, hits, how, &opts, q.mode)
+                    }
+                })
+            },
+        )
+    }
+
+    fn any(
+        &self,
+        scene: &Committed,
+        (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
+        out: &mut [bool],
+        q: &QueryOptions,
+    ) -> Result<TraversalStats> {
+        q.validate()?;
+        check_exclusions(rays, exclude)?;
         self.job(
             out,
-            gpu_lacks(q.intersector, OffsetMode::Epsilon),
+            gpu_lacks_query(q, exclude),
             |g, out, choices| {
                 let how = gpu_query_traversal(scene, q, choices);
                 gpu::occluded(g, scene, rays, out, how, q.short_stack_size)
             },
             |out, choices| {
                 let (how, opts) = self.query_setup(scene, q, choices);
-                self.install(|| cpu::query::occluded(scene, rays, out, how, &opts, q.mode))
+                self.install(|| match exclude {
+                    None => cpu::query::occluded(scene, rays, out, how, &opts, q.mode),
+                    Some(e) => {
+                        cpu::query::occluded_excluding(scene, rays, e, out, how, &opts, q.mode)
+                    }
+                })
             },
         )
     }
@@ -358,6 +416,26 @@ fn gpu_lacks(intersector: Intersector, offset: OffsetMode) -> Option<&'static st
     }
 }
 
+/// What the GPU kernels lack for a query, if anything (see [`gpu_lacks`]).
+fn gpu_lacks_query(q: &QueryOptions, exclude: Option<&[PrimIndex]>) -> Option<&'static str> {
+    gpu_lacks(q.intersector, OffsetMode::Epsilon).or(match exclude {
+        Some(_) => Some("the GPU kernels take no excluded primitives"),
+        None => None,
+    })
+}
+
+/// One excluded primitive per ray, when there are any.
+fn check_exclusions(rays: &[Ray], exclude: Option<&[PrimIndex]>) -> Result<()> {
+    match exclude {
+        Some(e) if e.len() != rays.len() => Err(Error::invalid_argument(format!(
+            "{} excluded primitives for {} rays: give one per ray",
+            e.len(),
+            rays.len()
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// Options of batch ray queries.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct QueryOptions {
@@ -391,5 +469,38 @@ impl Default for QueryOptions {
             mode: cpu::query::QueryMode::Single,
             intersector: crate::precision::Intersector::MollerTrumbore,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Scene, Shape};
+    use glam::Vec3;
+
+    /// An exclusion list of another length than the rays is refused, and nothing is written.
+    #[test]
+    fn one_exclusion_per_ray() {
+        let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
+        let mut s = Scene::new();
+        let sphere = Shape::Sphere {
+            center: Vec3::ZERO,
+            radius: 1.0,
+        };
+        s.add_object(sphere, 0).unwrap();
+        s.commit().unwrap();
+        let rays = [Ray::new(Vec3::Z * 5.0, -Vec3::Z, 0.0, f32::INFINITY); 2];
+        let q = QueryOptions::default();
+        let mut hits = [Hit::MISS; 2];
+        let c = s.committed().unwrap();
+        let e = ctx
+            .intersect_excluding(c, &rays, &[crate::geometry::INVALID], &mut hits, &q)
+            .unwrap_err();
+        assert_eq!(e.status, crate::error::Rt2Status::InvalidArgument);
+        assert!(hits.iter().all(|h| !h.is_hit()));
+        let mut occ = [false; 2];
+        ctx.occluded_excluding(c, &rays, &[0, crate::geometry::INVALID], &mut occ, &q)
+            .unwrap();
+        assert_eq!(occ, [false, true], "ray 0 ignores the only sphere");
     }
 }

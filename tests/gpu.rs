@@ -1101,3 +1101,59 @@ fn spheres_and_ellipsoids_are_hit_whatever_the_direction_length() {
     assert!(on_cpu.iter().all(|h| h.is_hit()));
     compare_queries("long and short directions", &g, &scene, &rays);
 }
+
+/// Queries with excluded primitives run on the CPU (the kernels take none): AUTO falls back and
+/// says why, a context that asked for the GPU refuses them, and the answer ignores the
+/// primitive either way it runs.
+#[test]
+fn queries_with_exclusions_run_on_the_cpu() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let mut s = Scene::new();
+    for z in [0.0, -3.0] {
+        let center = Vec3::new(0.0, 0.0, z);
+        s.add_object(
+            Shape::Sphere {
+                center,
+                radius: 1.0,
+            },
+            0,
+        )
+        .unwrap();
+    }
+    s.commit().unwrap();
+    let c = s.committed().unwrap();
+    let rays = [Ray::new(
+        Vec3::new(0.0, 0.0, 5.0),
+        -Vec3::Z,
+        0.0,
+        f32::INFINITY,
+    )];
+    let q = QueryOptions::default();
+    let mut first = [Hit::MISS];
+    g.intersect(c, &rays, &mut first, &q).unwrap();
+    assert_eq!(first[0].t, 4.0);
+    let exclude = [first[0].prim];
+    let mut hits = [Hit::MISS];
+    let e = g
+        .intersect_excluding(c, &rays, &exclude, &mut hits, &q)
+        .unwrap_err();
+    assert_eq!(e.status, Rt2Status::Unsupported, "{}", e.message);
+    assert!(!hits[0].is_hit(), "a refused query writes nothing");
+    let mut occ = [true];
+    let e = g
+        .occluded_excluding(c, &rays, &exclude, &mut occ, &q)
+        .unwrap_err();
+    assert_eq!(e.status, Rt2Status::Unsupported, "{}", e.message);
+    if let Some((auto, _)) = auto_on_gpu(None) {
+        auto.intersect_excluding(c, &rays, &exclude, &mut hits, &q)
+            .unwrap();
+        // Through the first sphere to the second one's front, at z = -2.
+        assert_eq!((hits[0].t, hits[0].prim == first[0].prim), (7.0, false));
+        let why = auto
+            .last_fallback()
+            .expect("a reason for running on the CPU");
+        assert!(why.contains("excluded") && why.contains("CPU"), "{why}");
+    }
+}

@@ -369,3 +369,213 @@ fn query_statistics_count_the_nodes_leaves_and_tests_of_each_ray() {
         rt2_context_destroy(ctx);
     }
 }
+
+/// `rt2_query_options.exclude`: two grids of triangles, at z = 0 (object 0) and z = -1 (object
+/// 1), and rays straight down from z = 10. A ray that ignores the triangle it hits first hits
+/// the lower grid at t = 11; one that ignores a triangle it does not hit is unchanged. The same
+/// in every query mode with either intersector, for closest and any hits. Names the scene
+/// lacks are refused before any output is written.
+#[test]
+fn excluded_primitives_are_ignored_in_every_mode() {
+    unsafe {
+        let mut ctx = null_mut();
+        assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
+        let mut scene = null_mut();
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        // An n × n grid of unit squares, two triangles each, at height z.
+        let n = 8u32;
+        let grid = |z: f32| {
+            let positions: Vec<f32> = (0..=n)
+                .flat_map(|y| (0..=n).flat_map(move |x| [x as f32, y as f32, z]))
+                .collect();
+            let corner = |x: u32, y: u32| y * (n + 1) + x;
+            let indices: Vec<u32> = (0..n)
+                .flat_map(|y| (0..n).map(move |x| (x, y)))
+                .flat_map(|(x, y)| {
+                    let (a, b) = (corner(x, y), corner(x + 1, y));
+                    let (c, d) = (corner(x, y + 1), corner(x + 1, y + 1));
+                    [a, b, d, a, d, c]
+                })
+                .collect();
+            (positions, indices)
+        };
+        for (z, want_id) in [(0.0, 0), (-1.0, 1)] {
+            let (p, i) = grid(z);
+            let mut id = u32::MAX;
+            let st = rt2_scene_add_mesh(
+                scene,
+                p.as_ptr(),
+                p.len() / 3,
+                i.as_ptr(),
+                i.len() / 3,
+                0,
+                &mut id,
+            );
+            assert_eq!((st, id), (Rt2Status::Ok, want_id));
+        }
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        // Rays inside the grid, off its edges (0.1 + 0.37 k mod 8).
+        let rays: Vec<rt2_ray> = (0..3000)
+            .map(|k| {
+                let f = |s: f32| 0.1 + (s * 0.37) % (n as f32 - 0.2);
+                rt2_ray {
+                    org: [f(k as f32), f(k as f32 * 1.9 + 0.5), 10.0],
+                    tmin: 0.0,
+                    dir: [0.0, 0.0, -1.0],
+                    tmax: f32::INFINITY,
+                }
+            })
+            .collect();
+        let miss = rt2_hit {
+            t: f32::INFINITY,
+            u: 0.0,
+            v: 0.0,
+            object: RT2_INVALID_ID,
+            prim: RT2_INVALID_ID,
+        };
+        let run = |opt: &rt2_query_options| {
+            let mut hits = vec![miss; rays.len()];
+            let st = rt2_intersect(
+                ctx,
+                scene,
+                rays.as_ptr(),
+                rays.len(),
+                hits.as_mut_ptr(),
+                opt,
+                null_mut(),
+            );
+            (st, hits)
+        };
+        let (st, first) = run(&rt2_query_options_default());
+        assert_eq!(st, Rt2Status::Ok);
+        assert!(first.iter().all(|h| h.object == 0 && h.t == 10.0));
+        // The lookup the exclusions need is built on their first use: 4 bytes per triangle
+        // and 8 per object.
+        let lookup_bytes = || {
+            let mut stats: rt2_scene_statistics = std::mem::zeroed();
+            stats.struct_size = std::mem::size_of::<rt2_scene_statistics>() as u32;
+            assert_eq!(rt2_scene_stats(scene, &mut stats), Rt2Status::Ok);
+            stats.bytes_prim_lookup
+        };
+        assert_eq!(lookup_bytes(), 0);
+        // A refused query (an object the scene lacks) does not build it.
+        let mut opt = rt2_query_options_default();
+        let bad = vec![
+            rt2_hit {
+                object: 2,
+                prim: 0,
+                ..miss
+            };
+            rays.len()
+        ];
+        opt.exclude = bad.as_ptr();
+        assert_eq!(run(&opt).0, Rt2Status::InvalidArgument);
+        assert_eq!(lookup_bytes(), 0);
+        // Every other ray ignores its own first hit, the others the neighbouring triangle
+        // (one they do not hit), or nothing.
+        let exclude: Vec<rt2_hit> = first
+            .iter()
+            .enumerate()
+            .map(|(k, h)| match k % 3 {
+                0 => *h,
+                1 => rt2_hit {
+                    prim: h.prim ^ 1,
+                    ..*h
+                },
+                _ => miss,
+            })
+            .collect();
+        for intersector in [Rt2Intersector::MollerTrumbore, Rt2Intersector::Watertight] {
+            for mode in [
+                Rt2QueryMode::Single,
+                Rt2QueryMode::Packet,
+                Rt2QueryMode::Stream,
+            ] {
+                let mut opt = rt2_query_options_default();
+                (opt.mode, opt.intersector, opt.exclude) =
+                    (mode as u32, intersector as u32, exclude.as_ptr());
+                let (st, hits) = run(&opt);
+                assert_eq!(st, Rt2Status::Ok);
+                for (k, (h, f)) in hits.iter().zip(&first).enumerate() {
+                    let through = k % 3 == 0;
+                    let (object, t) = if through { (1, 11.0) } else { (0, 10.0) };
+                    // Within rounding: the watertight test's `t` is not exact.
+                    assert!(
+                        h.object == object && (h.t - t).abs() <= 2e-6 * t,
+                        "{mode:?} {intersector:?} ray {k}: {h:?}"
+                    );
+                    if !through {
+                        // The same triangle (`u`, `v` round differently per intersector).
+                        assert_eq!(h.prim, f.prim, "{mode:?} {intersector:?} ray {k}");
+                    }
+                }
+                // Shadow rays ending between the grids: only those that see through are clear.
+                let short: Vec<rt2_ray> =
+                    rays.iter().map(|r| rt2_ray { tmax: 10.5, ..*r }).collect();
+                let mut occ = vec![2u8; rays.len()];
+                let st = rt2_occluded(
+                    ctx,
+                    scene,
+                    short.as_ptr(),
+                    short.len(),
+                    occ.as_mut_ptr(),
+                    &opt,
+                    null_mut(),
+                );
+                assert_eq!(st, Rt2Status::Ok);
+                for (k, o) in occ.iter().enumerate() {
+                    assert_eq!(*o, (k % 3 != 0) as u8, "{mode:?} {intersector:?} ray {k}");
+                }
+            }
+        }
+
+        assert_eq!(lookup_bytes(), (4 * 4 * n * n + 8 * 3) as u64);
+
+        // Names the scene lacks: the call fails and writes nothing.
+        let bad_ids = [
+            (2, 0),
+            (0, 2 * n * n),
+            (RT2_INVALID_ID, 0),
+            (0, RT2_INVALID_ID),
+        ];
+        for (object, prim) in bad_ids {
+            let mut bad = exclude.clone();
+            bad[rays.len() - 1] = rt2_hit {
+                object,
+                prim,
+                ..miss
+            };
+            let mut opt = rt2_query_options_default();
+            (opt.mode, opt.exclude) = (Rt2QueryMode::Stream as u32, bad.as_ptr());
+            let (st, hits) = run(&opt);
+            assert_eq!(st, Rt2Status::InvalidArgument, "({object}, {prim})");
+            assert!(hits.iter().all(|h| *h == miss), "({object}, {prim})");
+        }
+        // A query of more than one step (2^20 rays) is checked whole first: a bad name in
+        // its last step leaves the first step's hits unwritten too.
+        let long = (1 << 20) + 1;
+        let (many, mut bad): (Vec<rt2_ray>, Vec<rt2_hit>) =
+            (0..long).map(|k| (rays[k % rays.len()], miss)).unzip();
+        bad[long - 1] = rt2_hit {
+            object: 7,
+            prim: 0,
+            ..miss
+        };
+        let mut hits = vec![miss; long];
+        let mut opt = rt2_query_options_default();
+        opt.exclude = bad.as_ptr();
+        let st = rt2_intersect(
+            ctx,
+            scene,
+            many.as_ptr(),
+            long,
+            hits.as_mut_ptr(),
+            &opt,
+            null_mut(),
+        );
+        assert_eq!(st, Rt2Status::InvalidArgument);
+        assert!(hits.iter().all(|h| *h == miss));
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}

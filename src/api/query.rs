@@ -8,8 +8,9 @@ use super::options::{
 };
 use super::scene::rt2_scene;
 use crate::context::QueryOptions;
-use crate::error::Rt2Status;
-use crate::geometry::{Hit, Ray, TraversalStats};
+use crate::error::{Error, Rt2Status};
+use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
+use crate::scene::PrimLookup;
 use glam::Vec3;
 
 /// One ray: `org + t * dir` for `t` in `[tmin, tmax)` (32 bytes, the `.rays` record). Rays with
@@ -53,6 +54,13 @@ pub struct rt2_query_options {
     pub mode: u32,
     /// An `rt2_intersector` value (default MOLLER_TRUMBORE).
     pub intersector: u32,
+    /// NULL (default), or one hit per ray: ray i ignores the primitive `exclude[i]` names by
+    /// its `object` and `prim` (`t`, `u`, `v` are not read), e.g. the hit a secondary ray
+    /// leaves (the exclude-prim offset of renders). A miss (both `RT2_INVALID_ID`) excludes
+    /// nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. CPU only: a
+    /// GPU context runs such a query on the CPU under AUTO and refuses it (UNSUPPORTED) when
+    /// the GPU was asked for. The first use builds a lookup of 4 bytes per primitive.
+    pub exclude: *const rt2_hit,
 }
 
 versioned!(rt2_query_options);
@@ -76,6 +84,7 @@ pub extern "C" fn rt2_query_options_default() -> rt2_query_options {
         short_stack_size: d.short_stack_size as u32,
         mode: Rt2QueryMode::Single as u32,
         intersector: intersector_to(d.intersector),
+        exclude: std::ptr::null(),
     }
 }
 
@@ -88,9 +97,12 @@ impl From<&rt2_ray> for Ray {
     }
 }
 
-unsafe fn query_options(opt: *const rt2_query_options) -> crate::error::Result<QueryOptions> {
+/// The query options, and the per-ray exclusions (NULL for none).
+unsafe fn query_options(
+    opt: *const rt2_query_options,
+) -> crate::error::Result<(QueryOptions, *const rt2_hit)> {
     if opt.is_null() {
-        return Ok(QueryOptions::default());
+        return Ok((QueryOptions::default(), std::ptr::null()));
     }
     let o = read_versioned(opt)?;
     let q = QueryOptions {
@@ -100,7 +112,22 @@ unsafe fn query_options(opt: *const rt2_query_options) -> crate::error::Result<Q
         intersector: intersector_from(o.intersector)?,
     };
     q.validate()?;
-    Ok(q)
+    Ok((q, o.exclude))
+}
+
+/// The global index of the primitive `h` names (`INVALID` for a miss), or an error naming
+/// entry `i` of `opt.exclude`.
+fn excluded(lookup: &PrimLookup, i: usize, h: &rt2_hit) -> crate::error::Result<PrimIndex> {
+    if h.object == RT2_INVALID_ID && h.prim == RT2_INVALID_ID {
+        return Ok(INVALID);
+    }
+    lookup.get(h.object, h.prim).ok_or_else(|| {
+        Error::invalid_argument(format!(
+            "opt.exclude[{i}] names object {} primitive {}, which the committed scene lacks \
+             (a miss, with both ids RT2_INVALID_ID, excludes nothing)",
+            h.object, h.prim
+        ))
+    })
 }
 
 /// Rays converted and traced per step of a C query. The library's own copies (rays in its
@@ -124,7 +151,7 @@ unsafe fn run_query<T>(
     f: impl Fn(
         &crate::context::Context,
         &crate::scene::Committed,
-        &[Ray],
+        (&[Ray], Option<&[PrimIndex]>),
         &mut [T],
         &QueryOptions,
     ) -> crate::error::Result<TraversalStats>,
@@ -132,9 +159,13 @@ unsafe fn run_query<T>(
     guard(|| {
         let c = handle(ctx, "ctx")?;
         let s = handle(scene, "scene")?;
-        let q = query_options(opt)?;
+        let (q, exclude) = query_options(opt)?;
         let rays = slice(rays, count, "rays")?;
         let out = slice_mut(out, count, out_name)?;
+        let exclude = match exclude.is_null() {
+            true => None,
+            false => Some(slice(exclude, count, "opt.exclude")?),
+        };
         // `query_options` validated the options (defaults are valid): refused ones never reach
         // the ropes or exact vertices below, so a failed call leaves the scene as it was.
         if q.traversal.is_some_and(|t| t.needs_ropes()) {
@@ -143,14 +174,37 @@ unsafe fn run_query<T>(
         if q.intersector == crate::precision::Intersector::Watertight {
             s.write().ensure_exact_vertices()?;
         }
+        if let Some(e) = exclude {
+            // Every entry checked before any output is written.
+            s.write().ensure_prim_lookup(|lookup| {
+                for (i, h) in e.iter().enumerate() {
+                    excluded(lookup, i, h)?;
+                }
+                Ok(())
+            })?;
+        }
         let guard = s.read();
         let committed = guard.committed()?;
         let mut st = TraversalStats::default();
-        let mut step = Vec::new();
-        for (rays, out) in rays.chunks(QUERY_CHUNK).zip(out.chunks_mut(QUERY_CHUNK)) {
+        let (mut step, mut step_exclude) = (Vec::new(), Vec::new());
+        for (k, (rays, out)) in rays
+            .chunks(QUERY_CHUNK)
+            .zip(out.chunks_mut(QUERY_CHUNK))
+            .enumerate()
+        {
             step.clear();
             step.extend(rays.iter().map(Ray::from));
-            st.add(&f(&c.inner, committed, &step, out, &q)?);
+            let step_exclude = match exclude {
+                None => None,
+                Some(e) => {
+                    step_exclude.clear();
+                    for (i, h) in e.iter().enumerate().skip(k * QUERY_CHUNK).take(rays.len()) {
+                        step_exclude.push(excluded(&committed.lookup, i, h)?);
+                    }
+                    Some(&step_exclude[..])
+                }
+            };
+            st.add(&f(&c.inner, committed, (&step, step_exclude), out, &q)?);
         }
         if !stats.is_null() {
             write_out(
@@ -192,9 +246,12 @@ pub unsafe extern "C" fn rt2_intersect(
         (hits, "hits"),
         opt,
         stats,
-        |c, committed, rays, out, q| {
+        |c, committed, (rays, exclude), out, q| {
             let mut inner = vec![Hit::MISS; rays.len()];
-            let st = c.intersect(committed, rays, &mut inner, q)?;
+            let st = match exclude {
+                None => c.intersect(committed, rays, &mut inner, q)?,
+                Some(e) => c.intersect_excluding(committed, rays, e, &mut inner, q)?,
+            };
             for (h, o) in inner.iter().zip(out.iter_mut()) {
                 *o = if h.is_hit() {
                     let origin = committed.origins[h.prim as usize];
@@ -243,9 +300,12 @@ pub unsafe extern "C" fn rt2_occluded(
         (occluded, "occluded"),
         opt,
         stats,
-        |c, committed, rays, out, q| {
+        |c, committed, (rays, exclude), out, q| {
             let mut inner = vec![false; rays.len()];
-            let st = c.occluded(committed, rays, &mut inner, q)?;
+            let st = match exclude {
+                None => c.occluded(committed, rays, &mut inner, q)?,
+                Some(e) => c.occluded_excluding(committed, rays, e, &mut inner, q)?,
+            };
             for (b, o) in inner.iter().zip(out.iter_mut()) {
                 *o = *b as u8;
             }

@@ -7,10 +7,12 @@
 pub mod builtin;
 pub mod loaders;
 mod locality;
+mod lookup;
 mod material;
 mod object;
 pub mod tessellate;
 
+pub use lookup::PrimLookup;
 pub use material::{Checker, Material, PointLight};
 pub use object::{Object, PrimOrigin, Shape};
 
@@ -41,6 +43,8 @@ pub struct Committed {
     pub tree: KdTree,
     /// Object and per-object index of each global primitive (bounded ones, then planes).
     pub origins: Vec<PrimOrigin>,
+    /// The inverse of `origins`, empty until asked for (`Scene::ensure_prim_lookup`).
+    pub lookup: PrimLookup,
     pub object_material: Vec<u32>,
     pub materials: Vec<Material>,
     pub lights: Vec<PointLight>,
@@ -329,6 +333,7 @@ impl Scene {
             prims,
             tree,
             origins,
+            lookup: PrimLookup::default(),
             object_material: self.objects.iter().map(|o| o.material).collect(),
             materials: self.materials.clone(),
             lights: self.lights.clone(),
@@ -372,6 +377,26 @@ impl Scene {
                     .iter()
                     .map(|o| corners[first[o.object as usize] + o.prim as usize])
                     .collect();
+            }
+        }
+        Ok(())
+    }
+
+    /// Builds the committed scene's [`PrimLookup`] if it is not there yet (4 bytes per
+    /// primitive, for queries that name primitives to ignore) and runs `check` on it. A new
+    /// lookup is kept only when `check` passes, so a refused query leaves the scene as it was.
+    pub fn ensure_prim_lookup(
+        &mut self,
+        check: impl FnOnce(&PrimLookup) -> Result<()>,
+    ) -> Result<()> {
+        self.committed()?;
+        if let Some(c) = &mut self.committed {
+            if c.lookup.is_empty() {
+                let lookup = PrimLookup::new(&c.origins, self.objects.len());
+                check(&lookup)?;
+                c.lookup = lookup;
+            } else {
+                check(&c.lookup)?;
             }
         }
         Ok(())

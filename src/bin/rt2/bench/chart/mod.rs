@@ -67,8 +67,7 @@ impl Engine {
     /// waves do), and the GPU kernels offset by the fixed epsilon only.
     fn offsets(self) -> &'static [OffsetMode] {
         match self {
-            Engine::Cpu(QueryMode::Single) => &OffsetMode::ALL,
-            Engine::Cpu(_) => &[OffsetMode::Epsilon, OffsetMode::Robust],
+            Engine::Cpu(_) => &OffsetMode::ALL,
             Engine::Gpu => &[OffsetMode::Epsilon],
         }
     }
@@ -273,8 +272,9 @@ pub(super) fn chart(a: &Args) -> Result<String> {
          the object and every offset mode starts inside it. Single: each pixel's shadow ray \
          right after its primary ray (the depth-first schedule). Packet, stream and gpu: all \
          primary rays as one batch query, the shadow origins computed on the host, then all \
-         shadow rays as another (the breadth-first schedule); batches carry no excluded \
-         primitive, so these have no exclude-prim point.\n\n{st}{}{psnr}",
+         shadow rays as another (the breadth-first schedule), each shadow ray with its \
+         excluded primitive under exclude-prim (`Context::intersect_excluding`, \
+         `rt2_query_options.exclude`; CPU only).\n\n{st}{}{psnr}",
         b.gpu_note,
         front_table("ray queries", &qp),
         front_table("secondary rays", &sp)

@@ -225,7 +225,12 @@ fn breadth_first(
     });
     let shadow_rays: Vec<Ray> = shadows.iter().map(|s| s.ray).collect();
     let mut shadow_hits = vec![Hit::MISS; shadow_rays.len()];
-    ctx.intersect(c, &shadow_rays, &mut shadow_hits, q)?;
+    if tracer.opts.offset_mode == OffsetMode::ExcludePrim {
+        let skip: Vec<PrimIndex> = shadows.iter().map(|s| s.skip).collect();
+        ctx.intersect_excluding(c, &shadow_rays, &skip, &mut shadow_hits, q)?;
+    } else {
+        ctx.intersect(c, &shadow_rays, &mut shadow_hits, q)?;
+    }
     Ok(shadows
         .iter()
         .zip(&shadow_hits)
@@ -243,15 +248,15 @@ mod tests {
     /// The breadth-first measurement (batch queries in every CPU mode) finds the same shadow
     /// rays and the same self-intersections as the depth-first one: the modes return the same
     /// hits with either intersector, so the chart's packet and stream points differ from the
-    /// single-ray point of the same method in speed only. Both offsets the batches support;
-    /// the robust one has acne on this scene (BENCHMARKS.md), so the counts compared are not
-    /// all zero.
+    /// single-ray point of the same method in speed only. Every offset mode; the robust and
+    /// exclude-prim ones have acne on this scene (BENCHMARKS.md), so the counts compared are
+    /// not all zero.
     #[test]
     fn schedules_count_the_same_acne() -> Result<()> {
         let ctx = Context::new(BackendRequest::Cpu, 2)?;
         let scenes = secondary_scenes()?;
         let mut acne_seen = 0;
-        for (mode, intersector) in [OffsetMode::Epsilon, OffsetMode::Robust]
+        for (mode, intersector) in OffsetMode::ALL
             .into_iter()
             .flat_map(|m| Intersector::ALL.map(|i| (m, i)))
         {
