@@ -458,8 +458,17 @@ fn excluded_primitives_are_ignored_in_every_mode() {
             stats.bytes_prim_lookup
         };
         assert_eq!(lookup_bytes(), 0);
-        // A refused query (an object the scene lacks) does not build it.
+        // A refused query (an object the scene lacks) builds neither it nor what its other
+        // options would need (the watertight test's exact corners).
+        let primitive_bytes = || {
+            let mut stats: rt2_scene_statistics = std::mem::zeroed();
+            stats.struct_size = std::mem::size_of::<rt2_scene_statistics>() as u32;
+            assert_eq!(rt2_scene_stats(scene, &mut stats), Rt2Status::Ok);
+            stats.bytes_primitives
+        };
+        let before = primitive_bytes();
         let mut opt = rt2_query_options_default();
+        opt.intersector = Rt2Intersector::Watertight as u32;
         let bad = vec![
             rt2_hit {
                 object: 2,
@@ -470,7 +479,7 @@ fn excluded_primitives_are_ignored_in_every_mode() {
         ];
         opt.exclude = bad.as_ptr();
         assert_eq!(run(&opt).0, Rt2Status::InvalidArgument);
-        assert_eq!(lookup_bytes(), 0);
+        assert_eq!((lookup_bytes(), primitive_bytes()), (0, before));
         // Every other ray ignores its own first hit, the others the neighbouring triangle
         // (one they do not hit), or nothing.
         let exclude: Vec<rt2_hit> = first
@@ -530,6 +539,22 @@ fn excluded_primitives_are_ignored_in_every_mode() {
         }
 
         assert_eq!(lookup_bytes(), (4 * 4 * n * n + 8 * 3) as u64);
+
+        // In place: the hits a query writes may be the array it excludes (ray i leaving hit i).
+        let mut hits = first.clone();
+        let mut opt = rt2_query_options_default();
+        (opt.mode, opt.exclude) = (Rt2QueryMode::Stream as u32, hits.as_ptr());
+        let st = rt2_intersect(
+            ctx,
+            scene,
+            rays.as_ptr(),
+            rays.len(),
+            hits.as_mut_ptr(),
+            &opt,
+            null_mut(),
+        );
+        assert_eq!(st, Rt2Status::Ok);
+        assert!(hits.iter().all(|h| h.object == 1 && h.t == 11.0));
 
         // Names the scene lacks: the call fails and writes nothing.
         let bad_ids = [

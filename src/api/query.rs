@@ -115,6 +115,32 @@ unsafe fn query_options(
     Ok((q, o.exclude))
 }
 
+/// The primitives `exclude` names as the library's indices (4 bytes per ray, a fifth of the
+/// hits' size; refused as OUT_OF_MEMORY when that much cannot be had), once every entry is
+/// checked. Builds the scene's lookup on first use.
+fn excluded_all(
+    scene: &mut crate::scene::Scene,
+    exclude: &[rt2_hit],
+) -> crate::error::Result<Vec<PrimIndex>> {
+    let mut global = Vec::new();
+    global.try_reserve_exact(exclude.len()).map_err(|_| {
+        Error::new(
+            Rt2Status::OutOfMemory,
+            format!(
+                "no memory for the {} excluded primitives of opt.exclude",
+                exclude.len()
+            ),
+        )
+    })?;
+    scene.ensure_prim_lookup(|lookup| {
+        for (i, h) in exclude.iter().enumerate() {
+            global.push(excluded(lookup, i, h)?);
+        }
+        Ok(())
+    })?;
+    Ok(global)
+}
+
 /// The global index of the primitive `h` names (`INVALID` for a miss), or an error naming
 /// entry `i` of `opt.exclude`.
 fn excluded(lookup: &PrimLookup, i: usize, h: &rt2_hit) -> crate::error::Result<PrimIndex> {
@@ -161,10 +187,17 @@ unsafe fn run_query<T>(
         let s = handle(scene, "scene")?;
         let (q, exclude) = query_options(opt)?;
         let rays = slice(rays, count, "rays")?;
-        let out = slice_mut(out, count, out_name)?;
+        // The output checked now (NULL, size), borrowed below once the exclusions are read.
+        slice_mut(out, count, out_name)?;
+        // The exclusions, read whole before the output is borrowed: `exclude` may be the very
+        // array the hits go to (ray i leaving hit i). Every entry is checked before anything
+        // is written or built.
         let exclude = match exclude.is_null() {
             true => None,
-            false => Some(slice(exclude, count, "opt.exclude")?),
+            false => Some(excluded_all(
+                &mut s.write(),
+                slice(exclude, count, "opt.exclude")?,
+            )?),
         };
         // `query_options` validated the options (defaults are valid): refused ones never reach
         // the ropes or exact vertices below, so a failed call leaves the scene as it was.
@@ -174,19 +207,11 @@ unsafe fn run_query<T>(
         if q.intersector == crate::precision::Intersector::Watertight {
             s.write().ensure_exact_vertices()?;
         }
-        if let Some(e) = exclude {
-            // Every entry checked before any output is written.
-            s.write().ensure_prim_lookup(|lookup| {
-                for (i, h) in e.iter().enumerate() {
-                    excluded(lookup, i, h)?;
-                }
-                Ok(())
-            })?;
-        }
+        let out = slice_mut(out, count, out_name)?;
         let guard = s.read();
         let committed = guard.committed()?;
         let mut st = TraversalStats::default();
-        let (mut step, mut step_exclude) = (Vec::new(), Vec::new());
+        let mut step = Vec::new();
         for (k, (rays, out)) in rays
             .chunks(QUERY_CHUNK)
             .zip(out.chunks_mut(QUERY_CHUNK))
@@ -194,16 +219,9 @@ unsafe fn run_query<T>(
         {
             step.clear();
             step.extend(rays.iter().map(Ray::from));
-            let step_exclude = match exclude {
-                None => None,
-                Some(e) => {
-                    step_exclude.clear();
-                    for (i, h) in e.iter().enumerate().skip(k * QUERY_CHUNK).take(rays.len()) {
-                        step_exclude.push(excluded(&committed.lookup, i, h)?);
-                    }
-                    Some(&step_exclude[..])
-                }
-            };
+            let step_exclude = exclude
+                .as_ref()
+                .map(|e| &e[k * QUERY_CHUNK..][..rays.len()]);
             st.add(&f(&c.inner, committed, (&step, step_exclude), out, &q)?);
         }
         if !stats.is_null() {
