@@ -9,7 +9,7 @@
  * be rendered and queried concurrently (each render into its own frame); edits and commits
  * lock the scene and wait for running renders. A frame or a camera is used by one call at a
  * time while it is being modified. The `rays` and `hits` (or `occluded`) arrays of one query
- * must not overlap.
+ * must not overlap; `rt2_query_options.exclude` may be the `hits` array itself.
  */
 
 #ifndef RT2_H
@@ -544,7 +544,8 @@ typedef struct rt2_query_options {
    * leaves (the exclude-prim offset of renders). A miss (both `RT2_INVALID_ID`) excludes
    * nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. CPU only: a
    * GPU context runs such a query on the CPU under AUTO and refuses it (UNSUPPORTED) when
-   * the GPU was asked for. The first use builds a lookup of 4 bytes per primitive.
+   * the GPU was asked for. It may be the call's own `hits` array (read whole before any hit
+   * is written). The first use builds a lookup of 4 bytes per primitive.
    */
   const struct rt2_hit *exclude;
 } rt2_query_options;
@@ -620,8 +621,8 @@ typedef struct rt2_scene_statistics {
   uint64_t bytes_primitives;
   /**
    * The lookup from `(object, prim)` to the library's primitive index that
-   * `rt2_query_options.exclude` needs: 4 bytes per primitive and 8 per object; 0 until a
-   * query names primitives to exclude.
+   * `rt2_query_options.exclude` needs: 4 bytes per primitive and a `size_t` per object; 0
+   * until a query names primitives to exclude.
    */
   uint64_t bytes_prim_lookup;
 } rt2_scene_statistics;

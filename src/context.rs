@@ -295,6 +295,18 @@ impl Context {
         self.any(scene, (rays, Some(exclude)), out, q)
     }
 
+    /// Refuses, before anything is built for it, a query this context would refuse when it
+    /// runs: one the GPU kernels lack (`gpu_lacks_query`) on a context that asked for the GPU.
+    /// AUTO contexts run such queries on the CPU.
+    pub fn check_query(&self, q: &QueryOptions, excluding: bool) -> Result<()> {
+        match (&self.gpu, gpu_lacks_query(q, excluding)) {
+            (Some(_), Some(why)) if !self.decision.auto => {
+                Err(Error::unsupported(format!("the GPU backend: {why}")))
+            }
+            _ => Ok(()),
+        }
+    }
+
     fn closest(
         &self,
         scene: &Committed,
@@ -306,7 +318,7 @@ impl Context {
         check_exclusions(rays, exclude)?;
         self.job(
             hits,
-            gpu_lacks_query(q, exclude),
+            gpu_lacks_query(q, exclude.is_some()),
             |g, hits, choices| {
                 let how = gpu_query_traversal(scene, q, choices);
                 gpu::intersect(g, scene, rays, hits, how, q.short_stack_size)
@@ -334,7 +346,7 @@ impl Context {
         check_exclusions(rays, exclude)?;
         self.job(
             out,
-            gpu_lacks_query(q, exclude),
+            gpu_lacks_query(q, exclude.is_some()),
             |g, out, choices| {
                 let how = gpu_query_traversal(scene, q, choices);
                 gpu::occluded(g, scene, rays, out, how, q.short_stack_size)
@@ -417,11 +429,9 @@ fn gpu_lacks(intersector: Intersector, offset: OffsetMode) -> Option<&'static st
 }
 
 /// What the GPU kernels lack for a query, if anything (see [`gpu_lacks`]).
-fn gpu_lacks_query(q: &QueryOptions, exclude: Option<&[PrimIndex]>) -> Option<&'static str> {
-    gpu_lacks(q.intersector, OffsetMode::Epsilon).or(match exclude {
-        Some(_) => Some("the GPU kernels take no excluded primitives"),
-        None => None,
-    })
+fn gpu_lacks_query(q: &QueryOptions, excluding: bool) -> Option<&'static str> {
+    gpu_lacks(q.intersector, OffsetMode::Epsilon)
+        .or(excluding.then_some("the GPU kernels take no excluded primitives"))
 }
 
 /// One excluded primitive per ray, when there are any.

@@ -1157,3 +1157,72 @@ fn queries_with_exclusions_run_on_the_cpu() {
         assert!(why.contains("excluded") && why.contains("CPU"), "{why}");
     }
 }
+
+/// Through the C API, a query a GPU context refuses (excluded primitives, the watertight
+/// test) is refused before the scene builds anything for it: no lookup, no exact corners.
+#[test]
+fn refused_c_queries_build_nothing() {
+    use rt2::api::*;
+    use std::ptr::{null, null_mut};
+    if gpu(GpuOptions::default()).is_none() || !backend_not_overridden() {
+        return;
+    }
+    unsafe {
+        let mut desc = rt2_context_desc_default();
+        desc.backend = Rt2Backend::Gpu as u32;
+        let mut ctx = null_mut();
+        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
+        let mut scene = null_mut();
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let (positions, indices) = (
+            [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+            [0u32, 1, 2],
+        );
+        let st = rt2_scene_add_mesh(
+            scene,
+            positions.as_ptr(),
+            3,
+            indices.as_ptr(),
+            1,
+            0,
+            null_mut(),
+        );
+        assert_eq!(st, Rt2Status::Ok);
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        let bytes = || {
+            let mut s: rt2_scene_statistics = std::mem::zeroed();
+            s.struct_size = std::mem::size_of::<rt2_scene_statistics>() as u32;
+            assert_eq!(rt2_scene_stats(scene, &mut s), Rt2Status::Ok);
+            (s.bytes_prim_lookup, s.bytes_primitives)
+        };
+        let before = bytes();
+        let ray = rt2_ray {
+            org: [0.2, 0.2, 1.0],
+            tmin: 0.0,
+            dir: [0.0, 0.0, -1.0],
+            tmax: f32::INFINITY,
+        };
+        let miss = rt2_hit {
+            t: f32::INFINITY,
+            u: 0.0,
+            v: 0.0,
+            object: RT2_INVALID_ID,
+            prim: RT2_INVALID_ID,
+        };
+        let mut hit = miss;
+        let mut opt = rt2_query_options_default();
+        opt.exclude = &miss;
+        let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, &opt, null_mut());
+        assert_eq!(st, Rt2Status::Unsupported);
+        let mut opt = rt2_query_options_default();
+        opt.intersector = Rt2Intersector::Watertight as u32;
+        let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, &opt, null_mut());
+        assert_eq!(st, Rt2Status::Unsupported);
+        assert_eq!((bytes(), hit), (before, miss));
+        // The GPU answers the plain query.
+        let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, null(), null_mut());
+        assert_eq!((st, hit.object, hit.t), (Rt2Status::Ok, 0, 1.0));
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}

@@ -365,8 +365,8 @@ fn check_rays(
 /// traversal, bit for bit, the same occlusion answers, and the same work (they take the standard
 /// traversal's decisions for every ray, only grouped differently). With both ray–triangle tests,
 /// with one primitive excluded for all rays, and with per-ray excluded primitives: every other
-/// ray ignores the primitive it hits first, so it must find what lies behind it (the SIMD leaf tests serve only Möller–Trumbore with
-/// nothing excluded; the others run the single-ray leaf test lane by lane).
+/// ray ignores the primitive it hits first, so it must find what lies behind it (the SIMD leaf
+/// tests compute each of these).
 fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ray]) {
     let single = |opts: &TraverseOptions, ray: &Ray, stats: &mut TraversalStats| {
         intersect(tree, prims, ray, Traversal::Standard, opts, stats)

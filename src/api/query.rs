@@ -59,7 +59,8 @@ pub struct rt2_query_options {
     /// leaves (the exclude-prim offset of renders). A miss (both `RT2_INVALID_ID`) excludes
     /// nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. CPU only: a
     /// GPU context runs such a query on the CPU under AUTO and refuses it (UNSUPPORTED) when
-    /// the GPU was asked for. The first use builds a lookup of 4 bytes per primitive.
+    /// the GPU was asked for. It may be the call's own `hits` array (read whole before any hit
+    /// is written). The first use builds a lookup of 4 bytes per primitive.
     pub exclude: *const rt2_hit,
 }
 
@@ -117,11 +118,12 @@ unsafe fn query_options(
 
 /// The primitives `exclude` names as the library's indices (4 bytes per ray, a fifth of the
 /// hits' size; refused as OUT_OF_MEMORY when that much cannot be had), once every entry is
-/// checked. Builds the scene's lookup on first use.
+/// checked, and the id of the commit they belong to. Builds the scene's lookup on first use,
+/// under the write lock; later queries only read.
 fn excluded_all(
-    scene: &mut crate::scene::Scene,
+    scene: &super::scene::rt2_scene,
     exclude: &[rt2_hit],
-) -> crate::error::Result<Vec<PrimIndex>> {
+) -> crate::error::Result<(Vec<PrimIndex>, u64)> {
     let mut global = Vec::new();
     global.try_reserve_exact(exclude.len()).map_err(|_| {
         Error::new(
@@ -132,13 +134,23 @@ fn excluded_all(
             ),
         )
     })?;
-    scene.ensure_prim_lookup(|lookup| {
+    let map = |lookup: &PrimLookup, global: &mut Vec<PrimIndex>| {
         for (i, h) in exclude.iter().enumerate() {
             global.push(excluded(lookup, i, h)?);
         }
         Ok(())
-    })?;
-    Ok(global)
+    };
+    {
+        let r = scene.read();
+        let c = r.committed()?;
+        if !c.lookup.is_empty() {
+            map(&c.lookup, &mut global)?;
+            return Ok((global, c.id));
+        }
+    }
+    let mut w = scene.write();
+    w.ensure_prim_lookup(|lookup| map(lookup, &mut global))?;
+    Ok((global, w.committed()?.id))
 }
 
 /// The global index of the primitive `h` names (`INVALID` for a miss), or an error naming
@@ -189,15 +201,14 @@ unsafe fn run_query<T>(
         let rays = slice(rays, count, "rays")?;
         // The output checked now (NULL, size), borrowed below once the exclusions are read.
         slice_mut(out, count, out_name)?;
+        // A job the backend refuses is refused before anything is built for it.
+        c.inner.check_query(&q, !exclude.is_null())?;
         // The exclusions, read whole before the output is borrowed: `exclude` may be the very
         // array the hits go to (ray i leaving hit i). Every entry is checked before anything
         // is written or built.
-        let exclude = match exclude.is_null() {
+        let exclude = match exclude.is_null() || count == 0 {
             true => None,
-            false => Some(excluded_all(
-                &mut s.write(),
-                slice(exclude, count, "opt.exclude")?,
-            )?),
+            false => Some(excluded_all(s, slice(exclude, count, "opt.exclude")?)?),
         };
         // `query_options` validated the options (defaults are valid): refused ones never reach
         // the ropes or exact vertices below, so a failed call leaves the scene as it was.
@@ -210,6 +221,14 @@ unsafe fn run_query<T>(
         let out = slice_mut(out, count, out_name)?;
         let guard = s.read();
         let committed = guard.committed()?;
+        if exclude.as_ref().is_some_and(|(_, id)| *id != committed.id) {
+            // Another thread committed between the lookup and the trace.
+            return Err(Error::invalid_operation(
+                "the scene was committed again while this query read opt.exclude: its \
+                 primitives may be numbered differently now; query again",
+            ));
+        }
+        let exclude = exclude.map(|(e, _)| e);
         let mut st = TraversalStats::default();
         let mut step = Vec::new();
         for (k, (rays, out)) in rays

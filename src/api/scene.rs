@@ -372,8 +372,8 @@ pub struct rt2_scene_statistics {
     pub bytes_leaf_boxes: u64,
     pub bytes_primitives: u64,
     /// The lookup from `(object, prim)` to the library's primitive index that
-    /// `rt2_query_options.exclude` needs: 4 bytes per primitive and 8 per object; 0 until a
-    /// query names primitives to exclude.
+    /// `rt2_query_options.exclude` needs: 4 bytes per primitive and a `size_t` per object; 0
+    /// until a query names primitives to exclude.
     pub bytes_prim_lookup: u64,
 }
 

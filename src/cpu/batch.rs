@@ -61,7 +61,7 @@ impl Excluded<'_> {
 }
 
 impl RayTests<'_> {
-    /// Möller–Trumbore, nothing excluded: what the SIMD leaf tests compute.
+    /// Möller–Trumbore, nothing excluded: the defaults.
     pub const PLAIN: RayTests<'static> = RayTests {
         intersector: Intersector::MollerTrumbore,
         exclude: Excluded::All(INVALID),

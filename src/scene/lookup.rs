@@ -6,7 +6,8 @@ use super::PrimOrigin;
 use crate::geometry::{PrimIndex, INVALID};
 
 /// Global index of each `(object, prim)`, object by object. Built on demand
-/// (`Scene::ensure_prim_lookup`, 4 bytes per primitive), like ropes and exact corners.
+/// (`Scene::ensure_prim_lookup`, 4 bytes per primitive and a `usize` per object), like ropes
+/// and exact corners.
 #[derive(Clone, Debug, Default)]
 pub struct PrimLookup {
     /// Where object `o`'s entries start in `global`; `first[o + 1]` ends them.
@@ -51,8 +52,11 @@ impl PrimLookup {
     /// The global index of primitive `prim` of object `object`, if the scene has it.
     pub fn get(&self, object: u32, prim: u32) -> Option<PrimIndex> {
         let (o, p) = (object as usize, prim as usize);
-        let (start, end) = (*self.first.get(o)?, *self.first.get(o + 1)?);
-        let g = *self.global.get(start + p).filter(|_| p < end - start)?;
+        let (start, end) = (*self.first.get(o)?, *self.first.get(o.checked_add(1)?)?);
+        if p >= end - start {
+            return None;
+        }
+        let g = self.global[start + p];
         (g != INVALID).then_some(g)
     }
 }
