@@ -369,12 +369,27 @@ int main(int argc, char **argv) {
         rt2_hit hit;
         expect(rt2_intersect(ctx, scene, &ray, 1, &hit, &q, NULL), RT2_STATUS_INVALID_ARGUMENT,
                "short_stack_size", "rt2_intersect(packets, watertight, ropes, short stack 33)");
+        /* So is a query whose ray excludes a primitive the scene lacks (on a GPU context, which
+         * takes no exclusions, it is unsupported): it builds no lookup either. */
+        rt2_context_properties cp;
+        memset(&cp, 0, sizeof cp);
+        cp.struct_size = sizeof cp;
+        must(rt2_context_info(ctx, &cp), "rt2_context_info (backend)");
+        const rt2_hit nowhere = {0.0f, 0.0f, 0.0f, 99u, 0u};
+        q.short_stack_size = 3;
+        q.intersector = RT2_INTERSECTOR_MOLLER_TRUMBORE;
+        q.exclude = &nowhere;
+        expect(rt2_intersect(ctx, scene, &ray, 1, &hit, &q, NULL),
+               cp.backend == RT2_BACKEND_GPU ? RT2_STATUS_UNSUPPORTED : RT2_STATUS_INVALID_ARGUMENT, "exclude",
+               "rt2_intersect(packets, ropes, excluding object 99)");
         must(rt2_scene_stats(scene, &after), "rt2_scene_stats (after refused options)");
-        char d[128];
-        snprintf(d, sizeof d, "ropes %llu -> %llu bytes, primitives %llu -> %llu bytes",
+        char d[192];
+        snprintf(d, sizeof d, "ropes %llu -> %llu bytes, primitives %llu -> %llu bytes, lookup %llu -> %llu bytes",
                  (unsigned long long)before.bytes_ropes, (unsigned long long)after.bytes_ropes,
-                 (unsigned long long)before.bytes_primitives, (unsigned long long)after.bytes_primitives);
-        report(before.bytes_ropes == after.bytes_ropes && before.bytes_primitives == after.bytes_primitives,
+                 (unsigned long long)before.bytes_primitives, (unsigned long long)after.bytes_primitives,
+                 (unsigned long long)before.bytes_prim_lookup, (unsigned long long)after.bytes_prim_lookup);
+        report(before.bytes_ropes == after.bytes_ropes && before.bytes_primitives == after.bytes_primitives &&
+                   before.bytes_prim_lookup == after.bytes_prim_lookup,
                "  ... the refused calls left the scene's memory unchanged", d);
     }
 
