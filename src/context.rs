@@ -180,12 +180,10 @@ impl Context {
         let mut fallback = None;
         let result = match &self.gpu {
             None => Ok(None),
-            Some(g) => match unsupported {
-                Some(why) if self.decision.auto => Err(gpu::GpuError::Limits(why.to_string())),
-                Some(why) => Err(gpu::GpuError::Other(Error::unsupported(format!(
-                    "the GPU backend: {why}"
-                )))),
-                None => on_gpu(g, out, &mut choices).map(Some),
+            Some(g) => match (unsupported, self.refusal(unsupported)) {
+                (_, Some(e)) => Err(gpu::GpuError::Other(e)),
+                (Some(why), None) => Err(gpu::GpuError::Limits(why.to_string())),
+                (None, None) => on_gpu(g, out, &mut choices).map(Some),
             },
         };
         let result = match result {
@@ -295,16 +293,29 @@ impl Context {
         self.any(scene, (rays, Some(exclude)), out, q)
     }
 
-    /// Refuses, before anything is built for it, a query this context would refuse when it
-    /// runs: one the GPU kernels lack (`gpu_lacks_query`) on a context that asked for the GPU.
-    /// AUTO contexts run such queries on the CPU.
-    pub fn check_query(&self, q: &QueryOptions, excluding: bool) -> Result<()> {
-        match (&self.gpu, gpu_lacks_query(q, excluding)) {
+    /// The error of a job the GPU kernels lack (`unsupported` says why) on a context that
+    /// asked for the GPU; AUTO contexts run such jobs on the CPU. [`Context::job`] refuses with
+    /// it, and the C API asks first ([`Context::check_query`], [`Context::check_render`]) so
+    /// that a refused call builds nothing (ropes, exact corners, lookups).
+    fn refusal(&self, unsupported: Option<&str>) -> Option<Error> {
+        match (&self.gpu, unsupported) {
             (Some(_), Some(why)) if !self.decision.auto => {
-                Err(Error::unsupported(format!("the GPU backend: {why}")))
+                Some(Error::unsupported(format!("the GPU backend: {why}")))
             }
-            _ => Ok(()),
+            _ => None,
         }
+    }
+
+    /// Refuses a query this context would refuse when it runs (see `refusal`).
+    pub fn check_query(&self, q: &QueryOptions, excluding: bool) -> Result<()> {
+        self.refusal(gpu_lacks_query(q, excluding))
+            .map_or(Ok(()), Err)
+    }
+
+    /// Refuses a render this context would refuse when it runs (see `refusal`).
+    pub fn check_render(&self, opts: &RenderOptions) -> Result<()> {
+        self.refusal(gpu_lacks(opts.intersector, opts.offset_mode))
+            .map_or(Ok(()), Err)
     }
 
     fn closest(

@@ -1158,8 +1158,9 @@ fn queries_with_exclusions_run_on_the_cpu() {
     }
 }
 
-/// Through the C API, a query a GPU context refuses (excluded primitives, the watertight
-/// test) is refused before the scene builds anything for it: no lookup, no exact corners.
+/// Through the C API, a query or render a GPU context refuses (excluded primitives, the
+/// watertight test) is refused before the scene builds anything for it: no lookup, no exact
+/// corners, no ropes.
 #[test]
 fn refused_c_queries_build_nothing() {
     use rt2::api::*;
@@ -1193,7 +1194,7 @@ fn refused_c_queries_build_nothing() {
             let mut s: rt2_scene_statistics = std::mem::zeroed();
             s.struct_size = std::mem::size_of::<rt2_scene_statistics>() as u32;
             assert_eq!(rt2_scene_stats(scene, &mut s), Rt2Status::Ok);
-            (s.bytes_prim_lookup, s.bytes_primitives)
+            (s.bytes_prim_lookup, s.bytes_primitives, s.bytes_ropes)
         };
         let before = bytes();
         let ray = rt2_ray {
@@ -1219,6 +1220,18 @@ fn refused_c_queries_build_nothing() {
         let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, &opt, null_mut());
         assert_eq!(st, Rt2Status::Unsupported);
         assert_eq!((bytes(), hit), (before, miss));
+        // A render with the watertight test and the ropes traversal: refused, nothing built.
+        let (mut camera, mut frame) = (null_mut(), null_mut());
+        assert_eq!(rt2_camera_create(&mut camera), Rt2Status::Ok);
+        assert_eq!(rt2_frame_create(8, 8, &mut frame), Rt2Status::Ok);
+        let mut ropt = rt2_render_options_default();
+        ropt.intersector = Rt2Intersector::Watertight as u32;
+        ropt.traversal = Rt2Traversal::Ropes as u32;
+        let st = rt2_render(ctx, scene, camera, &ropt, frame);
+        assert_eq!(st, Rt2Status::Unsupported);
+        assert_eq!(bytes(), before);
+        rt2_frame_destroy(frame);
+        rt2_camera_destroy(camera);
         // The GPU answers the plain query.
         let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, null(), null_mut());
         assert_eq!((st, hit.object, hit.t), (Rt2Status::Ok, 0, 1.0));

@@ -34,6 +34,8 @@ pub unsafe extern "C" fn rt2_render(
             read_versioned(options)?.to_options()?
         };
         let f = handle_mut(frame, "frame")?;
+        // A render the backend refuses is refused before anything is built for it.
+        c.inner.check_render(&opts)?;
         // `to_options` validated the options (defaults are valid): refused ones never reach
         // the ropes or exact vertices below, so a failed call leaves the scene as it was.
         if opts.traversal.is_some_and(|t| t.needs_ropes()) {
