@@ -451,22 +451,17 @@ fn excluded_primitives_are_ignored_in_every_mode() {
         assert!(first.iter().all(|h| h.object == 0 && h.t == 10.0));
         // The lookup the exclusions need is built on their first use: 4 bytes per triangle
         // and a word per object (and one more).
-        let lookup_bytes = || {
+        // (lookup, primitives) bytes.
+        let bytes = || {
             let mut stats: rt2_scene_statistics = std::mem::zeroed();
             stats.struct_size = std::mem::size_of::<rt2_scene_statistics>() as u32;
             assert_eq!(rt2_scene_stats(scene, &mut stats), Rt2Status::Ok);
-            stats.bytes_prim_lookup
+            (stats.bytes_prim_lookup, stats.bytes_primitives)
         };
-        assert_eq!(lookup_bytes(), 0);
+        let (lookup, primitives) = bytes();
+        assert_eq!(lookup, 0);
         // A refused query (an object the scene lacks) builds neither it nor what its other
         // options would need (the watertight test's exact corners).
-        let primitive_bytes = || {
-            let mut stats: rt2_scene_statistics = std::mem::zeroed();
-            stats.struct_size = std::mem::size_of::<rt2_scene_statistics>() as u32;
-            assert_eq!(rt2_scene_stats(scene, &mut stats), Rt2Status::Ok);
-            stats.bytes_primitives
-        };
-        let before = primitive_bytes();
         let mut opt = rt2_query_options_default();
         opt.intersector = Rt2Intersector::Watertight as u32;
         let bad = vec![
@@ -479,7 +474,7 @@ fn excluded_primitives_are_ignored_in_every_mode() {
         ];
         opt.exclude = bad.as_ptr();
         assert_eq!(run(&opt).0, Rt2Status::InvalidArgument);
-        assert_eq!((lookup_bytes(), primitive_bytes()), (0, before));
+        assert_eq!(bytes(), (0, primitives));
         // Every other ray ignores its own first hit, the others the neighbouring triangle
         // (one they do not hit), or nothing.
         let exclude: Vec<rt2_hit> = first
@@ -539,7 +534,7 @@ fn excluded_primitives_are_ignored_in_every_mode() {
         }
 
         let word = std::mem::size_of::<usize>() as u32;
-        assert_eq!(lookup_bytes(), (4 * 4 * n * n + word * 3) as u64);
+        assert_eq!(bytes().0, (4 * 4 * n * n + word * 3) as u64);
 
         // In place: the hits a query writes may be the array it excludes (ray i leaving hit i).
         let mut hits = first.clone();

@@ -60,7 +60,14 @@ impl Excluded<'_> {
     }
 }
 
-impl RayTests<'_> {
+impl<'a> RayTests<'a> {
+    pub fn new(intersector: Intersector, exclude: Excluded<'a>) -> Self {
+        RayTests {
+            intersector,
+            exclude,
+        }
+    }
+
     /// Möller–Trumbore, nothing excluded: the defaults.
     pub const PLAIN: RayTests<'static> = RayTests {
         intersector: Intersector::MollerTrumbore,
@@ -366,10 +373,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
     /// the intersector stays a constant.
     #[inline(always)]
     fn tests(&self) -> RayTests<'a> {
-        RayTests {
-            intersector: Self::INTERSECTOR,
-            exclude: self.exclude,
-        }
+        RayTests::new(Self::INTERSECTOR, self.exclude)
     }
 
     /// Prepares the rays and returns them grouped by octant (the signs of the direction, `-0.0`
@@ -389,10 +393,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         exclude: Excluded<'a>,
         mut answer: A,
     ) -> (Self, [Vec<Root>; 8]) {
-        let tests = RayTests {
-            intersector: Self::INTERSECTOR,
-            exclude,
-        };
+        let tests = RayTests::new(Self::INTERSECTOR, exclude);
         let n = rays.len();
         assert!(
             u32::try_from(n).is_ok(),

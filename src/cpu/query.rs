@@ -152,18 +152,25 @@ fn closest_hits(
             traverse::intersect(tree, prims, ray, how, &opts, stats)
         },
         |rays, exclude, hits| {
-            let tests = RayTests {
-                intersector,
-                exclude,
-            };
-            packet::intersect(tree, prims, rays, tests, hits, width)
+            packet::intersect(
+                tree,
+                prims,
+                rays,
+                RayTests::new(intersector, exclude),
+                hits,
+                width,
+            )
         },
         |rays, exclude, hits| {
-            let tests = RayTests {
-                intersector,
-                exclude,
-            };
-            stream::intersect(tree, prims, rays, tests, hits, width).0
+            stream::intersect(
+                tree,
+                prims,
+                rays,
+                RayTests::new(intersector, exclude),
+                hits,
+                width,
+            )
+            .0
         },
     )
 }
@@ -189,18 +196,25 @@ fn any_hits(
             traverse::occluded(tree, prims, ray, how, &opts, stats)
         },
         |rays, exclude, out| {
-            let tests = RayTests {
-                intersector,
-                exclude,
-            };
-            packet::occluded(tree, prims, rays, tests, out, width)
+            packet::occluded(
+                tree,
+                prims,
+                rays,
+                RayTests::new(intersector, exclude),
+                out,
+                width,
+            )
         },
         |rays, exclude, out| {
-            let tests = RayTests {
-                intersector,
-                exclude,
-            };
-            stream::occluded(tree, prims, rays, tests, out, width).0
+            stream::occluded(
+                tree,
+                prims,
+                rays,
+                RayTests::new(intersector, exclude),
+                out,
+                width,
+            )
+            .0
         },
     )
 }

@@ -3,7 +3,7 @@
 //! rays that enter it; an inner node splits its list into the near and far children's lists
 //! (SIMD over N lanes), a leaf tests its triangles against every ray of its list (N rays × 1
 //! triangle: SAH leaves hold ~2 triangles per visit, too few to fill a block of N triangles;
-//! Möller–Trumbore, other tests ray by ray: [`RayTests`]).
+//! either intersector, each lane with its own excluded primitive: [`RayTests`]).
 //!
 //! Memory: the lists live on one ray stack, reused for the whole batch and never shrunk, so no node
 //! allocates. Each list is a run of slots in columns (ray index, segment start, segment end),

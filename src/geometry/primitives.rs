@@ -6,7 +6,7 @@
 use super::triangle::watertight;
 use super::{
     box_intersect, box_normal, Aabb, Ellipsoid, Hit, Plane, PrimIndex, Ray, Sphere, Triangle,
-    TriangleTest, INVALID,
+    TriangleTest,
 };
 use crate::precision::Intersector;
 use glam::Vec3;
@@ -27,12 +27,6 @@ impl RayTest {
             exclude,
         }
     }
-
-    /// Möller–Trumbore, nothing excluded: the defaults.
-    pub const PLAIN: RayTest = RayTest {
-        triangle: TriangleTest::MollerTrumbore,
-        exclude: INVALID,
-    };
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
