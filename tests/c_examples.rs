@@ -350,6 +350,54 @@ fn load_model_reports_a_missing_file() {
     );
 }
 
+/// ambient_occlusion.c: camera rays and occlusion rays through `rt2_intersect` and
+/// `rt2_occluded` in every query mode, the occlusion rays excluding the primitive they leave.
+#[test]
+fn ambient_occlusion_passes_its_checks_and_writes_the_image() {
+    let exe = build_example("ambient_occlusion");
+    let pgm = support::scratch("c_examples").join("ambient_occlusion.pgm");
+    let _ = std::fs::remove_file(&pgm);
+    let out = run(&exe, &[pgm.as_os_str()]);
+    assert_exit(&out, 0, "ambient_occlusion");
+    let text = stdout(&out);
+    assert!(text.contains("ambient_occlusion: OK"), "no OK in:\n{text}");
+    // Four probes (modes agree, view factor), the probe without exclusion (modes agree, every
+    // ray hits the ground), camera rays and occlusion rays (modes agree), the open ground: 13.
+    // A check that did not run would pass silently.
+    let checked = text.lines().filter(|l| l.ends_with(": ok")).count();
+    assert_eq!(
+        checked, 13,
+        "ambient_occlusion ran {checked} of its 13 checks"
+    );
+
+    // Binary PGM: "P5\n256 144\n255\n" and one byte per pixel.
+    let bytes = std::fs::read(&pgm).unwrap_or_else(|e| panic!("no {}: {e}", pgm.display()));
+    let header = b"P5\n256 144\n255\n";
+    assert!(bytes.starts_with(header), "not a 256x144 binary PGM");
+    let pixels = &bytes[header.len()..];
+    assert_eq!(pixels.len(), 256 * 144, "PGM pixel count");
+    // Open ground (nothing within the occlusion rays' reach: 255) and the wall's foot, where
+    // at least half of a point's rays are blocked, must both be in the picture.
+    let open = pixels.iter().filter(|&&p| p == 255).count();
+    let dark = pixels.iter().filter(|&&p| (1..=128).contains(&p)).count();
+    assert!(open > pixels.len() / 10, "only {open} open pixels");
+    assert!(dark > 100, "only {dark} pixels at least half occluded");
+}
+
+#[test]
+fn ambient_occlusion_refuses_a_bad_sample_count() {
+    let exe = build_example_as("ambient_occlusion", "ambient_occlusion-args");
+    let pgm = support::scratch("c_examples").join("ambient_occlusion-args.pgm");
+    let _ = std::fs::remove_file(&pgm);
+    let out = run(&exe, &[pgm.as_os_str(), "0".as_ref()]);
+    assert_exit(&out, 2, "ambient_occlusion with 0 samples");
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("SAMPLES"),
+        "the message does not name SAMPLES"
+    );
+    assert!(!pgm.exists(), "an image was written for bad arguments");
+}
+
 #[test]
 fn errors_example_passes_every_check() {
     errors_example(build_example("errors"), &[]);
