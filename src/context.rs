@@ -3,7 +3,9 @@
 
 use crate::camera::Camera;
 use crate::cpu;
-use crate::cpu::traverse::TraverseOptions;
+use crate::cpu::query::RayAnswer;
+use crate::cpu::simd::Width;
+use crate::cpu::traverse::{Traversal, TraverseOptions};
 use crate::dispatch::{self, BackendRequest, Decision};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
@@ -253,7 +255,7 @@ impl Context {
         hits: &mut [Hit],
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
-        self.closest(scene, (rays, None), hits, q)
+        self.answer(scene, (rays, None), hits, q)
     }
 
     /// [`Context::intersect`] where ray `i` ignores primitive `exclude[i]` (`INVALID`: none),
@@ -266,7 +268,7 @@ impl Context {
         hits: &mut [Hit],
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
-        self.closest(scene, (rays, Some(exclude)), hits, q)
+        self.answer(scene, (rays, Some(exclude)), hits, q)
     }
 
     /// Any-hit queries for a batch of rays.
@@ -277,7 +279,7 @@ impl Context {
         out: &mut [bool],
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
-        self.any(scene, (rays, None), out, q)
+        self.answer(scene, (rays, None), out, q)
     }
 
     /// [`Context::occluded`] where ray `i` ignores primitive `exclude[i]`, as
@@ -290,7 +292,7 @@ impl Context {
         out: &mut [bool],
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
-        self.any(scene, (rays, Some(exclude)), out, q)
+        self.answer(scene, (rays, Some(exclude)), out, q)
     }
 
     /// The error of a job the GPU kernels lack (`unsupported` says why) on a context that
@@ -318,39 +320,13 @@ impl Context {
             .map_or(Ok(()), Err)
     }
 
-    fn closest(
+    /// A batch query of either answer (closest hits or occlusion) on the GPU, or on the CPU
+    /// (in `q.mode`) where the GPU cannot run it.
+    fn answer<T: GpuAnswer>(
         &self,
         scene: &Committed,
         (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
-        hits: &mut [Hit],
-        q: &QueryOptions,
-    ) -> Result<TraversalStats> {
-        q.validate()?;
-        check_exclusions(rays, exclude)?;
-        self.job(
-            hits,
-            gpu_lacks_query(q, exclude.is_some()),
-            |g, hits, choices| {
-                let how = gpu_query_traversal(scene, q, choices);
-                gpu::intersect(g, scene, rays, hits, how, q.short_stack_size)
-            },
-            |hits, choices| {
-                let (how, opts) = self.query_setup(scene, q, choices);
-                self.install(|| match exclude {
-                    None => cpu::query::intersect(scene, rays, hits, how, &opts, q.mode),
-                    Some(e) => {
-                        cpu::query::intersect_excluding(scene, rays, e, hits, how, &opts, q.mode)
-                    }
-                })
-            },
-        )
-    }
-
-    fn any(
-        &self,
-        scene: &Committed,
-        (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
-        out: &mut [bool],
+        out: &mut [T],
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
         q.validate()?;
@@ -360,15 +336,13 @@ impl Context {
             gpu_lacks_query(q, exclude.is_some()),
             |g, out, choices| {
                 let how = gpu_query_traversal(scene, q, choices);
-                gpu::occluded(g, scene, rays, out, how, q.short_stack_size)
+                T::gpu(g, scene, rays, out, how, q.short_stack_size)
             },
             |out, choices| {
                 let (how, opts) = self.query_setup(scene, q, choices);
-                self.install(|| match exclude {
-                    None => cpu::query::occluded(scene, rays, out, how, &opts, q.mode),
-                    Some(e) => {
-                        cpu::query::occluded_excluding(scene, rays, e, out, how, &opts, q.mode)
-                    }
+                self.install(|| {
+                    let width = Width::best();
+                    cpu::query::trace(scene, (rays, exclude), out, how, &opts, q.mode, width)
                 })
             },
         )
@@ -379,7 +353,7 @@ impl Context {
         scene: &Committed,
         q: &QueryOptions,
         choices: &mut AutoChoices,
-    ) -> (crate::cpu::traverse::Traversal, TraverseOptions) {
+    ) -> (Traversal, TraverseOptions) {
         let (how, why) = dispatch::choose_traversal(scene, q.traversal);
         choices.note(q.traversal.is_none(), "CPU traversal", how.name(), why);
         (
@@ -393,11 +367,50 @@ impl Context {
     }
 }
 
+/// A [`RayAnswer`] the GPU kernels compute too, so that [`Context`] dispatches both kinds of
+/// query with one path.
+trait GpuAnswer: RayAnswer {
+    fn gpu(
+        g: &Gpu,
+        scene: &Committed,
+        rays: &[Ray],
+        out: &mut [Self],
+        how: Traversal,
+        short_stack: usize,
+    ) -> GpuResult<TraversalStats>;
+}
+
+impl GpuAnswer for Hit {
+    fn gpu(
+        g: &Gpu,
+        scene: &Committed,
+        rays: &[Ray],
+        out: &mut [Self],
+        how: Traversal,
+        short_stack: usize,
+    ) -> GpuResult<TraversalStats> {
+        gpu::intersect(g, scene, rays, out, how, short_stack)
+    }
+}
+
+impl GpuAnswer for bool {
+    fn gpu(
+        g: &Gpu,
+        scene: &Committed,
+        rays: &[Ray],
+        out: &mut [Self],
+        how: Traversal,
+        short_stack: usize,
+    ) -> GpuResult<TraversalStats> {
+        gpu::occluded(g, scene, rays, out, how, short_stack)
+    }
+}
+
 fn gpu_query_traversal(
     scene: &Committed,
     q: &QueryOptions,
     choices: &mut AutoChoices,
-) -> crate::cpu::traverse::Traversal {
+) -> Traversal {
     let (how, why) = dispatch::choose_gpu_traversal(scene, q.traversal);
     choices.note(q.traversal.is_none(), "GPU traversal", how.name(), why);
     how
@@ -461,7 +474,7 @@ fn check_exclusions(rays: &[Ray], exclude: Option<&[PrimIndex]>) -> Result<()> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct QueryOptions {
     /// `None` lets the library choose (AUTO).
-    pub traversal: Option<crate::cpu::traverse::Traversal>,
+    pub traversal: Option<Traversal>,
     pub short_stack_size: usize,
     /// One ray at a time, packets or streams (same hits; see [`cpu::query::QueryMode`]).
     pub mode: cpu::query::QueryMode,

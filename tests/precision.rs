@@ -7,6 +7,7 @@
 
 use glam::Vec3;
 use rt2::cpu::query::{self, QueryMode};
+use rt2::cpu::simd::Width;
 use rt2::cpu::traverse::{intersect, Traversal, TraverseOptions};
 use rt2::geometry::{Hit, Ray, RayTest, Sphere, TraversalStats, Triangle, INVALID};
 use rt2::precision::{offset_ray_origin, Intersector};
@@ -125,7 +126,16 @@ fn leaks(c: &Committed, rays: &[Ray], intersector: Intersector) -> [usize; 9] {
     });
     let batch = [QueryMode::Packet, QueryMode::Stream].map(|mode| {
         let mut hits = vec![Hit::MISS; rays.len()];
-        query::intersect(c, rays, &mut hits, Traversal::Standard, &opts, mode);
+        let width = Width::best();
+        query::trace(
+            c,
+            (rays, None),
+            &mut hits,
+            Traversal::Standard,
+            &opts,
+            mode,
+            width,
+        );
         hits.iter().filter(|h| !h.is_hit()).count()
     });
     let mut all = [0; 9];

@@ -52,193 +52,154 @@ impl QueryMode {
     }
 }
 
-/// Closest hits of `rays` into `hits` (same length). Packets and streams use the standard
-/// traversal's order whatever `how` says; every mode honours `opts.intersector` and
-/// `opts.exclude`, with the same hits.
-pub fn intersect(
-    scene: &Committed,
-    rays: &[Ray],
-    hits: &mut [Hit],
-    how: Traversal,
-    opts: &TraverseOptions,
-    mode: QueryMode,
-) -> TraversalStats {
-    intersect_width(scene, rays, hits, how, opts, mode, Width::best())
+/// What a query answers for each ray: its closest hit ([`Hit`]) or whether anything lies in
+/// its window (`bool`, shadow rays). Each mode's path is written once for both.
+pub trait RayAnswer: Copy + Send + Sync {
+    /// The answer of a ray that finds nothing.
+    const MISS: Self;
+    /// One ray with the single-ray traversal `how`; it ignores the primitive `opts.exclude`.
+    fn single(
+        scene: &Committed,
+        ray: &Ray,
+        how: Traversal,
+        opts: &TraverseOptions,
+        stats: &mut TraversalStats,
+    ) -> Self;
+    /// Rays in packets of `width` lanes, on the calling thread.
+    fn packets(
+        scene: &Committed,
+        rays: &[Ray],
+        tests: RayTests,
+        out: &mut [Self],
+        width: Width,
+    ) -> TraversalStats;
+    /// Rays as one n-ray stream of `width` lanes, on the calling thread.
+    fn stream(
+        scene: &Committed,
+        rays: &[Ray],
+        tests: RayTests,
+        out: &mut [Self],
+        width: Width,
+    ) -> TraversalStats;
 }
 
-/// [`intersect`] with packets and streams of a given lane width (for the benchmark's width rows).
-pub fn intersect_width(
+impl RayAnswer for Hit {
+    const MISS: Self = Hit::MISS;
+
+    fn single(
+        scene: &Committed,
+        ray: &Ray,
+        how: Traversal,
+        opts: &TraverseOptions,
+        stats: &mut TraversalStats,
+    ) -> Self {
+        traverse::intersect(&scene.tree, &scene.prims, ray, how, opts, stats)
+    }
+
+    fn packets(
+        scene: &Committed,
+        rays: &[Ray],
+        tests: RayTests,
+        out: &mut [Self],
+        width: Width,
+    ) -> TraversalStats {
+        packet::intersect(&scene.tree, &scene.prims, rays, tests, out, width)
+    }
+
+    fn stream(
+        scene: &Committed,
+        rays: &[Ray],
+        tests: RayTests,
+        out: &mut [Self],
+        width: Width,
+    ) -> TraversalStats {
+        stream::intersect(&scene.tree, &scene.prims, rays, tests, out, width).0
+    }
+}
+
+impl RayAnswer for bool {
+    const MISS: Self = false;
+
+    fn single(
+        scene: &Committed,
+        ray: &Ray,
+        how: Traversal,
+        opts: &TraverseOptions,
+        stats: &mut TraversalStats,
+    ) -> Self {
+        traverse::occluded(&scene.tree, &scene.prims, ray, how, opts, stats)
+    }
+
+    fn packets(
+        scene: &Committed,
+        rays: &[Ray],
+        tests: RayTests,
+        out: &mut [Self],
+        width: Width,
+    ) -> TraversalStats {
+        packet::occluded(&scene.tree, &scene.prims, rays, tests, out, width)
+    }
+
+    fn stream(
+        scene: &Committed,
+        rays: &[Ray],
+        tests: RayTests,
+        out: &mut [Self],
+        width: Width,
+    ) -> TraversalStats {
+        stream::occluded(&scene.tree, &scene.prims, rays, tests, out, width).0
+    }
+}
+
+/// Answers `rays` into `out` (same length): closest hits or occlusion ([`RayAnswer`]). Ray `i`
+/// ignores primitive `exclude[i]` (`INVALID` for none) when `exclude` is given, else
+/// `opts.exclude`. Packets and streams (of `width` lanes) use the standard traversal's order
+/// whatever `how` says; every mode honours `opts.intersector` and the exclusions, with the
+/// same answers.
+///
+/// # Panics
+/// When `exclude` is not as long as `rays`.
+pub fn trace<T: RayAnswer>(
     scene: &Committed,
-    rays: &[Ray],
-    hits: &mut [Hit],
+    (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
+    out: &mut [T],
     how: Traversal,
     opts: &TraverseOptions,
     mode: QueryMode,
     width: Width,
 ) -> TraversalStats {
-    let rays = (rays, Excluded::All(opts.exclude));
-    closest_hits(scene, rays, hits, how, opts, mode, width)
-}
-
-/// [`intersect`] where ray `i` ignores primitive `exclude[i]` (`INVALID` for none) in place of
-/// `opts.exclude`: the secondary rays of a breadth-first render (`OffsetMode::ExcludePrim`).
-///
-/// # Panics
-/// When `exclude` is not as long as `rays`.
-pub fn intersect_excluding(
-    scene: &Committed,
-    rays: &[Ray],
-    exclude: &[PrimIndex],
-    hits: &mut [Hit],
-    how: Traversal,
-    opts: &TraverseOptions,
-    mode: QueryMode,
-) -> TraversalStats {
-    assert_eq!(exclude.len(), rays.len(), "one excluded primitive per ray");
-    let rays = (rays, Excluded::Each(exclude));
-    closest_hits(scene, rays, hits, how, opts, mode, Width::best())
-}
-
-/// Any-hit queries: `occluded[i]` is true when something lies in ray i's `[tmin, tmax)`.
-pub fn occluded(
-    scene: &Committed,
-    rays: &[Ray],
-    occluded: &mut [bool],
-    how: Traversal,
-    opts: &TraverseOptions,
-    mode: QueryMode,
-) -> TraversalStats {
-    let rays = (rays, Excluded::All(opts.exclude));
-    any_hits(scene, rays, occluded, how, opts, mode)
-}
-
-/// [`occluded`] where ray `i` ignores primitive `exclude[i]` in place of `opts.exclude` (the
-/// shadow rays of a breadth-first render).
-///
-/// # Panics
-/// When `exclude` is not as long as `rays`.
-pub fn occluded_excluding(
-    scene: &Committed,
-    rays: &[Ray],
-    exclude: &[PrimIndex],
-    occluded: &mut [bool],
-    how: Traversal,
-    opts: &TraverseOptions,
-    mode: QueryMode,
-) -> TraversalStats {
-    assert_eq!(exclude.len(), rays.len(), "one excluded primitive per ray");
-    let rays = (rays, Excluded::Each(exclude));
-    any_hits(scene, rays, occluded, how, opts, mode)
-}
-
-/// Closest hits in `mode`; the rays carry what they exclude (`opts.exclude` is not read).
-fn closest_hits(
-    scene: &Committed,
-    rays: Rays,
-    hits: &mut [Hit],
-    how: Traversal,
-    opts: &TraverseOptions,
-    mode: QueryMode,
-    width: Width,
-) -> TraversalStats {
-    let (tree, prims, intersector) = (&scene.tree, &scene.prims, opts.intersector);
-    traced(
-        rays,
-        hits,
-        mode,
-        Hit::MISS,
-        |ray, exclude, stats| {
-            let opts = TraverseOptions { exclude, ..*opts };
-            traverse::intersect(tree, prims, ray, how, &opts, stats)
-        },
-        |rays, exclude, hits| {
-            packet::intersect(
-                tree,
-                prims,
-                rays,
-                RayTests::new(intersector, exclude),
-                hits,
-                width,
-            )
-        },
-        |rays, exclude, hits| {
-            stream::intersect(
-                tree,
-                prims,
-                rays,
-                RayTests::new(intersector, exclude),
-                hits,
-                width,
-            )
-            .0
-        },
-    )
-}
-
-/// Any-hit answers in `mode`; the rays carry what they exclude (`opts.exclude` is not read).
-fn any_hits(
-    scene: &Committed,
-    rays: Rays,
-    occluded: &mut [bool],
-    how: Traversal,
-    opts: &TraverseOptions,
-    mode: QueryMode,
-) -> TraversalStats {
-    let (tree, prims, intersector) = (&scene.tree, &scene.prims, opts.intersector);
-    let width = Width::best();
-    traced(
-        rays,
-        occluded,
-        mode,
-        false,
-        |ray, exclude, stats| {
-            let opts = TraverseOptions { exclude, ..*opts };
-            traverse::occluded(tree, prims, ray, how, &opts, stats)
-        },
-        |rays, exclude, out| {
-            packet::occluded(
-                tree,
-                prims,
-                rays,
-                RayTests::new(intersector, exclude),
-                out,
-                width,
-            )
-        },
-        |rays, exclude, out| {
-            stream::occluded(
-                tree,
-                prims,
-                rays,
-                RayTests::new(intersector, exclude),
-                out,
-                width,
-            )
-            .0
-        },
-    )
+    let exclude = match exclude {
+        None => Excluded::All(opts.exclude),
+        Some(e) => {
+            assert_eq!(e.len(), rays.len(), "one excluded primitive per ray");
+            Excluded::Each(e)
+        }
+    };
+    let rays = (rays, exclude);
+    let intersector = opts.intersector;
+    match mode {
+        QueryMode::Single => chunked(rays, out, CHUNK, |r, e, o| {
+            serial((r, e), o, |ray, exclude, stats| {
+                T::single(
+                    scene,
+                    ray,
+                    how,
+                    &TraverseOptions { exclude, ..*opts },
+                    stats,
+                )
+            })
+        }),
+        QueryMode::Packet => chunked(rays, out, CHUNK, |r, e, o| {
+            T::packets(scene, r, RayTests::new(intersector, e), o, width)
+        }),
+        QueryMode::Stream => streamed(rays, out, |r, e, o| {
+            T::stream(scene, r, RayTests::new(intersector, e), o, width)
+        }),
+    }
 }
 
 /// Rays and the primitives they ignore.
 type Rays<'a> = (&'a [Ray], Excluded<'a>);
-
-/// A batch in `mode`: `single` answers one ray, `packet` and `stream` a slice of rays;
-/// streams fill from `empty` (see [`streamed`]).
-fn traced<T: Copy + Send + Sync>(
-    rays: Rays,
-    out: &mut [T],
-    mode: QueryMode,
-    empty: T,
-    single: impl Fn(&Ray, PrimIndex, &mut TraversalStats) -> T + Sync,
-    packet: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
-    stream: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
-) -> TraversalStats {
-    match mode {
-        QueryMode::Single => chunked(rays, out, CHUNK, |r, e, o| serial((r, e), o, &single)),
-        QueryMode::Packet => chunked(rays, out, CHUNK, packet),
-        QueryMode::Stream => streamed(rays, out, empty, stream),
-    }
-}
 
 /// Traces `chunk`-ray pieces of a batch in parallel (`out[i]` belongs to `rays[i]`) and sums
 /// their statistics: no shared counters in the hot loop.
@@ -285,11 +246,10 @@ const LONG_RUNS: usize = 64;
 /// Streams of at most [`STREAM_MAX`] rays, no more than a thread's share (but at least
 /// [`STREAM_CHUNK`]), traced in parallel. Rays that come in long octant runs are cut in their
 /// own order; others are sorted by octant (a stable counting sort) and each stream, of one
-/// octant, traced on a gathered copy, with `out` filled from `empty` and its answers.
-fn streamed<T: Copy + Send + Sync>(
+/// octant, traced on a gathered copy, with `out` filled from its answers.
+fn streamed<T: RayAnswer>(
     (rays, exclude): Rays,
     out: &mut [T],
-    empty: T,
     trace: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
     let size = rays
@@ -330,7 +290,7 @@ fn streamed<T: Copy + Send + Sync>(
                 }
                 all => all,
             };
-            let mut answers = vec![empty; part.len()];
+            let mut answers = vec![T::MISS; part.len()];
             let stats = trace(&part_rays, part_exclude, &mut answers);
             (stats, answers)
         })

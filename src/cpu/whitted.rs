@@ -3,6 +3,7 @@
 //! transparency, image rows split into bands that the context's rayon pool renders.
 
 use super::query::{self, QueryMode};
+use super::simd::Width;
 use super::traverse::{self, Traversal, TraverseOptions};
 use crate::camera::{Camera, CameraRays};
 use crate::frame::Frame;
@@ -472,14 +473,14 @@ fn trace_wavefronts(
         let rays: Vec<Ray> = wave.iter().map(|r| r.ray).collect();
         let exclude: Vec<PrimIndex> = wave.iter().map(|r| r.exclude).collect();
         hits.resize(rays.len(), Hit::MISS);
-        query::intersect_excluding(
+        query::trace(
             scene,
-            &rays,
-            &exclude,
+            (&rays, Some(&exclude)),
             &mut hits,
             traversal,
             &topts,
             QueryMode::Stream,
+            Width::best(),
         );
         let surfaces: Vec<Option<Surface>> = wave
             .par_iter()
@@ -495,14 +496,14 @@ fn trace_wavefronts(
             }
         }
         blocked.resize(shadows.len(), false);
-        query::occluded_excluding(
+        query::trace(
             scene,
-            &shadows,
-            &skips,
+            (&shadows, Some(&skips)),
             &mut blocked,
             traversal,
             &topts,
             QueryMode::Stream,
+            Width::best(),
         );
         let mut blocked = blocked.iter();
         let mut next = Vec::new();

@@ -108,9 +108,9 @@ fn seconds(
     let mut pass = || {
         for b in batches {
             ctx.install(|| {
-                query::intersect_width(
+                query::trace(
                     c,
-                    b,
+                    (b, None),
                     &mut hits[..b.len()],
                     Traversal::Standard,
                     &opts,
