@@ -211,16 +211,13 @@ unsafe fn run_query<T>(
             false => Some(excluded_all(s, slice(exclude, count, "opt.exclude")?)?),
         };
         // `query_options` validated the options (defaults are valid): refused ones never reach
-        // the ropes or exact vertices below, so a failed call leaves the scene as it was.
-        if q.traversal.is_some_and(|t| t.needs_ropes()) {
-            s.write().ensure_ropes()?;
-        }
-        if q.intersector == crate::precision::Intersector::Watertight {
-            s.write().ensure_exact_vertices()?;
-        }
-        let out = slice_mut(out, count, out_name)?;
-        let guard = s.read();
+        // the ropes or exact vertices built here, so a failed call leaves the scene as it was.
+        let guard = s.prepared(
+            q.traversal.is_some_and(|t| t.needs_ropes()),
+            q.intersector == crate::precision::Intersector::Watertight,
+        )?;
         let committed = guard.committed()?;
+        let out = slice_mut(out, count, out_name)?;
         if exclude.as_ref().is_some_and(|(_, id)| *id != committed.id) {
             // Another thread committed between the lookup and the trace.
             return Err(Error::invalid_operation(

@@ -37,14 +37,11 @@ pub unsafe extern "C" fn rt2_render(
         // A render the backend refuses is refused before anything is built for it.
         c.inner.check_render(&opts)?;
         // `to_options` validated the options (defaults are valid): refused ones never reach
-        // the ropes or exact vertices below, so a failed call leaves the scene as it was.
-        if opts.traversal.is_some_and(|t| t.needs_ropes()) {
-            s.write().ensure_ropes()?;
-        }
-        if opts.intersector == crate::precision::Intersector::Watertight {
-            s.write().ensure_exact_vertices()?;
-        }
-        let guard = s.read();
+        // the ropes or exact vertices built here, so a failed call leaves the scene as it was.
+        let guard = s.prepared(
+            opts.traversal.is_some_and(|t| t.needs_ropes()),
+            opts.intersector == crate::precision::Intersector::Watertight,
+        )?;
         let committed = guard.committed()?;
         c.inner.render(committed, &cam.camera, &opts, &mut f.frame)
     })

@@ -10,6 +10,7 @@ use super::ffi::{
 use super::options::{rt2_build_options, rt2_material};
 use crate::context::Context;
 use crate::error::{Error, Result, Rt2Status};
+use crate::precision::Intersector;
 use crate::scene::{loaders, PointLight, Scene, Shape};
 use glam::{Affine3A, Mat3, Vec3};
 use std::sync::{Arc, RwLock, RwLockReadGuard, RwLockWriteGuard};
@@ -35,7 +36,57 @@ impl rt2_scene {
     pub(crate) fn write(&self) -> RwLockWriteGuard<'_, Scene> {
         self.scene.write().unwrap_or_else(|p| p.into_inner())
     }
+
+    /// The committed scene under the read lock, with what a job needs that is built on demand:
+    /// ropes for a rope traversal, exact corners for the watertight test. They are built under
+    /// the write lock, then checked again under the read lock the job runs under: another
+    /// thread may commit in between, and a new commit has neither (a watertight job would
+    /// then run on corners rebuilt from the edges, unsound, with nothing to say so). Gives up
+    /// after a few such commits in a row.
+    pub(crate) fn prepared(
+        &self,
+        ropes: bool,
+        watertight: bool,
+    ) -> Result<RwLockReadGuard<'_, Scene>> {
+        self.prepared_with(ropes, watertight, || {})
+    }
+
+    /// [`rt2_scene::prepared`], calling `between` each time it has built what was missing and
+    /// holds no lock: where the tests commit, as another thread may.
+    fn prepared_with(
+        &self,
+        ropes: bool,
+        watertight: bool,
+        between: impl Fn(),
+    ) -> Result<RwLockReadGuard<'_, Scene>> {
+        for _ in 0..PREPARE_ROUNDS {
+            let guard = self.read();
+            let c = guard.committed()?;
+            let has_ropes = !ropes || c.tree.ropes.is_some();
+            let has_corners = !watertight || !c.prims.rebuilds_corners(Intersector::Watertight);
+            if has_ropes && has_corners {
+                return Ok(guard);
+            }
+            drop(guard);
+            let mut scene = self.write();
+            if ropes {
+                scene.ensure_ropes()?;
+            }
+            if watertight {
+                scene.ensure_exact_vertices()?;
+            }
+            drop(scene);
+            between();
+        }
+        Err(Error::invalid_operation(format!(
+            "the scene was committed {PREPARE_ROUNDS} times by other threads while this job \
+             built its ropes or exact corners; run it again"
+        )))
+    }
 }
+
+/// Rounds of [`rt2_scene::prepared`] before it gives up.
+const PREPARE_ROUNDS: usize = 8;
 
 /// Runs an edit that yields an id, writing the id only on success.
 unsafe fn edit_with_id(
@@ -424,4 +475,77 @@ pub unsafe extern "C" fn rt2_scene_stats(
         };
         write_out(out, "out", stats)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::api::context::rt2_context_create;
+    use std::cell::Cell;
+    use std::ptr::{null, null_mut};
+
+    /// A committed scene of one triangle, through the C API.
+    fn triangle_scene() -> *mut rt2_scene {
+        unsafe {
+            let mut ctx = null_mut();
+            assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
+            let mut scene = null_mut();
+            assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+            crate::api::context::rt2_context_destroy(ctx);
+            let p = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+            let st = rt2_scene_add_mesh(
+                scene,
+                p.as_ptr(),
+                3,
+                [0u32, 1, 2].as_ptr(),
+                1,
+                0,
+                null_mut(),
+            );
+            assert_eq!(st, Rt2Status::Ok);
+            assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+            scene
+        }
+    }
+
+    /// Another thread's commit right after the corners and ropes were built (which drops
+    /// them): the scene handed out still has both, built again.
+    #[test]
+    fn what_a_commit_drops_before_the_job_reads_is_built_again() {
+        let scene = triangle_scene();
+        let s = unsafe { &*scene };
+        let commits = Cell::new(0);
+        let commit_twice = || {
+            if commits.get() < 2 {
+                s.write().commit().unwrap();
+                commits.set(commits.get() + 1);
+            }
+        };
+        {
+            let guard = s.prepared_with(true, true, commit_twice).unwrap();
+            let c = guard.committed().unwrap();
+            assert!(c.tree.ropes.is_some(), "no ropes");
+            assert!(
+                !c.prims.rebuilds_corners(Intersector::Watertight),
+                "no exact corners"
+            );
+        }
+        assert_eq!(commits.get(), 2, "the commits did not happen");
+        unsafe { rt2_scene_destroy(scene) };
+    }
+
+    /// Commits after every build: the job gives up with INVALID_OPERATION, and the scene works.
+    #[test]
+    fn endless_commits_make_the_job_give_up() {
+        let scene = triangle_scene();
+        let s = unsafe { &*scene };
+        let e = s
+            .prepared_with(false, true, || s.write().commit().unwrap())
+            .map(|_| ())
+            .unwrap_err();
+        assert_eq!(e.status, Rt2Status::InvalidOperation, "{}", e.message);
+        assert!(e.message.contains("run it again"), "{}", e.message);
+        assert!(s.prepared(false, true).is_ok());
+        unsafe { rt2_scene_destroy(scene) };
+    }
 }
