@@ -173,7 +173,8 @@ int main(int argc, char **argv) {
         return 2;
     }
 
-    /* The query modes PACKET and STREAM are CPU traversals. */
+    /* A CPU context: the query modes PACKET and STREAM are CPU traversals. (RT2_BACKEND=gpu
+     * overrides it; the GPU kernels take the exclusions too, one ray per thread in every mode.) */
     rt2_context_desc desc = rt2_context_desc_default();
     desc.backend = RT2_BACKEND_CPU;
     rt2_context *ctx = NULL;

@@ -542,10 +542,9 @@ typedef struct rt2_query_options {
    * NULL (default), or one hit per ray: ray i ignores the primitive `exclude[i]` names by
    * its `object` and `prim` (`t`, `u`, `v` are not read), e.g. the hit a secondary ray
    * leaves (the exclude-prim offset of renders). A miss (both `RT2_INVALID_ID`) excludes
-   * nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. CPU only: a
-   * GPU context runs such a query on the CPU under AUTO and refuses it (UNSUPPORTED) when
-   * the GPU was asked for. It may be the call's own `hits` array (read whole before any hit
-   * is written). The first use builds a lookup of 4 bytes per primitive.
+   * nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. Every mode and
+   * the GPU honour it. It may be the call's own `hits` array (read whole before any hit is
+   * written). The first use builds a lookup of 4 bytes per primitive.
    */
   const struct rt2_hit *exclude;
 } rt2_query_options;

@@ -34,7 +34,7 @@ struct Params {
     n_planes: u32, n_leaves: u32, n_lights: u32, short_stack: u32,
     count: u32, width: u32, height: u32, row0: u32,
     samples: u32, sample: u32, max_depth: u32, refract: u32,
-    has_mask: u32, rope_bits: u32, pad1: u32, pad2: u32,
+    has_mask: u32, rope_bits: u32, excluding: u32, pad2: u32,
 }
 
 // Group 0: the committed scene, uploaded once per commit (src/gpu/scene.rs). Empty arrays
@@ -80,7 +80,8 @@ fn flat_id(wid: vec3<u32>, lid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return (wid.y * nwg.x + wid.x) * WG + lid.x;
 }
 
-struct Ray { org: vec3<f32>, dir: vec3<f32>, tmin: f32, tmax: f32 }
+// `skip`: the global index of the primitive the ray ignores (`RayTest::exclude`; INVALID: none).
+struct Ray { org: vec3<f32>, dir: vec3<f32>, tmin: f32, tmax: f32, skip: u32 }
 struct TRay { ray: Ray, inv_dir: vec3<f32> }
 struct Hit { t: f32, u: f32, v: f32, prim: u32 }
 struct Stats { nodes: u32, leaves: u32, prims: u32 }
@@ -227,6 +228,7 @@ fn hit_plane(p: Plane, r: Ray, tmax: f32) -> Tuv {
 // `PrimitiveSet::intersect`: bounded primitive `i` by its global index (kinds in the order
 // triangles, spheres, ellipsoids, boxes).
 fn intersect_prim(i: u32, r: Ray, h: ptr<function, Hit>) -> bool {
+    if (i == r.skip) { return false; }
     let tmax = bound(*h, r);
     var k = i;
     var f: Tuv;
@@ -255,6 +257,7 @@ fn n_bounded() -> u32 { return params.n_tri + params.n_sph + params.n_ell + para
 fn intersect_planes(r: Ray, h: ptr<function, Hit>) {
     let base = n_bounded();
     for (var k = 0u; k < params.n_planes; k++) {
+        if (base + k == r.skip) { continue; }
         let f = hit_plane(planes[k], r, bound(*h, r));
         if (f.ok) { offer(h, f.t, 0.0, 0.0, base + k); }
     }

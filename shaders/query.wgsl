@@ -2,10 +2,15 @@
 @group(1) @binding(1) var<storage, read> rays: array<RayIn>;           // the batch (.rays records)
 @group(1) @binding(2) var<storage, read_write> hits: array<HitOut>;    // one answer per ray
 @group(1) @binding(3) var<storage, read_write> stats: array<StatsOut>; // work per ray
+// The primitive each ray ignores, read when params.excluding is set (else another buffer of
+// the job is bound here, and not read).
+@group(1) @binding(4) var<storage, read> excludes: array<u32>;
 
 fn load_ray(i: u32) -> Ray {
     let q = rays[i];
-    return Ray(v3(q.org), v3(q.dir), q.tmin, q.tmax);
+    var skip = INVALID;
+    if (params.excluding != 0u) { skip = excludes[i]; }
+    return Ray(v3(q.org), v3(q.dir), q.tmin, q.tmax, skip);
 }
 
 @compute @workgroup_size(64)

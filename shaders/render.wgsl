@@ -30,7 +30,7 @@ fn megakernel(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
         while (sp > 0u) {
             sp -= 1u;
             let q = pending[sp];
-            let sh = shade(Ray(q.org, q.dir, 0.0, inf()), q.w, q.depth);
+            let sh = shade(Ray(q.org, q.dir, 0.0, inf(), INVALID), q.w, q.depth);
             color += sh.color;
             if (sh.transmitted.ok && sp < PENDING_MAX) {
                 pending[sp] = Pending(sh.transmitted.org, sh.transmitted.dir, sh.transmitted.w, q.depth + 1u);
@@ -71,7 +71,7 @@ fn wave_trace(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
     let i = flat_id(wid, lid, nwg);
     if (i >= params.count) { return; }
     let q = queue[i];
-    let sh = shade(Ray(v3(q.org), v3(q.dir), 0.0, inf()), v3(q.weight), q.depth);
+    let sh = shade(Ray(v3(q.org), v3(q.dir), 0.0, inf(), INVALID), v3(q.weight), q.depth);
     contrib[i] = vec4<f32>(sh.color, 0.0);
     let t = sh.transmitted;
     let m = sh.mirror;

@@ -122,7 +122,7 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
             let light = lights[k];
             let to_light = v3(light.position) - above;
             let d = length(to_light);
-            let shadow = Ray(above, to_light / d, 0.0, d);
+            let shadow = Ray(above, to_light / d, 0.0, d, INVALID);
             if (d > 0.0 && !occluded(shadow, &st)) {
                 local += phong(m, base, p, n, -r.dir, light);
             }
@@ -227,12 +227,12 @@ fn camera_ray(pixel: vec2<f32>, lens: vec2<f32>) -> Ray {
     let dir = normalize_or_zero(fwd + (ndc.x * params.right.w) * right + (ndc.y * params.up.w) * up);
     let eye = params.eye.xyz;
     let aperture = params.eye.w;
-    if (aperture == 0.0) { return Ray(eye, dir, 0.0, inf()); }
+    if (aperture == 0.0) { return Ray(eye, dir, 0.0, inf(), INVALID); }
     let focus_point = eye + dir * (params.forward.w / dot(dir, fwd));
     let rad = 0.5 * aperture * sqrt(lens.x);
     let phi = 6.28318530717958647692 * lens.y;
     let org = eye + rad * (cos(phi) * right + sin(phi) * up);
-    return Ray(org, normalize_or_zero(focus_point - org), 0.0, inf());
+    return Ray(org, normalize_or_zero(focus_point - org), 0.0, inf(), INVALID);
 }
 
 // Primary ray of sample s of the chunk's pixel i.

@@ -259,7 +259,7 @@ impl Context {
     }
 
     /// [`Context::intersect`] where ray `i` ignores primitive `exclude[i]` (`INVALID`: none),
-    /// e.g. the one a secondary ray leaves. On the CPU: the GPU kernels take no exclusions.
+    /// e.g. the one a secondary ray leaves.
     pub fn intersect_excluding(
         &self,
         scene: &Committed,
@@ -309,9 +309,8 @@ impl Context {
     }
 
     /// Refuses a query this context would refuse when it runs (see `refusal`).
-    pub fn check_query(&self, q: &QueryOptions, excluding: bool) -> Result<()> {
-        self.refusal(gpu_lacks_query(q, excluding))
-            .map_or(Ok(()), Err)
+    pub fn check_query(&self, q: &QueryOptions) -> Result<()> {
+        self.refusal(gpu_lacks_query(q)).map_or(Ok(()), Err)
     }
 
     /// Refuses a render this context would refuse when it runs (see `refusal`).
@@ -333,10 +332,10 @@ impl Context {
         check_exclusions(rays, exclude)?;
         self.job(
             out,
-            gpu_lacks_query(q, exclude.is_some()),
+            gpu_lacks_query(q),
             |g, out, choices| {
                 let how = gpu_query_traversal(scene, q, choices);
-                T::gpu(g, scene, rays, out, how, q.short_stack_size)
+                T::gpu(g, scene, (rays, exclude), out, how, q.short_stack_size)
             },
             |out, choices| {
                 let (how, opts) = self.query_setup(scene, q, choices);
@@ -373,7 +372,7 @@ trait GpuAnswer: RayAnswer {
     fn gpu(
         g: &Gpu,
         scene: &Committed,
-        rays: &[Ray],
+        rays: (&[Ray], Option<&[PrimIndex]>),
         out: &mut [Self],
         how: Traversal,
         short_stack: usize,
@@ -384,7 +383,7 @@ impl GpuAnswer for Hit {
     fn gpu(
         g: &Gpu,
         scene: &Committed,
-        rays: &[Ray],
+        rays: (&[Ray], Option<&[PrimIndex]>),
         out: &mut [Self],
         how: Traversal,
         short_stack: usize,
@@ -397,7 +396,7 @@ impl GpuAnswer for bool {
     fn gpu(
         g: &Gpu,
         scene: &Committed,
-        rays: &[Ray],
+        rays: (&[Ray], Option<&[PrimIndex]>),
         out: &mut [Self],
         how: Traversal,
         short_stack: usize,
@@ -453,9 +452,8 @@ fn gpu_lacks(intersector: Intersector, offset: OffsetMode) -> Option<&'static st
 }
 
 /// What the GPU kernels lack for a query, if anything (see [`gpu_lacks`]).
-fn gpu_lacks_query(q: &QueryOptions, excluding: bool) -> Option<&'static str> {
+fn gpu_lacks_query(q: &QueryOptions) -> Option<&'static str> {
     gpu_lacks(q.intersector, OffsetMode::Epsilon)
-        .or(excluding.then_some("the GPU kernels take no excluded primitives"))
 }
 
 /// One excluded primitive per ray, when there are any.

@@ -354,11 +354,27 @@ fn load_model_reports_a_missing_file() {
 /// `rt2_occluded` in every query mode, the occlusion rays excluding the primitive they leave.
 #[test]
 fn ambient_occlusion_passes_its_checks_and_writes_the_image() {
-    let exe = build_example("ambient_occlusion");
-    let pgm = support::scratch("c_examples").join("ambient_occlusion.pgm");
+    ambient_occlusion("ambient_occlusion", &[]);
+}
+
+/// ambient_occlusion.c on the GPU backend (`RT2_BACKEND=gpu`, lavapipe in CI): the kernels
+/// take the exclusions too, and every check holds (the modes agree trivially there: the GPU
+/// traces one ray per thread whatever the mode).
+#[test]
+fn ambient_occlusion_on_the_gpu_backend_passes_its_checks() {
+    if !gpu_available("ambient_occlusion_on_the_gpu_backend_passes_its_checks") {
+        return;
+    }
+    ambient_occlusion("ambient_occlusion-gpu", &[("RT2_BACKEND", "gpu")]);
+}
+
+/// Runs ambient_occlusion.c as `name` with `env` and checks its report and its image.
+fn ambient_occlusion(name: &str, env: &[(&str, &str)]) {
+    let exe = build_example_as("ambient_occlusion", name);
+    let pgm = support::scratch("c_examples").join(format!("{name}.pgm"));
     let _ = std::fs::remove_file(&pgm);
-    let out = run(&exe, &[pgm.as_os_str()]);
-    assert_exit(&out, 0, "ambient_occlusion");
+    let out = run_with(&exe, &[pgm.as_os_str()], env);
+    assert_exit(&out, 0, name);
     let text = stdout(&out);
     assert!(text.contains("ambient_occlusion: OK"), "no OK in:\n{text}");
     // Four probes (modes agree, view factor), the probe without exclusion (modes agree, every

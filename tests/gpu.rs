@@ -10,11 +10,11 @@ use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::{Backend, BackendRequest};
 use rt2::error::Rt2Status;
 use rt2::frame::Frame;
-use rt2::geometry::{Hit, Ray};
+use rt2::geometry::{Hit, PrimIndex, Ray};
 use rt2::gpu::GpuOptions;
 use rt2::rayset;
 use rt2::render::{GpuPathRequest, RenderOptions};
-use rt2::scene::{builtin, loaders, Material, PointLight, Scene, Shape};
+use rt2::scene::{builtin, loaders, Committed, Material, PointLight, Scene, Shape};
 
 mod support;
 
@@ -106,19 +106,44 @@ fn query(how: Traversal) -> QueryOptions {
 
 /// The bar: the same primitive for at least 99.99% of rays, `t` within 1e-5
 /// relative where both hit the same primitive; `occluded` on the GPU equal to the CPU's.
+/// Then the same rays again, each ignoring the primitive it hit first (the kernels' exclusions
+/// against the CPU's): every ray that hit must now find something else or nothing.
 fn compare_queries(what: &str, g: &Context, scene: &Scene, rays: &[Ray]) {
     let c = scene.committed().unwrap();
+    let first = compare_with(what, g, c, (rays, None));
+    let exclude: Vec<PrimIndex> = first.iter().map(|h| h.prim).collect();
+    let what = format!("{what}, excluding the first hit");
+    let second = compare_with(&what, g, c, (rays, Some(&exclude)));
+    let again = first
+        .iter()
+        .zip(&second)
+        .filter(|(a, b)| a.is_hit() && a.prim == b.prim)
+        .count();
+    assert_eq!(again, 0, "{what}: {again} rays hit the excluded primitive");
+}
+
+/// [`compare_queries`] for one set of exclusions; returns the CPU's hits.
+fn compare_with(
+    what: &str,
+    g: &Context,
+    c: &Committed,
+    (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
+) -> Vec<Hit> {
+    let intersect = |ctx: &Context, how, hits: &mut [Hit]| match exclude {
+        None => ctx.intersect(c, rays, hits, &query(how)),
+        Some(e) => ctx.intersect_excluding(c, rays, e, hits, &query(how)),
+    };
+    let occluded = |ctx: &Context, how, occ: &mut [bool]| match exclude {
+        None => ctx.occluded(c, rays, occ, &query(how)),
+        Some(e) => ctx.occluded_excluding(c, rays, e, occ, &query(how)),
+    };
     let mut want = vec![Hit::MISS; rays.len()];
-    cpu()
-        .intersect(c, rays, &mut want, &query(Traversal::Standard))
-        .unwrap();
+    intersect(&cpu(), Traversal::Standard, &mut want).unwrap();
     let mut want_occ = vec![false; rays.len()];
-    cpu()
-        .occluded(c, rays, &mut want_occ, &query(Traversal::Standard))
-        .unwrap();
+    occluded(&cpu(), Traversal::Standard, &mut want_occ).unwrap();
     for how in Traversal::ALL {
         let mut got = vec![Hit::MISS; rays.len()];
-        let stats = g.intersect(c, rays, &mut got, &query(how)).unwrap();
+        let stats = intersect(g, how, &mut got).unwrap();
         assert!(
             stats.nodes_visited > 0 || rays.len() < 4,
             "{what} {}: no work counted",
@@ -147,7 +172,7 @@ fn compare_queries(what: &str, g: &Context, scene: &Scene, rays: &[Ray]) {
             rays.len()
         );
         let mut occ = vec![false; rays.len()];
-        g.occluded(c, rays, &mut occ, &query(how)).unwrap();
+        occluded(g, how, &mut occ).unwrap();
         let occ_differ = occ.iter().zip(&want_occ).filter(|(a, b)| a != b).count();
         assert!(
             occ_differ <= allowed,
@@ -160,6 +185,7 @@ fn compare_queries(what: &str, g: &Context, scene: &Scene, rays: &[Ray]) {
             rays.len()
         );
     }
+    want
 }
 
 /// 16,384 rays of each bunny ray set (65,536 per traversal), evenly strided through the set
@@ -1102,11 +1128,10 @@ fn spheres_and_ellipsoids_are_hit_whatever_the_direction_length() {
     compare_queries("long and short directions", &g, &scene, &rays);
 }
 
-/// Queries with excluded primitives run on the CPU (the kernels take none): AUTO falls back and
-/// says why, a context that asked for the GPU refuses them, and the answer ignores the
-/// primitive either way it runs.
+/// Queries with excluded primitives run on the GPU, which ignores each ray's primitive: a
+/// sphere, or a plane (tested outside the tree), as the CPU does.
 #[test]
-fn queries_with_exclusions_run_on_the_cpu() {
+fn queries_with_exclusions_run_on_the_gpu() {
     let Some(g) = gpu(GpuOptions::default()) else {
         return;
     };
@@ -1122,45 +1147,51 @@ fn queries_with_exclusions_run_on_the_cpu() {
         )
         .unwrap();
     }
+    s.add_object(
+        Shape::Plane {
+            normal: Vec3::Z,
+            offset: -10.0,
+        },
+        0,
+    )
+    .unwrap();
     s.commit().unwrap();
     let c = s.committed().unwrap();
-    let rays = [Ray::new(
-        Vec3::new(0.0, 0.0, 5.0),
-        -Vec3::Z,
-        0.0,
-        f32::INFINITY,
-    )];
+    // Through both spheres to the plane; beside them, to the plane only.
+    let rays = [Vec3::ZERO, Vec3::new(5.0, 0.0, 0.0)]
+        .map(|o| Ray::new(o + Vec3::new(0.0, 0.0, 5.0), -Vec3::Z, 0.0, f32::INFINITY));
     let q = QueryOptions::default();
-    let mut first = [Hit::MISS];
+    let mut first = [Hit::MISS; 2];
     g.intersect(c, &rays, &mut first, &q).unwrap();
-    assert_eq!(first[0].t, 4.0);
-    let exclude = [first[0].prim];
-    let mut hits = [Hit::MISS];
-    let e = g
-        .intersect_excluding(c, &rays, &exclude, &mut hits, &q)
-        .unwrap_err();
-    assert_eq!(e.status, Rt2Status::Unsupported, "{}", e.message);
-    assert!(!hits[0].is_hit(), "a refused query writes nothing");
-    let mut occ = [true];
-    let e = g
-        .occluded_excluding(c, &rays, &exclude, &mut occ, &q)
-        .unwrap_err();
-    assert_eq!(e.status, Rt2Status::Unsupported, "{}", e.message);
+    assert_eq!((first[0].t, first[1].t), (4.0, 15.0));
+    let exclude = first.map(|h| h.prim);
+    let mut hits = [Hit::MISS; 2];
+    g.intersect_excluding(c, &rays, &exclude, &mut hits, &q)
+        .unwrap();
+    // Through the first sphere to the second one's front, at z = -2; the plane excluded: a miss.
+    assert_eq!(hits[0].t, 7.0);
+    assert_ne!(hits[0].prim, first[0].prim);
+    assert!(
+        !hits[1].is_hit(),
+        "the excluded plane was hit: {:?}",
+        hits[1]
+    );
+    let mut occ = [true; 2];
+    g.occluded_excluding(c, &rays, &exclude, &mut occ, &q)
+        .unwrap();
+    assert_eq!(occ, [true, false]);
     if let Some((auto, _)) = auto_on_gpu(None) {
-        auto.intersect_excluding(c, &rays, &exclude, &mut hits, &q)
+        let mut auto_hits = [Hit::MISS; 2];
+        auto.intersect_excluding(c, &rays, &exclude, &mut auto_hits, &q)
             .unwrap();
-        // Through the first sphere to the second one's front, at z = -2.
-        assert_eq!((hits[0].t, hits[0].prim == first[0].prim), (7.0, false));
-        let why = auto
-            .last_fallback()
-            .expect("a reason for running on the CPU");
-        assert!(why.contains("excluded") && why.contains("CPU"), "{why}");
+        assert_eq!(auto_hits, hits);
+        assert_eq!(auto.last_fallback(), None, "AUTO ran it on the CPU");
     }
 }
 
-/// Through the C API, a query or render a GPU context refuses (excluded primitives, the
-/// watertight test) is refused before the scene builds anything for it: no lookup, no exact
-/// corners, no ropes.
+/// Through the C API, a query or render a GPU context refuses (the watertight test) is refused
+/// before the scene builds anything for it: no exact corners, no ropes. A query with
+/// exclusions runs.
 #[test]
 fn refused_c_queries_build_nothing() {
     use rt2::api::*;
@@ -1212,10 +1243,6 @@ fn refused_c_queries_build_nothing() {
         };
         let mut hit = miss;
         let mut opt = rt2_query_options_default();
-        opt.exclude = &miss;
-        let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, &opt, null_mut());
-        assert_eq!(st, Rt2Status::Unsupported);
-        let mut opt = rt2_query_options_default();
         opt.intersector = Rt2Intersector::Watertight as u32;
         let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, &opt, null_mut());
         assert_eq!(st, Rt2Status::Unsupported);
@@ -1232,9 +1259,14 @@ fn refused_c_queries_build_nothing() {
         assert_eq!(bytes(), before);
         rt2_frame_destroy(frame);
         rt2_camera_destroy(camera);
-        // The GPU answers the plain query.
+        // The GPU answers the plain query, and the same query excluding the triangle it hit.
         let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, null(), null_mut());
         assert_eq!((st, hit.object, hit.t), (Rt2Status::Ok, 0, 1.0));
+        let mut opt = rt2_query_options_default();
+        opt.exclude = &hit;
+        let mut second = hit;
+        let st = rt2_intersect(ctx, scene, &ray, 1, &mut second, &opt, null_mut());
+        assert_eq!((st, second.object), (Rt2Status::Ok, RT2_INVALID_ID));
         rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);
     }

@@ -57,10 +57,9 @@ pub struct rt2_query_options {
     /// NULL (default), or one hit per ray: ray i ignores the primitive `exclude[i]` names by
     /// its `object` and `prim` (`t`, `u`, `v` are not read), e.g. the hit a secondary ray
     /// leaves (the exclude-prim offset of renders). A miss (both `RT2_INVALID_ID`) excludes
-    /// nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. CPU only: a
-    /// GPU context runs such a query on the CPU under AUTO and refuses it (UNSUPPORTED) when
-    /// the GPU was asked for. It may be the call's own `hits` array (read whole before any hit
-    /// is written). The first use builds a lookup of 4 bytes per primitive.
+    /// nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. Every mode and
+    /// the GPU honour it. It may be the call's own `hits` array (read whole before any hit is
+    /// written). The first use builds a lookup of 4 bytes per primitive.
     pub exclude: *const rt2_hit,
 }
 
@@ -202,7 +201,7 @@ unsafe fn run_query<T>(
         // The output checked now (NULL, size), borrowed below once the exclusions are read.
         slice_mut(out, count, out_name)?;
         // A job the backend refuses is refused before anything is built for it.
-        c.inner.check_query(&q, !exclude.is_null())?;
+        c.inner.check_query(&q)?;
         // The exclusions, read whole before the output is borrowed: `exclude` may be the very
         // array the hits go to (ray i leaving hit i). Every entry is checked before anything
         // is written or built.

@@ -67,7 +67,8 @@ fn logical_devices(value: Option<&str>) -> Result<usize> {
 /// The pipelines of one module, in the order of its entry-point list.
 pub(crate) type Pipelines = Arc<Vec<wgpu::ComputePipeline>>;
 
-/// Storage buffers one kernel binds: 13 scene arrays + 7 wavefront buffers.
+/// Storage buffers one kernel binds at most: 13 scene arrays + 7 wavefront buffers (a query
+/// binds 4).
 const STORAGE_BUFFERS_NEEDED: u32 = 20;
 
 /// Bind group layouts shared by all kernels of a device.
@@ -292,7 +293,7 @@ fn make_layouts(d: &wgpu::Device) -> Layouts {
     // Group 0: the 13 scene arrays, read-only.
     let scene_entries: Vec<_> = (0..13).map(|b| storage(b, true)).collect();
     let scene = bgl("scene", &scene_entries);
-    // Group 1 of the queries: params, rays (read), hits and stats (written).
+    // Group 1 of the queries: params, rays (read), hits and stats (written), exclusions (read).
     let query_io = bgl(
         "query io",
         &[
@@ -300,6 +301,7 @@ fn make_layouts(d: &wgpu::Device) -> Layouts {
             storage(1, true),
             storage(2, false),
             storage(3, false),
+            storage(4, true),
         ],
     );
     // Group 1 of the megakernel: params, frame (written), mask (read).

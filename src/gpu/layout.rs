@@ -176,8 +176,9 @@ pub struct GpuParams {
     pub has_mask: u32,
     /// Bits per rope in the packed rope words (`RopeLinks::bits`; 0 without ropes).
     pub rope_bits: u32,
-    // Scalars, not an array: uniform arrays need a 16-byte stride.
-    pub pad1: u32,
+    /// 1 when a query's rays each ignore a primitive (its `excludes` buffer).
+    pub excluding: u32,
+    // A scalar, not an array: uniform arrays need a 16-byte stride.
     pub pad2: u32,
 }
 
@@ -295,7 +296,7 @@ mod tests {
                 refract,
                 has_mask,
                 rope_bits,
-                pad1,
+                excluding,
                 pad2
             ]
         );

@@ -22,7 +22,7 @@ pub use render::GpuPath;
 use crate::camera::Camera;
 use crate::cpu::traverse::Traversal;
 use crate::frame::Frame;
-use crate::geometry::{Hit, Ray, TraversalStats};
+use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats};
 use crate::render::RenderOptions;
 use crate::scene::Committed;
 
@@ -39,11 +39,12 @@ pub fn render(
     render::render(gpu, scene, camera, opts, traversal, path, frame)
 }
 
-/// Closest hits of a batch of rays, on the first device.
+/// Closest hits of a batch of rays, on the first device; ray `i` ignores primitive
+/// `exclude[i]` (`INVALID`: none) when `exclude` is given (as long as `rays`).
 pub fn intersect(
     gpu: &Gpu,
     scene: &Committed,
-    rays: &[Ray],
+    (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
     hits: &mut [Hit],
     traversal: Traversal,
     short_stack: usize,
@@ -51,7 +52,7 @@ pub fn intersect(
     query::run(
         &gpu.devices[0],
         scene,
-        rays,
+        (rays, exclude),
         traversal,
         short_stack,
         Some(hits),
@@ -59,11 +60,11 @@ pub fn intersect(
     )
 }
 
-/// Any-hit flags of a batch of rays, on the first device.
+/// Any-hit flags of a batch of rays, on the first device; exclusions as [`intersect`].
 pub fn occluded(
     gpu: &Gpu,
     scene: &Committed,
-    rays: &[Ray],
+    (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
     out: &mut [bool],
     traversal: Traversal,
     short_stack: usize,
@@ -71,7 +72,7 @@ pub fn occluded(
     query::run(
         &gpu.devices[0],
         scene,
-        rays,
+        (rays, exclude),
         traversal,
         short_stack,
         None,

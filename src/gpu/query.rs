@@ -6,14 +6,15 @@ use super::kernels::Program;
 use super::layout::{GpuHit, GpuParams, GpuRay, GpuStats};
 use super::GpuResult;
 use crate::cpu::traverse::Traversal;
-use crate::geometry::{Hit, Ray, TraversalStats};
+use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats};
 use crate::scene::Committed;
 
-/// Closest hits (`hits = Some`) or any-hit flags (`occluded = Some`) of `rays`.
+/// Closest hits (`hits = Some`) or any-hit flags (`occluded = Some`) of `rays`, ray `i`
+/// ignoring primitive `exclude[i]` when `exclude` is given.
 pub(crate) fn run(
     dev: &Device,
     scene: &Committed,
-    rays: &[Ray],
+    (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
     traversal: Traversal,
     short_stack: usize,
     mut hits: Option<&mut [Hit]>,
@@ -36,6 +37,7 @@ pub(crate) fn run(
         let params = cache.job(GpuParams {
             count: piece.len() as u32,
             short_stack: short_stack as u32,
+            excluding: exclude.is_some() as u32,
             ..GpuParams::default()
         });
         let n = piece.len() as u64;
@@ -44,6 +46,15 @@ pub(crate) fn run(
             bytemuck::cast_slice(&gpu_rays),
             wgpu::BufferUsages::empty(),
         );
+        // Without exclusions the shader reads none: the rays stand in for the binding.
+        let exclude_buf = exclude.map(|e| {
+            let e = &e[k * per..][..piece.len()];
+            dev.upload(
+                "excludes",
+                bytemuck::cast_slice(e),
+                wgpu::BufferUsages::empty(),
+            )
+        });
         // Hits then stats in one buffer, so that one read-back brings both.
         let hit_bytes = 16 * n;
         let stat_offset = hit_bytes.next_multiple_of(align);
@@ -82,6 +93,10 @@ pub(crate) fn run(
                 wgpu::BindGroupEntry {
                     binding: 3,
                     resource: wgpu::BindingResource::Buffer(stat_view.clone()),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: exclude_buf.as_ref().unwrap_or(&ray_buf).as_entire_binding(),
                 },
             ],
         });

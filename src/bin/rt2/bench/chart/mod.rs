@@ -26,7 +26,7 @@ pub(super) enum Engine {
     /// The CPU backend in one of its query modes. Packets and streams follow the standard
     /// traversal's order, with either intersector.
     Cpu(QueryMode),
-    /// The GPU backend: Möller–Trumbore and the fixed epsilon offset only.
+    /// The GPU backend: Möller–Trumbore only, and renders with the fixed epsilon offset only.
     Gpu,
 }
 
@@ -62,10 +62,10 @@ impl Engine {
         }
     }
 
-    /// The offset modes measured with this engine: batch queries (`Context::intersect`, like
-    /// `rt2_intersect`) take no per-ray excluded primitive (the breadth-first renderer's own
-    /// waves do), and the GPU kernels offset by the fixed epsilon only.
-    fn offsets(self) -> &'static [OffsetMode] {
+    /// The offset modes of this engine's renders: the GPU kernels offset secondary rays by the
+    /// fixed epsilon only. (The secondary-ray points take every mode on every engine: their
+    /// origins are offset on the host, and the excluded primitives go with the query.)
+    fn render_offsets(self) -> &'static [OffsetMode] {
         match self {
             Engine::Cpu(_) => &OffsetMode::ALL,
             Engine::Gpu => &[OffsetMode::Epsilon],
@@ -274,7 +274,7 @@ pub(super) fn chart(a: &Args) -> Result<String> {
          primary rays as one batch query, the shadow origins computed on the host, then all \
          shadow rays as another (the breadth-first schedule), each shadow ray with its \
          excluded primitive under exclude-prim (`Context::intersect_excluding`, \
-         `rt2_query_options.exclude`; CPU only).\n\n{st}{}{psnr}",
+         `rt2_query_options.exclude`).\n\n{st}{}{psnr}",
         b.gpu_note,
         front_table("ray queries", &qp),
         front_table("secondary rays", &sp)

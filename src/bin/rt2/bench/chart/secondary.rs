@@ -77,7 +77,7 @@ pub(super) fn secondary(a: &Args, b: &Backends) -> Result<(Vec<Point>, String)> 
     );
     for (engine, ctx) in b.engines() {
         for (how, intersector) in engine.methods() {
-            for &mode in engine.offsets() {
+            for mode in OffsetMode::ALL {
                 let opts = RenderOptions {
                     intersector,
                     offset_mode: mode,
