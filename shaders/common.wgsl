@@ -26,7 +26,7 @@ struct Light { position: array<f32, 3>, intensity: f32, color: array<f32, 3>, pa
 struct RayIn { org: array<f32, 3>, tmin: f32, dir: array<f32, 3>, tmax: f32 }
 struct HitOut { t: f32, u: f32, v: f32, prim: u32 }
 struct StatsOut { nodes: u32, leaves: u32, prims: u32, pad: u32 }
-struct Item { org: array<f32, 3>, pixel: u32, dir: array<f32, 3>, depth: u32, weight: array<f32, 3>, pad: u32 }
+struct Item { org: array<f32, 3>, pixel: u32, dir: array<f32, 3>, depth: u32, weight: array<f32, 3>, skip: u32 }
 struct Params {
     bounds_min: vec4<f32>, bounds_max: vec4<f32>,
     eye: vec4<f32>, forward: vec4<f32>, right: vec4<f32>, up: vec4<f32>, background: vec4<f32>,
@@ -34,7 +34,8 @@ struct Params {
     n_planes: u32, n_leaves: u32, n_lights: u32, short_stack: u32,
     count: u32, width: u32, height: u32, row0: u32,
     samples: u32, sample: u32, max_depth: u32, refract: u32,
-    has_mask: u32, rope_bits: u32, excluding: u32, pad2: u32,
+    has_mask: u32, rope_bits: u32, excluding: u32, offset_mode: u32,
+    scale: f32, pad1: u32, pad2: u32, pad3: u32,
 }
 
 // Group 0: the committed scene, uploaded once per commit (src/gpu/scene.rs). Empty arrays

@@ -10,7 +10,7 @@
 
 fn masked(i: u32) -> bool { return params.has_mask != 0u && mask[i] == 0u; }
 
-struct Pending { org: vec3<f32>, dir: vec3<f32>, w: vec3<f32>, depth: u32 }
+struct Pending { org: vec3<f32>, dir: vec3<f32>, w: vec3<f32>, depth: u32, skip: u32 }
 // Longest pending list: each pop pushes at most two, so it grows by one per level at most.
 const PENDING_MAX: u32 = 72u;
 
@@ -25,19 +25,21 @@ fn megakernel(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
     for (var s = 0u; s < params.samples; s++) {
         let r0 = primary(i, s);
         var color = vec3<f32>(0.0);
-        pending[0] = Pending(r0.org, r0.dir, vec3<f32>(1.0), 1u);
+        pending[0] = Pending(r0.org, r0.dir, vec3<f32>(1.0), 1u, INVALID);
         var sp = 1u;
         while (sp > 0u) {
             sp -= 1u;
             let q = pending[sp];
-            let sh = shade(Ray(q.org, q.dir, 0.0, inf(), INVALID), q.w, q.depth);
+            let sh = shade(Ray(q.org, q.dir, 0.0, inf(), q.skip), q.w, q.depth);
             color += sh.color;
             if (sh.transmitted.ok && sp < PENDING_MAX) {
-                pending[sp] = Pending(sh.transmitted.org, sh.transmitted.dir, sh.transmitted.w, q.depth + 1u);
+                let t = sh.transmitted;
+                pending[sp] = Pending(t.org, t.dir, t.w, q.depth + 1u, t.skip);
                 sp += 1u;
             }
             if (sh.mirror.ok && sp < PENDING_MAX) {
-                pending[sp] = Pending(sh.mirror.org, sh.mirror.dir, sh.mirror.w, q.depth + 1u);
+                let m = sh.mirror;
+                pending[sp] = Pending(m.org, m.dir, m.w, q.depth + 1u, m.skip);
                 sp += 1u;
             }
         }
@@ -48,8 +50,8 @@ fn megakernel(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
 
 // ---- Wavefront: one kernel per bounce, live rays compacted by a prefix sum ----
 
-fn item(org: vec3<f32>, pixel: u32, dir: vec3<f32>, depth: u32, w: vec3<f32>) -> Item {
-    return Item(a3(org), pixel, a3(dir), depth, a3(w), 0u);
+fn item(org: vec3<f32>, pixel: u32, dir: vec3<f32>, depth: u32, w: vec3<f32>, skip: u32) -> Item {
+    return Item(a3(org), pixel, a3(dir), depth, a3(w), skip);
 }
 
 // Primary rays of sample `params.sample` into the child slots (slot 2i, flag set unless
@@ -60,7 +62,7 @@ fn wave_generate(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocatio
     if (i >= params.count) { return; }
     if (params.sample == 0u) { accum[i] = vec4<f32>(0.0); }
     let r = primary(i, params.sample);
-    slots[2u * i] = item(r.org, i, r.dir, 1u, vec3<f32>(1.0));
+    slots[2u * i] = item(r.org, i, r.dir, 1u, vec3<f32>(1.0), INVALID);
     scan[2u * i] = select(1u, 0u, masked(i));
     scan[2u * i + 1u] = 0u;
 }
@@ -71,12 +73,12 @@ fn wave_trace(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
     let i = flat_id(wid, lid, nwg);
     if (i >= params.count) { return; }
     let q = queue[i];
-    let sh = shade(Ray(v3(q.org), v3(q.dir), 0.0, inf(), INVALID), v3(q.weight), q.depth);
+    let sh = shade(Ray(v3(q.org), v3(q.dir), 0.0, inf(), q.skip), v3(q.weight), q.depth);
     contrib[i] = vec4<f32>(sh.color, 0.0);
     let t = sh.transmitted;
     let m = sh.mirror;
-    slots[2u * i] = item(t.org, q.pixel, t.dir, q.depth + 1u, t.w);
-    slots[2u * i + 1u] = item(m.org, q.pixel, m.dir, q.depth + 1u, m.w);
+    slots[2u * i] = item(t.org, q.pixel, t.dir, q.depth + 1u, t.w, t.skip);
+    slots[2u * i + 1u] = item(m.org, q.pixel, m.dir, q.depth + 1u, m.w, m.skip);
     scan[2u * i] = select(0u, 1u, t.ok);
     scan[2u * i + 1u] = select(0u, 1u, m.ok);
 }

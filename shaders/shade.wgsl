@@ -87,18 +87,76 @@ fn color_at(m: Material, p: vec3<f32>) -> vec3<f32> {
     return select(v3(m.color2), v3(m.color), s < 1.0);
 }
 
-struct Child { ok: bool, org: vec3<f32>, dir: vec3<f32>, w: vec3<f32> }
+// ---- Secondary-ray origins (src/precision.rs, `Tracer::surface` and `Tracer::leave`) ----
+
+// `OffsetMode` values in Params.offset_mode.
+const OFFSET_EPSILON: u32 = 0u;
+const OFFSET_ROBUST: u32 = 1u;
+
+// `offset_ray_origin` (Wächter & Binder): 256 ULPs along n per coordinate, or 2^-16 · scale
+// for coordinates below scale / 32.
+fn offset_ray_origin(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    let scale = params.scale;
+    var out = p;
+    for (var a = 0u; a < 3u; a++) {
+        if (abs(p[a]) < scale / 32.0) {
+            out[a] = p[a] + (scale / 65536.0) * n[a];
+        } else {
+            // Adding to the bit pattern moves away from zero for either sign of p.
+            var of_i = i32(256.0 * n[a]);
+            if (p[a] < 0.0) { of_i = -of_i; }
+            out[a] = bitcast<f32>(bitcast<i32>(p[a]) + of_i);
+        }
+    }
+    return out;
+}
+
+// `PrimitiveSet::hit_point`: the hit recomputed on the surface, from the barycentrics for
+// triangles, projected onto the sphere for spheres, `org + t·dir` otherwise.
+fn hit_point(h: Hit, r: Ray) -> vec3<f32> {
+    let p = ray_at(r, h.t);
+    if (h.prim < params.n_tri) {
+        let t = triangles[h.prim];
+        return v3(t.v0) + h.u * v3(t.e1) + h.v * v3(t.e2);
+    }
+    let k = h.prim - params.n_tri;
+    if (h.prim < n_bounded() && k < params.n_sph) {
+        let c = v3(spheres[k].center);
+        let d = normalize_or_zero(p - c);
+        if (all(d == vec3<f32>(0.0))) { return p; }
+        return c + spheres[k].radius * d;
+    }
+    return p;
+}
+
+// `PrimitiveSet::is_flat`: triangles and planes.
+fn is_flat(i: u32) -> bool { return i < params.n_tri || i >= n_bounded(); }
+
+// Where a secondary ray leaving point p of primitive `prim` (outward normal n_geo) into the
+// side of the unit normal `side` starts, and the primitive it ignores.
+struct Origin { org: vec3<f32>, skip: u32 }
+
+fn leave(p: vec3<f32>, prim: u32, n_geo: vec3<f32>, side: vec3<f32>) -> Origin {
+    if (params.offset_mode == OFFSET_EPSILON) { return Origin(p + params.background.w * side, INVALID); }
+    // Exclude-prim: leaving a flat primitive, or a convex one to its outside, never meets it
+    // again; entering a curved one takes the robust offset.
+    if (params.offset_mode != OFFSET_ROBUST && (is_flat(prim) || dot(side, n_geo) > 0.0)) {
+        return Origin(p, prim);
+    }
+    return Origin(offset_ray_origin(p, side), INVALID);
+}
+
+struct Child { ok: bool, org: vec3<f32>, dir: vec3<f32>, w: vec3<f32>, skip: u32 }
 // One ray's work: its contribution and its children (transmitted, mirror), in the order the
 // CPU pushes them onto its stack of pending rays.
 struct Shaded { color: vec3<f32>, transmitted: Child, mirror: Child }
 
-fn child(p: vec3<f32>, n: vec3<f32>, side: f32, dir: vec3<f32>, w: vec3<f32>) -> Child {
-    let eps = params.background.w;
-    return Child(max(w.x, max(w.y, w.z)) >= MIN_WEIGHT, p + side * eps * n, dir, w);
+fn child(o: Origin, dir: vec3<f32>, w: vec3<f32>) -> Child {
+    return Child(max(w.x, max(w.y, w.z)) >= MIN_WEIGHT, o.org, dir, w, o.skip);
 }
 
 fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
-    let none = Child(false, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    let none = Child(false, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), INVALID);
     var out = Shaded(vec3<f32>(0.0), none, none);
     var st = Stats(0u, 0u, 0u);
     let hit = closest_hit(r, &st);
@@ -108,7 +166,9 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
     }
     let m = materials[prim_material[hit.prim]];
     let eps = params.background.w;
-    let p = ray_at(r, hit.t);
+    // The fixed epsilon keeps `org + t·dir`; the other modes start on the surface.
+    var p = ray_at(r, hit.t);
+    if (params.offset_mode != OFFSET_EPSILON) { p = hit_point(hit, r); }
     let n_geo = prim_normal(hit.prim, p);
     let entering = dot(n_geo, r.dir) < 0.0;
     let n = select(-n_geo, n_geo, entering);
@@ -117,12 +177,12 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
     let local_weight = 1.0 - m.reflectivity - m.transparency;
     if (local_weight > 0.0) {
         var local = m.ambient * base;
-        let above = p + eps * n;
+        let above = leave(p, hit.prim, n_geo, n);
         for (var k = 0u; k < params.n_lights; k++) {
             let light = lights[k];
-            let to_light = v3(light.position) - above;
+            let to_light = v3(light.position) - above.org;
             let d = length(to_light);
-            let shadow = Ray(above, to_light / d, 0.0, d, INVALID);
+            let shadow = Ray(above.org, to_light / d, 0.0, d, above.skip);
             if (d > 0.0 && !occluded(shadow, &st)) {
                 local += phong(m, base, p, n, -r.dir, light);
             }
@@ -133,21 +193,22 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
     var mirror = m.reflectivity;
     if (m.transparency > 0.0) {
         if (params.refract == 0u) {
-            out.transmitted = child(p, n, -1.0, r.dir, weight * m.transparency);
+            out.transmitted = child(leave(p, hit.prim, n_geo, -n), r.dir, weight * m.transparency);
         } else {
             let eta = select(m.ior, 1.0 / m.ior, entering);
             let t = refract_dir(r.dir, n, eta);
             if (t.w > 0.0) {
                 let f = schlick(-dot(r.dir, n), eta);
                 mirror += m.transparency * f;
-                out.transmitted = child(p, n, -1.0, t.xyz, weight * (m.transparency * (1.0 - f)));
+                let w = weight * (m.transparency * (1.0 - f));
+                out.transmitted = child(leave(p, hit.prim, n_geo, -n), t.xyz, w);
             } else {
                 mirror += m.transparency;
             }
         }
     }
     if (mirror > 0.0) {
-        out.mirror = child(p, n, 1.0, reflect_dir(r.dir, n), weight * mirror);
+        out.mirror = child(leave(p, hit.prim, n_geo, n), reflect_dir(r.dir, n), weight * mirror);
     }
     return out;
 }

@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats};
 use crate::gpu::{self, Gpu, GpuOptions, GpuResult};
-use crate::precision::{Intersector, OffsetMode};
+use crate::precision::Intersector;
 use crate::render::{GpuPathRequest, RenderOptions};
 use crate::scene::Committed;
 use std::sync::Mutex;
@@ -220,7 +220,7 @@ impl Context {
         opts.validate()?;
         self.job(
             frame,
-            gpu_lacks(opts.intersector, opts.offset_mode),
+            gpu_lacks(opts.intersector),
             |g, frame, choices| {
                 let (traversal, why) = dispatch::choose_gpu_traversal(scene, opts.traversal);
                 choices.note(
@@ -310,12 +310,12 @@ impl Context {
 
     /// Refuses a query this context would refuse when it runs (see `refusal`).
     pub fn check_query(&self, q: &QueryOptions) -> Result<()> {
-        self.refusal(gpu_lacks_query(q)).map_or(Ok(()), Err)
+        self.refusal(gpu_lacks(q.intersector)).map_or(Ok(()), Err)
     }
 
     /// Refuses a render this context would refuse when it runs (see `refusal`).
     pub fn check_render(&self, opts: &RenderOptions) -> Result<()> {
-        self.refusal(gpu_lacks(opts.intersector, opts.offset_mode))
+        self.refusal(gpu_lacks(opts.intersector))
             .map_or(Ok(()), Err)
     }
 
@@ -332,7 +332,7 @@ impl Context {
         check_exclusions(rays, exclude)?;
         self.job(
             out,
-            gpu_lacks_query(q),
+            gpu_lacks(q.intersector),
             |g, out, choices| {
                 let how = gpu_query_traversal(scene, q, choices);
                 T::gpu(g, scene, (rays, exclude), out, how, q.short_stack_size)
@@ -439,21 +439,11 @@ impl AutoChoices {
     }
 }
 
-/// Why the GPU kernels cannot run a job with these precision modes (`None`: they can). They
-/// implement Möller–Trumbore and the fixed epsilon offset only.
-fn gpu_lacks(intersector: Intersector, offset: OffsetMode) -> Option<&'static str> {
-    if intersector != Intersector::MollerTrumbore {
-        Some("the GPU kernels test triangles with Möller–Trumbore only (no watertight test)")
-    } else if offset != OffsetMode::Epsilon {
-        Some("the GPU kernels offset secondary rays by the fixed epsilon only")
-    } else {
-        None
-    }
-}
-
-/// What the GPU kernels lack for a query, if anything (see [`gpu_lacks`]).
-fn gpu_lacks_query(q: &QueryOptions) -> Option<&'static str> {
-    gpu_lacks(q.intersector, OffsetMode::Epsilon)
+/// Why the GPU kernels cannot run a job with this ray–triangle test (`None`: they can). They
+/// implement Möller–Trumbore only (the watertight test's exact redo of edge cases needs f64).
+fn gpu_lacks(intersector: Intersector) -> Option<&'static str> {
+    (intersector != Intersector::MollerTrumbore)
+        .then_some("the GPU kernels test triangles with Möller–Trumbore only (no watertight test)")
 }
 
 /// One excluded primitive per ray, when there are any.

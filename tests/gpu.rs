@@ -12,8 +12,9 @@ use rt2::error::Rt2Status;
 use rt2::frame::Frame;
 use rt2::geometry::{Hit, PrimIndex, Ray};
 use rt2::gpu::GpuOptions;
+use rt2::precision::OffsetMode;
 use rt2::rayset;
-use rt2::render::{GpuPathRequest, RenderOptions};
+use rt2::render::{GpuPathRequest, RenderOptions, Transparency};
 use rt2::scene::{builtin, loaders, Committed, Material, PointLight, Scene, Shape};
 
 mod support;
@@ -388,12 +389,23 @@ fn render(
 }
 
 fn check_scene(g: &Context, name: &str, w: u32, h: u32, traversals: &[Traversal]) {
+    check_scene_with(g, name, (w, h), traversals, RenderOptions::default());
+}
+
+/// [`check_scene`] with `opts` (its depth: the scene's).
+fn check_scene_with(
+    g: &Context,
+    name: &str,
+    (w, h): (u32, u32),
+    traversals: &[Traversal],
+    opts: RenderOptions,
+) {
     let mut b = builtin::by_name(name).unwrap();
     let mut scene = std::mem::take(&mut b.scene);
     scene.commit().unwrap();
     let base = RenderOptions {
         max_depth: b.max_depth,
-        ..RenderOptions::default()
+        ..opts
     };
     let want = render(&cpu(), &mut scene, &b, &base, w, h);
     for &t in traversals {
@@ -427,6 +439,26 @@ fn images_match_the_cpu_on_the_builtin_scenes() {
     };
     for name in ["default", "spheres2", "spheres3"] {
         check_scene(&g, name, 96, 64, &Traversal::ALL);
+    }
+}
+
+/// The robust and exclude-prim offsets of secondary rays on the GPU, with straight and refracted
+/// transparency (refraction into the glass sphere takes the robust offset under exclude-prim):
+/// the CPU's images, both render paths.
+#[test]
+fn offset_modes_match_the_cpu() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    for offset_mode in [OffsetMode::Robust, OffsetMode::ExcludePrim] {
+        for transparency in [Transparency::Straight, Transparency::Refract] {
+            let opts = RenderOptions {
+                offset_mode,
+                transparency,
+                ..RenderOptions::default()
+            };
+            check_scene_with(&g, "default", (96, 64), &[Traversal::Standard], opts);
+        }
     }
 }
 

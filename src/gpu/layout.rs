@@ -131,7 +131,8 @@ pub struct GpuItem {
     pub dir: [f32; 3],
     pub depth: u32,
     pub weight: [f32; 3],
-    pub pad: u32,
+    /// The primitive the ray ignores (`OffsetMode::ExcludePrim`; `INVALID` for none).
+    pub skip: u32,
 }
 
 /// The one uniform block of the traversal kernels (queries and renders): scene sizes, the
@@ -178,8 +179,14 @@ pub struct GpuParams {
     pub rope_bits: u32,
     /// 1 when a query's rays each ignore a primitive (its `excludes` buffer).
     pub excluding: u32,
-    // A scalar, not an array: uniform arrays need a 16-byte stride.
+    /// A render's `OffsetMode` (0 epsilon, 1 robust, 2 exclude-prim).
+    pub offset_mode: u32,
+    /// The scene diagonal, for the robust offset near the origin (`Tracer::scale`).
+    pub scale: f32,
+    // Scalars, not an array: uniform arrays need a 16-byte stride.
+    pub pad1: u32,
     pub pad2: u32,
+    pub pad3: u32,
 }
 
 /// Uniform block of the prefix-sum kernels.
@@ -266,7 +273,7 @@ mod tests {
         layout!("RayIn", GpuRay, [org, tmin, dir, tmax]);
         layout!("HitOut", GpuHit, [t, u, v, prim]);
         layout!("StatsOut", GpuStats, [nodes, leaves, prims, pad]);
-        layout!("Item", GpuItem, [org, pixel, dir, depth, weight, pad]);
+        layout!("Item", GpuItem, [org, pixel, dir, depth, weight, skip]);
         layout!(
             "Params",
             GpuParams,
@@ -297,7 +304,11 @@ mod tests {
                 has_mask,
                 rope_bits,
                 excluding,
-                pad2
+                offset_mode,
+                scale,
+                pad1,
+                pad2,
+                pad3
             ]
         );
     }

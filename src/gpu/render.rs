@@ -16,6 +16,7 @@ use super::{GpuError, GpuResult};
 use crate::camera::Camera;
 use crate::cpu::traverse::Traversal;
 use crate::frame::Frame;
+use crate::precision::OffsetMode;
 use crate::render::{RenderOptions, Transparency};
 use crate::scene::Committed;
 
@@ -71,6 +72,12 @@ pub(crate) fn render(
         samples: opts.samples,
         max_depth: opts.max_depth,
         refract: (opts.transparency == Transparency::Refract) as u32,
+        offset_mode: match opts.offset_mode {
+            OffsetMode::Epsilon => 0,
+            OffsetMode::Robust => 1,
+            OffsetMode::ExcludePrim => 2,
+        },
+        scale: scene.scale(),
         short_stack: opts.short_stack_size as u32,
         ..GpuParams::default()
     };

@@ -16,7 +16,7 @@ use rt2::cpu::query::QueryMode;
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
 use rt2::error::Result;
-use rt2::precision::{Intersector, OffsetMode};
+use rt2::precision::Intersector;
 use std::fmt::Write as _;
 use std::time::Instant;
 
@@ -26,7 +26,7 @@ pub(super) enum Engine {
     /// The CPU backend in one of its query modes. Packets and streams follow the standard
     /// traversal's order, with either intersector.
     Cpu(QueryMode),
-    /// The GPU backend: Möller–Trumbore only, and renders with the fixed epsilon offset only.
+    /// The GPU backend: Möller–Trumbore only.
     Gpu,
 }
 
@@ -59,16 +59,6 @@ impl Engine {
             Engine::Gpu => Traversal::ALL
                 .map(|t| (t, Intersector::MollerTrumbore))
                 .to_vec(),
-        }
-    }
-
-    /// The offset modes of this engine's renders: the GPU kernels offset secondary rays by the
-    /// fixed epsilon only. (The secondary-ray points take every mode on every engine: their
-    /// origins are offset on the host, and the excluded primitives go with the query.)
-    fn render_offsets(self) -> &'static [OffsetMode] {
-        match self {
-            Engine::Cpu(_) => &OffsetMode::ALL,
-            Engine::Gpu => &[OffsetMode::Epsilon],
         }
     }
 
