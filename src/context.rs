@@ -335,7 +335,7 @@ impl Context {
             gpu_lacks(q.intersector),
             |g, out, choices| {
                 let how = gpu_query_traversal(scene, q, choices);
-                T::gpu(g, scene, (rays, exclude), out, how, q.short_stack_size)
+                T::GPU(g, scene, (rays, exclude), out, how, q.short_stack_size)
             },
             |out, choices| {
                 let (how, opts) = self.query_setup(scene, q, choices);
@@ -366,43 +366,28 @@ impl Context {
     }
 }
 
+/// A GPU query answering a batch of rays (with their exclusions) on a context's GPU.
+type GpuFn<T> = fn(
+    &Gpu,
+    &Committed,
+    (&[Ray], Option<&[PrimIndex]>),
+    &mut [T],
+    Traversal,
+    usize,
+) -> GpuResult<TraversalStats>;
+
 /// A [`RayAnswer`] the GPU kernels compute too, so that [`Context`] dispatches both kinds of
 /// query with one path.
 trait GpuAnswer: RayAnswer {
-    fn gpu(
-        g: &Gpu,
-        scene: &Committed,
-        rays: (&[Ray], Option<&[PrimIndex]>),
-        out: &mut [Self],
-        how: Traversal,
-        short_stack: usize,
-    ) -> GpuResult<TraversalStats>;
+    const GPU: GpuFn<Self>;
 }
 
 impl GpuAnswer for Hit {
-    fn gpu(
-        g: &Gpu,
-        scene: &Committed,
-        rays: (&[Ray], Option<&[PrimIndex]>),
-        out: &mut [Self],
-        how: Traversal,
-        short_stack: usize,
-    ) -> GpuResult<TraversalStats> {
-        gpu::intersect(g, scene, rays, out, how, short_stack)
-    }
+    const GPU: GpuFn<Self> = gpu::intersect;
 }
 
 impl GpuAnswer for bool {
-    fn gpu(
-        g: &Gpu,
-        scene: &Committed,
-        rays: (&[Ray], Option<&[PrimIndex]>),
-        out: &mut [Self],
-        how: Traversal,
-        short_stack: usize,
-    ) -> GpuResult<TraversalStats> {
-        gpu::occluded(g, scene, rays, out, how, short_stack)
-    }
+    const GPU: GpuFn<Self> = gpu::occluded;
 }
 
 fn gpu_query_traversal(

@@ -5,9 +5,11 @@
 
 use super::batch::{octant, Excluded, RayTests};
 use super::simd::Width;
+use super::stream::StreamMemory;
 use super::traverse::{self, Traversal, TraverseOptions};
 use super::{packet, stream};
-use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats};
+use crate::geometry::{Hit, PrimIndex, PrimitiveSet, Ray, TraversalStats};
+use crate::kdtree::KdTree;
 use crate::scene::Committed;
 use rayon::prelude::*;
 
@@ -52,103 +54,37 @@ impl QueryMode {
     }
 }
 
+/// A single-ray traversal answering one ray (it ignores the primitive `opts.exclude`).
+pub type SingleFn<T> =
+    fn(&KdTree, &PrimitiveSet, &Ray, Traversal, &TraverseOptions, &mut TraversalStats) -> T;
+
+/// A packet or stream traversal answering a slice of rays on the calling thread, at a lane
+/// width; `S` is what it reports.
+pub type BatchFn<T, S> = fn(&KdTree, &PrimitiveSet, &[Ray], RayTests, &mut [T], Width) -> S;
+
 /// What a query answers for each ray: its closest hit ([`Hit`]) or whether anything lies in
-/// its window (`bool`, shadow rays). Each mode's path is written once for both.
-pub trait RayAnswer: Copy + Send + Sync {
+/// its window (`bool`, shadow rays), and the traversals of each mode that compute it, so that
+/// each mode's path is written once for both.
+pub trait RayAnswer: Copy + Send + Sync + 'static {
     /// The answer of a ray that finds nothing.
     const MISS: Self;
-    /// One ray with the single-ray traversal `how`; it ignores the primitive `opts.exclude`.
-    fn single(
-        scene: &Committed,
-        ray: &Ray,
-        how: Traversal,
-        opts: &TraverseOptions,
-        stats: &mut TraversalStats,
-    ) -> Self;
-    /// Rays in packets of `width` lanes, on the calling thread.
-    fn packets(
-        scene: &Committed,
-        rays: &[Ray],
-        tests: RayTests,
-        out: &mut [Self],
-        width: Width,
-    ) -> TraversalStats;
-    /// Rays as one n-ray stream of `width` lanes, on the calling thread.
-    fn stream(
-        scene: &Committed,
-        rays: &[Ray],
-        tests: RayTests,
-        out: &mut [Self],
-        width: Width,
-    ) -> TraversalStats;
+    const SINGLE: SingleFn<Self>;
+    const PACKETS: BatchFn<Self, TraversalStats>;
+    const STREAM: BatchFn<Self, (TraversalStats, StreamMemory)>;
 }
 
 impl RayAnswer for Hit {
     const MISS: Self = Hit::MISS;
-
-    fn single(
-        scene: &Committed,
-        ray: &Ray,
-        how: Traversal,
-        opts: &TraverseOptions,
-        stats: &mut TraversalStats,
-    ) -> Self {
-        traverse::intersect(&scene.tree, &scene.prims, ray, how, opts, stats)
-    }
-
-    fn packets(
-        scene: &Committed,
-        rays: &[Ray],
-        tests: RayTests,
-        out: &mut [Self],
-        width: Width,
-    ) -> TraversalStats {
-        packet::intersect(&scene.tree, &scene.prims, rays, tests, out, width)
-    }
-
-    fn stream(
-        scene: &Committed,
-        rays: &[Ray],
-        tests: RayTests,
-        out: &mut [Self],
-        width: Width,
-    ) -> TraversalStats {
-        stream::intersect(&scene.tree, &scene.prims, rays, tests, out, width).0
-    }
+    const SINGLE: SingleFn<Self> = traverse::intersect;
+    const PACKETS: BatchFn<Self, TraversalStats> = packet::intersect;
+    const STREAM: BatchFn<Self, (TraversalStats, StreamMemory)> = stream::intersect;
 }
 
 impl RayAnswer for bool {
     const MISS: Self = false;
-
-    fn single(
-        scene: &Committed,
-        ray: &Ray,
-        how: Traversal,
-        opts: &TraverseOptions,
-        stats: &mut TraversalStats,
-    ) -> Self {
-        traverse::occluded(&scene.tree, &scene.prims, ray, how, opts, stats)
-    }
-
-    fn packets(
-        scene: &Committed,
-        rays: &[Ray],
-        tests: RayTests,
-        out: &mut [Self],
-        width: Width,
-    ) -> TraversalStats {
-        packet::occluded(&scene.tree, &scene.prims, rays, tests, out, width)
-    }
-
-    fn stream(
-        scene: &Committed,
-        rays: &[Ray],
-        tests: RayTests,
-        out: &mut [Self],
-        width: Width,
-    ) -> TraversalStats {
-        stream::occluded(&scene.tree, &scene.prims, rays, tests, out, width).0
-    }
+    const SINGLE: SingleFn<Self> = traverse::occluded;
+    const PACKETS: BatchFn<Self, TraversalStats> = packet::occluded;
+    const STREAM: BatchFn<Self, (TraversalStats, StreamMemory)> = stream::occluded;
 }
 
 /// Answers `rays` into `out` (same length): closest hits or occlusion ([`RayAnswer`]). Ray `i`
@@ -176,24 +112,19 @@ pub fn trace<T: RayAnswer>(
         }
     };
     let rays = (rays, exclude);
-    let intersector = opts.intersector;
+    let (tree, prims, intersector) = (&scene.tree, &scene.prims, opts.intersector);
     match mode {
         QueryMode::Single => chunked(rays, out, CHUNK, |r, e, o| {
             serial((r, e), o, |ray, exclude, stats| {
-                T::single(
-                    scene,
-                    ray,
-                    how,
-                    &TraverseOptions { exclude, ..*opts },
-                    stats,
-                )
+                let opts = TraverseOptions { exclude, ..*opts };
+                T::SINGLE(tree, prims, ray, how, &opts, stats)
             })
         }),
         QueryMode::Packet => chunked(rays, out, CHUNK, |r, e, o| {
-            T::packets(scene, r, RayTests::new(intersector, e), o, width)
+            T::PACKETS(tree, prims, r, RayTests::new(intersector, e), o, width)
         }),
         QueryMode::Stream => streamed(rays, out, |r, e, o| {
-            T::stream(scene, r, RayTests::new(intersector, e), o, width)
+            T::STREAM(tree, prims, r, RayTests::new(intersector, e), o, width).0
         }),
     }
 }
