@@ -32,6 +32,7 @@
 #include <time.h>
 
 #include "rt2.h"
+#include "vec3.h"
 
 #define W 256
 #define H 144
@@ -57,15 +58,6 @@ static void *alloc(size_t count, size_t size) {
     return p;
 }
 
-typedef struct { float x, y, z; } v3;
-static v3 v(float x, float y, float z) { v3 r = {x, y, z}; return r; }
-static v3 add(v3 a, v3 b) { return v(a.x + b.x, a.y + b.y, a.z + b.z); }
-static v3 sub(v3 a, v3 b) { return v(a.x - b.x, a.y - b.y, a.z - b.z); }
-static v3 mul(v3 a, float s) { return v(a.x * s, a.y * s, a.z * s); }
-static float dot(v3 a, v3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-static v3 cross(v3 a, v3 b) { return v(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x); }
-static v3 norm(v3 a) { return mul(a, 1.0f / sqrtf(dot(a, a))); }
-static v3 at(const float *p) { return v(p[0], p[1], p[2]); }
 
 static rt2_ray ray(v3 o, v3 d, float tmax) {
     rt2_ray r = {{o.x, o.y, o.z}, 0.0f, {d.x, d.y, d.z}, tmax};

@@ -12,6 +12,7 @@
 #include <stdlib.h>
 
 #include "rt2.h"
+#include "vec3.h"
 
 #define W 640
 #define H 360
@@ -27,14 +28,6 @@ static void check(rt2_status s, const char *what) {
     }
 }
 
-typedef struct { float x, y, z; } v3;
-static v3 v(float x, float y, float z) { v3 r = {x, y, z}; return r; }
-static v3 add(v3 a, v3 b) { return v(a.x + b.x, a.y + b.y, a.z + b.z); }
-static v3 sub(v3 a, v3 b) { return v(a.x - b.x, a.y - b.y, a.z - b.z); }
-static v3 mul(v3 a, float s) { return v(a.x * s, a.y * s, a.z * s); }
-static float dot(v3 a, v3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-static v3 cross(v3 a, v3 b) { return v(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x); }
-static v3 norm(v3 a) { return mul(a, 1.0f / sqrtf(dot(a, a))); }
 
 typedef struct { v3 center; float radius; rt2_material m; uint32_t material_id; } sphere;
 

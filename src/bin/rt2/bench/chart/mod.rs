@@ -238,7 +238,7 @@ pub(super) fn chart(a: &Args) -> Result<String> {
          (triangles) and **stream** = `QueryMode::Stream` (squares), which follow the standard \
          traversal's order with either intersector (both tested on 16 rays or triangles at \
          once in the leaves, where the CPU has AVX-512); **gpu** = the GPU backend (diamonds), every traversal \
-         kernel, Möller–Trumbore and the epsilon offset only (all its kernels have); its \
+         kernel, Möller–Trumbore only (the one its kernels have), every offset mode; its \
          Möller–Trumbore rounds differently from the CPU's near edges (Vulkan lets a division \
          be off by 2.5 ULP and a shader compiler fuse multiply-adds), so its leak count on the \
          stress set differs a little from the CPU's. GPU: {}. Colour: the ray set; filled: \
