@@ -3,7 +3,9 @@
  *   1. one camera ray per pixel -> rt2_intersect (closest hits);
  *   2. from every hit, S rays over the hemisphere around the surface normal (cosine-weighted)
  *      -> rt2_occluded, each ray ignoring the primitive it leaves (rt2_query_options.exclude
- *      = the camera hit): no epsilon offset, and no ray hits the surface it starts on.
+ *      = the camera hit): no epsilon offset, and no ray hits the triangle it starts on (a
+ *      coplanar neighbour still can, near a shared edge: the exclude-prim limit in README.md;
+ *      the ground here is one triangle).
  * Both run in each query mode (SINGLE: one ray at a time; PACKET: 4/8/16-ray packets; STREAM:
  * the n-ray traversal, all rays of an octant at once), which must agree bit for bit; the
  * program prints each mode's speed on this scene.
