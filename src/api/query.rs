@@ -175,7 +175,8 @@ const QUERY_CHUNK: usize = 1 << 20;
 
 /// Shared prologue of both queries: checks, ropes on demand, the committed scene; then the
 /// rays in steps of [`QUERY_CHUNK`]. It takes the C call's arguments as they are, hence their
-/// number.
+/// number; `between` runs where another thread's commit could come between reading the
+/// exclusions and tracing (`rt2_scene::prepared`), a no-op but in the tests.
 #[allow(clippy::too_many_arguments)]
 unsafe fn run_query<T>(
     ctx: *const rt2_context,
@@ -192,6 +193,7 @@ unsafe fn run_query<T>(
         &mut [T],
         &QueryOptions,
     ) -> crate::error::Result<TraversalStats>,
+    between: impl Fn(),
 ) -> Rt2Status {
     guard(|| {
         let c = handle(ctx, "ctx")?;
@@ -211,9 +213,10 @@ unsafe fn run_query<T>(
         };
         // `query_options` validated the options (defaults are valid): refused ones never reach
         // the ropes or exact vertices built here, so a failed call leaves the scene as it was.
-        let guard = s.prepared(
+        let guard = s.prepared_with(
             q.traversal.is_some_and(|t| t.needs_ropes()),
             q.intersector == crate::precision::Intersector::Watertight,
+            between,
         )?;
         let committed = guard.committed()?;
         let out = slice_mut(out, count, out_name)?;
@@ -307,6 +310,7 @@ pub unsafe extern "C" fn rt2_intersect(
             }
             Ok(st)
         },
+        || {},
     )
 }
 
@@ -344,5 +348,90 @@ pub unsafe extern "C" fn rt2_occluded(
             }
             Ok(st)
         },
+        || {},
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::api::{
+        rt2_context_create, rt2_context_destroy, rt2_last_error_message, rt2_scene_add_mesh,
+        rt2_scene_commit, rt2_scene_create, rt2_scene_destroy, Rt2Intersector, RT2_INVALID_ID,
+    };
+    use std::cell::Cell;
+    use std::ffi::CStr;
+    use std::ptr::{null, null_mut};
+
+    /// A commit by another thread after the exclusions were read (here while a watertight
+    /// query builds its exact corners) may renumber the primitives: the query fails with
+    /// INVALID_OPERATION and writes nothing, rather than exclude by the old numbering.
+    #[test]
+    fn a_commit_after_the_exclusions_were_read_fails_the_query() {
+        unsafe {
+            let mut ctx = null_mut();
+            assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
+            let mut scene = null_mut();
+            assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+            let p = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+            let st = rt2_scene_add_mesh(
+                scene,
+                p.as_ptr(),
+                3,
+                [0u32, 1, 2].as_ptr(),
+                1,
+                0,
+                null_mut(),
+            );
+            assert_eq!(st, Rt2Status::Ok);
+            assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+            let ray = rt2_ray {
+                org: [0.2, 0.2, 1.0],
+                tmin: 0.0,
+                dir: [0.0, 0.0, -1.0],
+                tmax: f32::INFINITY,
+            };
+            let triangle = rt2_hit {
+                t: 0.0,
+                u: 0.0,
+                v: 0.0,
+                object: 0,
+                prim: 0,
+            };
+            let mut opt = rt2_query_options_default();
+            opt.intersector = Rt2Intersector::Watertight as u32;
+            opt.exclude = &triangle;
+            let untouched = rt2_hit {
+                t: -1.0,
+                ..triangle
+            };
+            let mut hit = untouched;
+            let (s, committed) = (&*scene, Cell::new(false));
+            let st = run_query(
+                ctx,
+                scene,
+                &ray,
+                1,
+                (&mut hit as *mut rt2_hit, "hits"),
+                &opt,
+                null_mut(),
+                |_, _, _, _, _| Ok(TraversalStats::default()),
+                || {
+                    if !committed.replace(true) {
+                        s.write().commit().unwrap();
+                    }
+                },
+            );
+            assert!(committed.get(), "the commit did not happen");
+            let message = CStr::from_ptr(rt2_last_error_message()).to_string_lossy();
+            assert_eq!(st, Rt2Status::InvalidOperation, "{message}");
+            assert!(message.contains("committed again"), "{message}");
+            assert_eq!((hit.t, hit.object), (untouched.t, untouched.object));
+            // Asked again, the query runs: the one triangle excluded, a miss.
+            let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, &opt, null_mut());
+            assert_eq!((st, hit.object), (Rt2Status::Ok, RT2_INVALID_ID));
+            rt2_scene_destroy(scene);
+            rt2_context_destroy(ctx);
+        }
+    }
 }

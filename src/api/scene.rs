@@ -53,7 +53,7 @@ impl rt2_scene {
 
     /// [`rt2_scene::prepared`], calling `between` each time it has built what was missing and
     /// holds no lock: where the tests commit, as another thread may.
-    fn prepared_with(
+    pub(crate) fn prepared_with(
         &self,
         ropes: bool,
         watertight: bool,
