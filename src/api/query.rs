@@ -355,36 +355,20 @@ pub unsafe extern "C" fn rt2_occluded(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::api::{
-        rt2_context_create, rt2_context_destroy, rt2_last_error_message, rt2_scene_add_mesh,
-        rt2_scene_commit, rt2_scene_create, rt2_scene_destroy, Rt2Intersector, RT2_INVALID_ID,
-    };
+    use crate::api::scene::tests::{destroy, triangle_scene};
+    use crate::api::{rt2_last_error_message, Rt2Intersector, RT2_INVALID_ID};
     use std::cell::Cell;
     use std::ffi::CStr;
-    use std::ptr::{null, null_mut};
+    use std::ptr::null_mut;
 
     /// A commit by another thread after the exclusions were read (here while a watertight
     /// query builds its exact corners) may renumber the primitives: the query fails with
     /// INVALID_OPERATION and writes nothing, rather than exclude by the old numbering.
     #[test]
     fn a_commit_after_the_exclusions_were_read_fails_the_query() {
+        let made = triangle_scene();
+        let (ctx, scene) = made;
         unsafe {
-            let mut ctx = null_mut();
-            assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
-            let mut scene = null_mut();
-            assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
-            let p = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
-            let st = rt2_scene_add_mesh(
-                scene,
-                p.as_ptr(),
-                3,
-                [0u32, 1, 2].as_ptr(),
-                1,
-                0,
-                null_mut(),
-            );
-            assert_eq!(st, Rt2Status::Ok);
-            assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
             let ray = rt2_ray {
                 org: [0.2, 0.2, 1.0],
                 tmin: 0.0,
@@ -430,8 +414,7 @@ mod tests {
             // Asked again, the query runs: the one triangle excluded, a miss.
             let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, &opt, null_mut());
             assert_eq!((st, hit.object), (Rt2Status::Ok, RT2_INVALID_ID));
-            rt2_scene_destroy(scene);
-            rt2_context_destroy(ctx);
         }
+        destroy(made);
     }
 }

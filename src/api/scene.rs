@@ -478,20 +478,20 @@ pub unsafe extern "C" fn rt2_scene_stats(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::api::context::rt2_context_create;
     use std::cell::Cell;
     use std::ptr::{null, null_mut};
 
-    /// A committed scene of one triangle, through the C API.
-    fn triangle_scene() -> *mut rt2_scene {
+    /// A context and a committed scene of one triangle in the z = 0 plane, (0,0,0) (1,0,0)
+    /// (0,1,0), through the C API (for the tests of this module and `api::query`).
+    pub(crate) fn triangle_scene() -> (*mut rt2_context, *mut rt2_scene) {
         unsafe {
             let mut ctx = null_mut();
             assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
             let mut scene = null_mut();
             assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
-            crate::api::context::rt2_context_destroy(ctx);
             let p = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
             let st = rt2_scene_add_mesh(
                 scene,
@@ -504,7 +504,15 @@ mod tests {
             );
             assert_eq!(st, Rt2Status::Ok);
             assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
-            scene
+            (ctx, scene)
+        }
+    }
+
+    /// Destroys what [`triangle_scene`] made.
+    pub(crate) fn destroy((ctx, scene): (*mut rt2_context, *mut rt2_scene)) {
+        unsafe {
+            rt2_scene_destroy(scene);
+            crate::api::context::rt2_context_destroy(ctx);
         }
     }
 
@@ -512,8 +520,8 @@ mod tests {
     /// them): the scene handed out still has both, built again.
     #[test]
     fn what_a_commit_drops_before_the_job_reads_is_built_again() {
-        let scene = triangle_scene();
-        let s = unsafe { &*scene };
+        let made = triangle_scene();
+        let s = unsafe { &*made.1 };
         let commits = Cell::new(0);
         let commit_twice = || {
             if commits.get() < 2 {
@@ -531,14 +539,14 @@ mod tests {
             );
         }
         assert_eq!(commits.get(), 2, "the commits did not happen");
-        unsafe { rt2_scene_destroy(scene) };
+        destroy(made);
     }
 
     /// Commits after every build: the job gives up with INVALID_OPERATION, and the scene works.
     #[test]
     fn endless_commits_make_the_job_give_up() {
-        let scene = triangle_scene();
-        let s = unsafe { &*scene };
+        let made = triangle_scene();
+        let s = unsafe { &*made.1 };
         let e = s
             .prepared_with(false, true, || s.write().commit().unwrap())
             .map(|_| ())
@@ -546,6 +554,6 @@ mod tests {
         assert_eq!(e.status, Rt2Status::InvalidOperation, "{}", e.message);
         assert!(e.message.contains("run it again"), "{}", e.message);
         assert!(s.prepared(false, true).is_ok());
-        unsafe { rt2_scene_destroy(scene) };
+        destroy(made);
     }
 }
