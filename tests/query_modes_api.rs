@@ -28,6 +28,46 @@ unsafe fn sphere_scene(
     (ctx, scene, ids)
 }
 
+/// `rt2_intersect` of every ray of `rays` into `hits` (as long), no statistics.
+unsafe fn intersect_all(
+    ctx: *const rt2_context,
+    scene: *const rt2_scene,
+    rays: &[rt2_ray],
+    hits: &mut [rt2_hit],
+    opt: *const rt2_query_options,
+) -> Rt2Status {
+    assert_eq!(rays.len(), hits.len());
+    rt2_intersect(
+        ctx,
+        scene,
+        rays.as_ptr(),
+        rays.len(),
+        hits.as_mut_ptr(),
+        opt,
+        null_mut(),
+    )
+}
+
+/// `rt2_occluded` of every ray of `rays` into `occ` (as long), no statistics.
+unsafe fn occluded_all(
+    ctx: *const rt2_context,
+    scene: *const rt2_scene,
+    rays: &[rt2_ray],
+    occ: &mut [u8],
+    opt: *const rt2_query_options,
+) -> Rt2Status {
+    assert_eq!(rays.len(), occ.len());
+    rt2_occluded(
+        ctx,
+        scene,
+        rays.as_ptr(),
+        rays.len(),
+        occ.as_mut_ptr(),
+        opt,
+        null_mut(),
+    )
+}
+
 #[test]
 fn every_query_mode_gives_the_same_hits_and_bad_values_are_rejected() {
     unsafe {
@@ -72,26 +112,10 @@ fn every_query_mode_gives_the_same_hits_and_bad_values_are_rejected() {
                 };
                 rays.len()
             ];
-            let st = rt2_intersect(
-                ctx,
-                scene,
-                rays.as_ptr(),
-                rays.len(),
-                hits.as_mut_ptr(),
-                &opt,
-                null_mut(),
-            );
+            let st = intersect_all(ctx, scene, &rays, &mut hits, &opt);
             assert_eq!(st, Rt2Status::Ok);
             let mut occ = vec![2u8; rays.len()];
-            let st = rt2_occluded(
-                ctx,
-                scene,
-                rays.as_ptr(),
-                rays.len(),
-                occ.as_mut_ptr(),
-                &opt,
-                null_mut(),
-            );
+            let st = occluded_all(ctx, scene, &rays, &mut occ, &opt);
             assert_eq!(st, Rt2Status::Ok);
             for (h, o) in hits.iter().zip(&occ) {
                 assert_eq!(*o, (h.object != RT2_INVALID_ID) as u8);
@@ -435,15 +459,7 @@ fn excluded_primitives_are_ignored_in_every_mode() {
         };
         let run = |opt: &rt2_query_options| {
             let mut hits = vec![miss; rays.len()];
-            let st = rt2_intersect(
-                ctx,
-                scene,
-                rays.as_ptr(),
-                rays.len(),
-                hits.as_mut_ptr(),
-                opt,
-                null_mut(),
-            );
+            let st = intersect_all(ctx, scene, &rays, &mut hits, opt);
             (st, hits)
         };
         let (st, first) = run(&rt2_query_options_default());
@@ -517,15 +533,7 @@ fn excluded_primitives_are_ignored_in_every_mode() {
                 let short: Vec<rt2_ray> =
                     rays.iter().map(|r| rt2_ray { tmax: 10.5, ..*r }).collect();
                 let mut occ = vec![2u8; rays.len()];
-                let st = rt2_occluded(
-                    ctx,
-                    scene,
-                    short.as_ptr(),
-                    short.len(),
-                    occ.as_mut_ptr(),
-                    &opt,
-                    null_mut(),
-                );
+                let st = occluded_all(ctx, scene, &short, &mut occ, &opt);
                 assert_eq!(st, Rt2Status::Ok);
                 for (k, o) in occ.iter().enumerate() {
                     assert_eq!(*o, (k % 3 != 0) as u8, "{mode:?} {intersector:?} ray {k}");
@@ -540,15 +548,7 @@ fn excluded_primitives_are_ignored_in_every_mode() {
         let mut hits = first.clone();
         let mut opt = rt2_query_options_default();
         (opt.mode, opt.exclude) = (Rt2QueryMode::Stream as u32, hits.as_ptr());
-        let st = rt2_intersect(
-            ctx,
-            scene,
-            rays.as_ptr(),
-            rays.len(),
-            hits.as_mut_ptr(),
-            &opt,
-            null_mut(),
-        );
+        let st = intersect_all(ctx, scene, &rays, &mut hits, &opt);
         assert_eq!(st, Rt2Status::Ok);
         assert!(hits.iter().all(|h| h.object == 1 && h.t == 11.0));
 
