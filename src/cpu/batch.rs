@@ -10,7 +10,7 @@
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
 use super::simd::{
-    self, lanes_less, lanes_less_eq, prefetch, Isa, Kernel, LeafPrims, RayLanes, Width,
+    self, lanes_less, lanes_less_eq, prefetch, Isa, Kernel, PreparedLeaf, RayLanes, Width,
 };
 use super::traverse::{
     any_among, any_in_subtree, clip_lanes, closest_among, closest_in_subtree, scene_box, Entry,
@@ -97,7 +97,7 @@ pub(crate) trait Answer {
         &mut self,
         isa: Isa<N>,
         prims: &PrimitiveSet,
-        leaf: &LeafPrims<N>,
+        leaf: &PreparedLeaf<N>,
         i: usize,
         ray: &Ray,
         test: &RayTest,
@@ -154,7 +154,7 @@ impl Answer for Closest<'_> {
         &mut self,
         isa: Isa<N>,
         prims: &PrimitiveSet,
-        leaf: &LeafPrims<N>,
+        leaf: &PreparedLeaf<N>,
         i: usize,
         ray: &Ray,
         test: &RayTest,
@@ -164,10 +164,10 @@ impl Answer for Closest<'_> {
         // The blocks' triangles here; the rest are counted by the single-ray leaf test.
         stats.prim_tests += (leaf.count - leaf.others.len()) as u64;
         let hit = &mut self.0[i];
-        for b in &leaf.blocks {
+        for b in leaf.blocks {
             b.intersect(isa, ray, test, hit);
         }
-        closest_among(prims, ray, test, &leaf.others, hit, stats);
+        closest_among(prims, ray, test, leaf.others, hit, stats);
         // Strictly before the exit, as `traverse::common::Closest`.
         hit.t < t_exit
     }
@@ -261,7 +261,7 @@ impl Answer for AnyHit<'_> {
         &mut self,
         isa: Isa<N>,
         prims: &PrimitiveSet,
-        leaf: &LeafPrims<N>,
+        leaf: &PreparedLeaf<N>,
         i: usize,
         ray: &Ray,
         test: &RayTest,
@@ -271,7 +271,7 @@ impl Answer for AnyHit<'_> {
         // The blocks' triangles here; the rest are counted by the single-ray leaf test.
         stats.prim_tests += (leaf.count - leaf.others.len()) as u64;
         let found = leaf.blocks.iter().any(|b| b.occludes(isa, ray, test))
-            || any_among(prims, ray, test, &leaf.others, stats);
+            || any_among(prims, ray, test, leaf.others, stats);
         self.0[i] = found;
         found
     }
@@ -524,7 +524,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
     pub fn visit_leaf<const N: usize>(
         &mut self,
         isa: Isa<N>,
-        leaf: &LeafPrims<N>,
+        leaf: &PreparedLeaf<N>,
         i: u32,
         t_exit: f32,
     ) -> bool {

@@ -144,7 +144,7 @@ pub(crate) fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
             continue;
         }
         let list = tree.leaf_prims(n);
-        s.leaf.gather(
+        let leaf = s.leaf.gather(
             b.prims,
             list,
             live.count_ones() as usize,
@@ -154,7 +154,7 @@ pub(crate) fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
         while m != 0 {
             let l = m.trailing_zeros() as usize;
             m &= m - 1;
-            let done = b.visit_leaf(isa, &s.leaf, id[l], cur.t1[l]);
+            let done = b.visit_leaf(isa, &leaf, id[l], cur.t1[l]);
             if done {
                 dead |= 1 << l;
             }

@@ -397,41 +397,49 @@ impl<const N: usize> RayLanes<N> {
 /// single-ray speed on primary rays; incoherent rays were within noise).
 pub const GATHER_MIN_RAYS: usize = 3;
 
-/// A leaf's primitives prepared once per leaf visit for all the rays that reach it: triangles
-/// gathered into [`TriBlock`]s, the rest kept as indices for the single-ray leaf test
-/// (`traverse::closest_among`). Reused from leaf to leaf, so a traversal allocates nothing per
-/// node.
+/// Reused buffers for a leaf's primitives prepared once per leaf visit for all the rays that
+/// reach it (`gather`), so a traversal allocates nothing per node.
 #[derive(Default)]
 pub struct LeafPrims<const N: usize> {
-    pub blocks: Vec<TriBlock<N>>,
-    pub others: Vec<u32>,
+    blocks: Vec<TriBlock<N>>,
+    others: Vec<u32>,
+}
+
+/// A leaf prepared by [`LeafPrims::gather`]: triangles in [`TriBlock`]s, the rest as indices for
+/// the single-ray leaf test (`traverse::closest_among`).
+pub struct PreparedLeaf<'a, const N: usize> {
+    pub blocks: &'a [TriBlock<N>],
+    pub others: &'a [u32],
     /// Primitive tests one ray costs here (for the statistics).
     pub count: usize,
 }
 
 impl<const N: usize> LeafPrims<N> {
     /// Prepares the leaf `prims` for `rays` rays. Gathering costs about one triangle test per
-    /// triangle, so for fewer than [`GATHER_MIN_RAYS`] rays every primitive stays an index.
+    /// triangle, so for fewer than [`GATHER_MIN_RAYS`] rays every primitive stays an index, read
+    /// from the tree's own list (copying it was a library call per leaf visit).
     ///
     /// Lanes are written one by one into the reused blocks rather than built by
     /// [`TriBlock::from_prims`], which suits a block tested at once by one ray: these blocks
     /// are read by several rays well after the stores, and building them through
     /// `from_prims` (after splitting off the other kinds) made 8-ray packets slower.
     #[inline(always)]
-    pub fn gather(
-        &mut self,
+    pub fn gather<'a>(
+        &'a mut self,
         set: &PrimitiveSet,
-        prims: &[u32],
+        prims: &'a [u32],
         rays: usize,
         intersector: Intersector,
-    ) {
+    ) -> PreparedLeaf<'a, N> {
+        if rays < GATHER_MIN_RAYS {
+            return PreparedLeaf {
+                blocks: &[],
+                others: prims,
+                count: prims.len(),
+            };
+        }
         self.blocks.clear();
         self.others.clear();
-        self.count = prims.len();
-        if rays < GATHER_MIN_RAYS {
-            self.others.extend_from_slice(prims);
-            return;
-        }
         let mut lane = N;
         for &p in prims {
             if p as usize >= set.triangles.len() {
@@ -451,6 +459,11 @@ impl<const N: usize> LeafPrims<N> {
             }
             b.prim[lane] = p;
             lane += 1;
+        }
+        PreparedLeaf {
+            blocks: &self.blocks,
+            others: &self.others,
+            count: prims.len(),
         }
     }
 }
