@@ -965,6 +965,8 @@ enum rt2_status rt2_scene_set_build_options(rt2_scene *scene,
 
 /**
  * Builds the acceleration structure. Rendering needs a commit after the last edit.
+ * `RT2_STATUS_OUT_OF_MEMORY` when the placed primitives or the kd-tree cannot be allocated:
+ * the scene then keeps its last commit (or none) and its edits, and can be committed again.
  *
  * # Safety
  * `scene` is a live scene.

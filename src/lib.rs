@@ -14,6 +14,7 @@ pub mod cpu;
 pub mod dispatch;
 mod env;
 pub mod error;
+pub mod fallible;
 pub mod frame;
 pub mod geometry;
 pub mod gpu;

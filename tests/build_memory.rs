@@ -52,7 +52,9 @@ fn a_deep_midpoint_build_peaks_near_the_size_of_its_tree() {
         .build()
         .expect("a thread pool");
     let before = status_mib("VmRSS:");
-    let tree = pool.install(|| build(&set, &opts));
+    let tree = pool
+        .install(|| build(&set, &opts))
+        .expect("memory for the tree");
     let peak = status_mib("VmHWM:") - before;
     let tree_mib = (tree.nodes.len() * std::mem::size_of_val(&tree.nodes[0])
         + tree.prim_indices.len() * 4) as f64

@@ -14,7 +14,12 @@ use rt2::geometry::{
     Aabb, Ellipsoid, Hit, Plane, PrimKind, PrimitiveSet, Ray, RayTest, Sphere, TraversalStats,
     Triangle, INVALID,
 };
-use rt2::kdtree::{build, BuildOptions, Builder, KdTree, Layout, MAX_DEPTH_LIMIT};
+use rt2::kdtree::{self, BuildInput, BuildOptions, Builder, KdTree, Layout, MAX_DEPTH_LIMIT};
+
+/// The library's build: these tests' trees always fit in memory.
+fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
+    kdtree::build(input, opts).expect("memory for the tree")
+}
 use rt2::precision::Intersector;
 
 /// SplitMix64: deterministic, no dependency.
@@ -110,7 +115,7 @@ fn trees(prims: &PrimitiveSet) -> Vec<(String, KdTree)> {
                 ..BuildOptions::default()
             };
             let mut tree = build(prims, &opts);
-            tree.ensure_ropes();
+            tree.ensure_ropes().expect("memory for the ropes");
             out.push((format!("{builder:?}/{layout:?}"), tree));
         }
     }

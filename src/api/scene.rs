@@ -373,6 +373,8 @@ pub unsafe extern "C" fn rt2_scene_set_build_options(
 }
 
 /// Builds the acceleration structure. Rendering needs a commit after the last edit.
+/// `RT2_STATUS_OUT_OF_MEMORY` when the placed primitives or the kd-tree cannot be allocated:
+/// the scene then keeps its last commit (or none) and its edits, and can be committed again.
 ///
 /// # Safety
 /// `scene` is a live scene.

@@ -5,7 +5,8 @@
 use std::time::Instant;
 
 use super::split::Subtree;
-use super::{layout, midpoint, ropes, sah, stats, KdTree};
+use super::{layout, midpoint, sah, stats, KdTree};
+use crate::fallible::{self, Fallible};
 use crate::geometry::Aabb;
 
 /// What a builder needs to know of the primitives.
@@ -108,32 +109,36 @@ impl BuildOptions {
 /// The result depends only on `input` and `opts`, not on the number of threads of the rayon
 /// pool the call runs in: the builders write the node arrays in depth-first order whichever
 /// parts ran in parallel (see `split::Subtree`).
-pub fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
+///
+/// Fails, rather than aborting the process, when the memory for the tree or its build cannot
+/// be allocated: every allocation that grows with the input goes through [`crate::fallible`].
+pub fn build(input: &dyn BuildInput, opts: &BuildOptions) -> Fallible<KdTree> {
     let start = Instant::now();
-    let prims: Vec<(u32, Aabb)> = (0..input.prim_count())
-        .map(|p| (p as u32, input.bounds(p)))
-        .filter(|(_, b)| !b.is_empty() && b.is_finite())
-        .collect();
+    let prims: Vec<(u32, Aabb)> = fallible::collect(
+        (0..input.prim_count())
+            .map(|p| (p as u32, input.bounds(p)))
+            .filter(|(_, b)| !b.is_empty() && b.is_finite()),
+    )?;
     let bounds = prims.iter().fold(Aabb::EMPTY, |acc, (_, b)| acc.union(*b));
     let max_depth = opts.depth_limit(prims.len());
     let built = if prims.is_empty() {
-        Subtree::built(|slot| slot.leaf(Vec::new()))
+        Subtree::built(|slot| slot.leaf(Vec::new()))?
     } else {
         match opts.builder {
             // Beyond 2^30 primitives (more memory than a machine of this kind has) the SAH
             // builder's packed events run out of bits; the midpoint builder still works.
             Builder::Sah if prims.len() <= sah::MAX_PRIMS => {
-                sah::build(input, prims, bounds, max_depth, opts)
+                sah::build(input, prims, bounds, max_depth, opts)?
             }
-            Builder::Sah => midpoint::build(input, prims, bounds, max_depth, opts),
-            Builder::Midpoint => midpoint::build(input, prims, bounds, max_depth, opts),
+            Builder::Sah => midpoint::build(input, prims, bounds, max_depth, opts)?,
+            Builder::Midpoint => midpoint::build(input, prims, bounds, max_depth, opts)?,
         }
     };
-    let mut tree = layout::lay_out(built, bounds, opts.layout);
+    let mut tree = layout::lay_out(built, bounds, opts.layout)?;
     tree.stats = stats::tree_stats(&tree, opts.traversal_cost);
     if opts.ropes {
-        tree.ropes = Some(ropes::build_ropes(&tree));
+        tree.ensure_ropes()?;
     }
     tree.stats.build_ms = start.elapsed().as_secs_f32() * 1e3;
-    tree
+    Ok(tree)
 }

@@ -7,6 +7,7 @@
 
 use super::split::{child_voxels, classify, clip, fork, Budget, Side, Slot, Subtree};
 use super::{BuildInput, BuildOptions};
+use crate::fallible::{self, Fallible, TryGrow};
 use crate::geometry::Aabb;
 
 /// `prims` are (index, bounds inside `voxel`) pairs.
@@ -16,7 +17,7 @@ pub(super) fn build(
     voxel: Aabb,
     max_depth: u32,
     opts: &BuildOptions,
-) -> Subtree {
+) -> Fallible<Subtree> {
     let budget = Budget::root(prims.len(), opts.references_per_prim);
     let m = Midpoint {
         input,
@@ -29,6 +30,9 @@ pub(super) fn build(
 /// (index, bounds inside the child voxel) pairs below and above a split plane.
 type Sides = [Vec<(u32, Aabb)>; 2];
 
+/// A split plane (axis, position), the primitives of each side and their budgets.
+type Split = (usize, f32, Sides, [Budget; 2]);
+
 struct Midpoint<'a> {
     input: &'a dyn BuildInput,
     max_depth: u32,
@@ -37,11 +41,18 @@ struct Midpoint<'a> {
 
 impl Midpoint<'_> {
     /// Writes the subtree of `voxel` into `slot`.
-    fn node(&self, prims: Vec<(u32, Aabb)>, voxel: Aabb, depth: u32, budget: Budget, slot: Slot) {
+    fn node(
+        &self,
+        prims: Vec<(u32, Aabb)>,
+        voxel: Aabb,
+        depth: u32,
+        budget: Budget,
+        slot: Slot,
+    ) -> Fallible<()> {
         let Some((axis, split, [below, above], [bb, ba])) =
-            self.split(&prims, &voxel, depth, budget)
+            self.split(&prims, &voxel, depth, budget)?
         else {
-            return slot.leaf(prims.into_iter().map(|(p, _)| p).collect());
+            return slot.leaf(fallible::collect(prims.into_iter().map(|(p, _)| p))?);
         };
         drop(prims);
         let [vb, va] = child_voxels(&voxel, axis, split);
@@ -49,10 +60,10 @@ impl Midpoint<'_> {
         fork(
             depth,
             n,
-            slot.inner(axis, split),
+            slot.inner(axis, split)?,
             |slot| self.node(below, vb, depth + 1, bb, slot),
             |slot| self.node(above, va, depth + 1, ba, slot),
-        );
+        )
     }
 
     /// The split plane, the primitives of each side and their budgets, or `None` for a leaf:
@@ -75,9 +86,9 @@ impl Midpoint<'_> {
         voxel: &Aabb,
         depth: u32,
         budget: Budget,
-    ) -> Option<(usize, f32, Sides, [Budget; 2])> {
+    ) -> Fallible<Option<Split>> {
         if prims.len() <= self.leaf_size || depth >= self.max_depth {
-            return None;
+            return Ok(None);
         }
         let e = voxel.extent();
         let axis = if e.x >= e.y && e.x >= e.z {
@@ -89,37 +100,44 @@ impl Midpoint<'_> {
         };
         let split = voxel.center()[axis];
         if !(split > voxel.min[axis] && split < voxel.max[axis]) {
-            return None;
+            return Ok(None);
         }
-        let sides = self.partition(prims, voxel, axis, split);
+        let sides = self.partition(prims, voxel, axis, split)?;
         // Each primitive is at most once on each side: a side shorter than `prims` misses one.
         if sides.iter().all(|s| s.len() == prims.len()) {
-            return None;
+            return Ok(None);
         }
-        let budgets = budget.split(sides[0].len(), sides[1].len())?;
-        Some((axis, split, sides, budgets))
+        Ok(budget
+            .split(sides[0].len(), sides[1].len())
+            .map(|budgets| (axis, split, sides, budgets)))
     }
 
     /// The primitives of each child voxel of the split at `axis = split`, with their bounds
     /// inside it.
-    fn partition(&self, prims: &[(u32, Aabb)], voxel: &Aabb, axis: usize, split: f32) -> Sides {
+    fn partition(
+        &self,
+        prims: &[(u32, Aabb)],
+        voxel: &Aabb,
+        axis: usize,
+        split: f32,
+    ) -> Fallible<Sides> {
         let voxels = child_voxels(voxel, axis, split);
         let mut sides: Sides = Default::default();
         for &(p, b) in prims {
             // A primitive in the plane touches both closed child voxels: it is clipped like a
             // straddling one, which keeps it in both.
             match classify(b.min[axis], b.max[axis], split) {
-                Side::Below => sides[0].push((p, b)),
-                Side::Above => sides[1].push((p, b)),
+                Side::Below => sides[0].try_push((p, b))?,
+                Side::Above => sides[1].try_push((p, b))?,
                 Side::Both => {
                     for (side, v) in sides.iter_mut().zip(&voxels) {
                         if let Some(c) = clip(self.input, p, v) {
-                            side.push((p, c));
+                            side.try_push((p, c))?;
                         }
                     }
                 }
             }
         }
-        sides
+        Ok(sides)
     }
 }

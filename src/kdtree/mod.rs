@@ -23,6 +23,7 @@ mod walk;
 
 pub use build::{build, BuildInput, BuildOptions, Builder, Layout, MAX_DEPTH_LIMIT};
 
+use crate::fallible::{self, Fallible};
 use crate::geometry::{Aabb, PrimitiveSet, INVALID};
 
 /// 8-byte node. `bits & 3` is the split axis (0–2) of an inner node or 3 for a leaf.
@@ -173,11 +174,11 @@ pub struct RopeLinks {
 
 impl RopeLinks {
     /// Packs `links` (faces `-x, +x, -y, +y, -z, +z` per leaf) for a tree of `nodes` nodes.
-    pub fn pack(links: &[[u32; ROPE_FACES]], nodes: usize) -> Self {
+    pub fn pack(links: &[[u32; ROPE_FACES]], nodes: usize) -> Fallible<Self> {
         // `nodes` itself must stay below the all-ones value that means INVALID.
         let bits = (usize::BITS - nodes.leading_zeros()).max(1);
         let total = links.len() * ROPE_FACES * bits as usize;
-        let mut words = vec![0u32; total.div_ceil(32) + 1];
+        let mut words = fallible::filled(0u32, total.div_ceil(32) + 1)?;
         let invalid = Self::mask(bits);
         for (k, &link) in links.iter().flatten().enumerate() {
             let value = u64::from(if link == INVALID { invalid } else { link });
@@ -187,7 +188,7 @@ impl RopeLinks {
             words[w] |= u32::from_le_bytes([both[0], both[1], both[2], both[3]]);
             words[w + 1] |= u32::from_le_bytes([both[4], both[5], both[6], both[7]]);
         }
-        RopeLinks { bits, words }
+        Ok(RopeLinks { bits, words })
     }
 
     fn mask(bits: u32) -> u32 {
@@ -260,10 +261,11 @@ impl KdTree {
 
     /// Adds ropes (with leaf boxes and the rank words that number the leaves) if they are not
     /// there yet.
-    pub fn ensure_ropes(&mut self) {
+    pub fn ensure_ropes(&mut self) -> Fallible<()> {
         if self.ropes.is_none() {
-            self.ropes = Some(ropes::build_ropes(self));
+            self.ropes = Some(ropes::build_ropes(self)?);
         }
+        Ok(())
     }
 
     /// Frees the ropes when no rope traversal needs them any more.
@@ -331,10 +333,10 @@ mod tests {
                     })
                 })
                 .collect();
-            let packed = RopeLinks::pack(&links, nodes);
+            let packed = RopeLinks::pack(&links, nodes).unwrap();
             assert_eq!(packed.bits, bits, "{nodes} nodes");
             // One node more and the all-ones value would be a node index: one bit more.
-            let wider = RopeLinks::pack(&links, nodes + 1);
+            let wider = RopeLinks::pack(&links, nodes + 1).unwrap();
             assert_eq!(wider.bits, (bits + 1).min(32), "{} nodes", nodes + 1);
             for (leaf, l) in links.iter().enumerate() {
                 assert_eq!(packed.leaf(leaf), *l, "{bits} bits, leaf {leaf}");

@@ -9,20 +9,21 @@
 
 use super::split::child_voxels;
 use super::{KdNode, KdTree, RankWord, RopeLinks, Ropes, ROPE_FACES};
+use crate::fallible::{self, Fallible};
 use crate::geometry::{Aabb, INVALID};
 
-pub(super) fn build_ropes(tree: &KdTree) -> Ropes {
+pub(super) fn build_ropes(tree: &KdTree) -> Fallible<Ropes> {
     let mut out = Unpacked {
-        rank: rank(&tree.nodes),
-        links: vec![[INVALID; ROPE_FACES]; tree.leaf_count()],
-        leaf_bounds: vec![Aabb::EMPTY; tree.leaf_count()],
+        rank: rank(&tree.nodes)?,
+        links: fallible::filled([INVALID; ROPE_FACES], tree.leaf_count())?,
+        leaf_bounds: fallible::filled(Aabb::EMPTY, tree.leaf_count())?,
     };
     descend(tree, 0, tree.bounds, [INVALID; ROPE_FACES], &mut out);
-    Ropes {
-        links: RopeLinks::pack(&out.links, tree.nodes.len()),
+    Ok(Ropes {
+        links: RopeLinks::pack(&out.links, tree.nodes.len())?,
         leaf_bounds: out.leaf_bounds,
         rank: out.rank,
-    }
+    })
 }
 
 /// The ropes while they are built, one `u32` per rope.
@@ -33,21 +34,18 @@ struct Unpacked {
 }
 
 /// The rank words of `nodes`: leaf bits per 32 nodes, with the count of leaves before them.
-fn rank(nodes: &[KdNode]) -> Vec<RankWord> {
+fn rank(nodes: &[KdNode]) -> Fallible<Vec<RankWord>> {
     let mut before = 0;
-    nodes
-        .chunks(32)
-        .map(|chunk| {
-            let leaf_bits = chunk
-                .iter()
-                .enumerate()
-                .filter(|(_, n)| n.is_leaf())
-                .fold(0u32, |bits, (i, _)| bits | 1 << i);
-            let word = RankWord { leaf_bits, before };
-            before += leaf_bits.count_ones();
-            word
-        })
-        .collect()
+    fallible::collect(nodes.chunks(32).map(|chunk| {
+        let leaf_bits = chunk
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| n.is_leaf())
+            .fold(0u32, |bits, (i, _)| bits | 1 << i);
+        let word = RankWord { leaf_bits, before };
+        before += leaf_bits.count_ones();
+        word
+    }))
 }
 
 fn descend(

@@ -19,6 +19,7 @@ use rayon::prelude::*;
 
 use super::split::{child_voxels, clip, fork, parallel, Budget, Side, Slot, Subtree};
 use super::{BuildInput, BuildOptions};
+use crate::fallible::{self, Fallible, TryGrow};
 use crate::geometry::Aabb;
 
 /// Cost of one primitive test, the unit of the cost model.
@@ -100,16 +101,17 @@ impl Event {
 /// Sorted event lists of one node, one per axis.
 type Events = [Vec<Event>; 3];
 
-fn push_events(b: &Aabb, prim: u32, events: &mut Events) {
+fn push_events(b: &Aabb, prim: u32, events: &mut Events) -> Fallible<()> {
     for (axis, list) in events.iter_mut().enumerate() {
         let (lo, hi) = (b.min[axis], b.max[axis]);
         if lo == hi {
-            list.push(Event::new(lo, prim, Kind::Planar));
+            list.try_push(Event::new(lo, prim, Kind::Planar))?;
         } else {
-            list.push(Event::new(lo, prim, Kind::Start));
-            list.push(Event::new(hi, prim, Kind::End));
+            list.try_push(Event::new(lo, prim, Kind::Start))?;
+            list.try_push(Event::new(hi, prim, Kind::End))?;
         }
     }
+    Ok(())
 }
 
 /// Merges a sorted list of new events into a sorted list while the latter is written out:
@@ -126,17 +128,17 @@ impl<'a> Merge<'a> {
 
     /// Appends the new events that sort before `e`, then `e`.
     #[inline]
-    fn push(&mut self, out: &mut Vec<Event>, e: Event) {
+    fn push(&mut self, out: &mut Vec<Event>, e: Event) -> Fallible<()> {
         while let Some(&x) = self.extra.get(self.next).filter(|&&x| x < e) {
-            out.push(x);
+            out.try_push(x)?;
             self.next += 1;
         }
-        out.push(e);
+        out.try_push(e)
     }
 
     /// Appends the new events left after the last of the list.
-    fn finish(self, out: &mut Vec<Event>) {
-        out.extend_from_slice(&self.extra[self.next..]);
+    fn finish(self, out: &mut Vec<Event>) -> Fallible<()> {
+        out.try_extend_from_slice(&self.extra[self.next..])
     }
 }
 
@@ -147,10 +149,10 @@ pub(super) fn build(
     voxel: Aabb,
     max_depth: u32,
     opts: &BuildOptions,
-) -> Subtree {
+) -> Fallible<Subtree> {
     let mut events: Events = Default::default();
     for (local, (_, b)) in prims.iter().enumerate() {
-        push_events(b, local as u32, &mut events);
+        push_events(b, local as u32, &mut events)?;
     }
     for list in &mut events {
         list.par_sort_unstable();
@@ -162,7 +164,7 @@ pub(super) fn build(
         empty_bonus: opts.empty_bonus,
     };
     let budget = Budget::root(prims.len(), opts.references_per_prim);
-    let prims = prims.into_iter().map(|(p, _)| p).collect();
+    let prims = fallible::collect(prims.into_iter().map(|(p, _)| p))?;
     Subtree::built(|slot| sah.node(prims, events, voxel, 0, budget, slot))
 }
 
@@ -191,7 +193,7 @@ impl Sah<'_> {
         depth: u32,
         budget: Budget,
         slot: Slot,
-    ) {
+    ) -> Fallible<()> {
         let leaf_cost = INTERSECTION_COST * prims.len() as f32;
         let plane = if depth < self.max_depth && !prims.is_empty() {
             self.best_plane(&events, prims.len(), &voxel, depth)
@@ -202,7 +204,7 @@ impl Sah<'_> {
             return slot.leaf(prims);
         };
         let voxels = child_voxels(&voxel, plane.axis, plane.pos);
-        let [(pb, eb), (pa, ea)] = self.distribute(&prims, events, &voxels, &plane);
+        let [(pb, eb), (pa, ea)] = self.distribute(&prims, events, &voxels, &plane)?;
         let Some([bb, ba]) = budget.split(pb.len(), pa.len()) else {
             return slot.leaf(prims);
         };
@@ -211,10 +213,10 @@ impl Sah<'_> {
         fork(
             depth,
             pb.len() + pa.len(),
-            slot.inner(plane.axis, plane.pos),
+            slot.inner(plane.axis, plane.pos)?,
             |slot| self.node(pb, eb, vb, depth + 1, bb, slot),
             |slot| self.node(pa, ea, va, depth + 1, ba, slot),
-        );
+        )
     }
 
     /// The cheapest plane over the three axes; near the root the axes are swept in parallel.
@@ -326,11 +328,11 @@ impl Sah<'_> {
         events: Events,
         voxels: &[Aabb; 2],
         plane: &Plane,
-    ) -> [(Vec<u32>, Events); 2] {
+    ) -> Fallible<[(Vec<u32>, Events); 2]> {
         let n = prims.len();
         // The side of each primitive, from its events along the split axis: the rule of
         // `split::classify` (an end before the plane puts it below, a start after it above).
-        let mut side = vec![Side::Both; n];
+        let mut side = fallible::filled(Side::Both, n)?;
         for &e in &events[plane.axis] {
             let pos = e.pos();
             match e.kind() {
@@ -342,7 +344,7 @@ impl Sah<'_> {
         let mut children: [(Vec<u32>, Events); 2] = Default::default();
         let mut straddling: [Events; 2] = Default::default();
         // Position of each one-sided primitive in its child's list.
-        let mut moved = vec![u32::MAX; n];
+        let mut moved = fallible::filled(u32::MAX, n)?;
         for (p, &prim) in prims.iter().enumerate() {
             let child = match side[p] {
                 Side::Below => 0,
@@ -352,8 +354,8 @@ impl Sah<'_> {
                     for (child, voxel) in voxels.iter().enumerate() {
                         if let Some(b) = clip(self.input, prim, voxel) {
                             let list = &mut children[child].0;
-                            push_events(&b, list.len() as u32, &mut straddling[child]);
-                            list.push(prim);
+                            push_events(&b, list.len() as u32, &mut straddling[child])?;
+                            list.try_push(prim)?;
                         }
                     }
                     continue;
@@ -361,14 +363,15 @@ impl Sah<'_> {
             };
             let list = &mut children[child].0;
             moved[p] = list.len() as u32;
-            list.push(prim);
+            list.try_push(prim)?;
         }
         for (axis, list) in events.iter().enumerate() {
             let extra: [&mut [Event]; 2] = straddling.each_mut().map(|s| &mut s[axis][..]);
             for (child, (prims, events)) in children.iter_mut().enumerate() {
                 extra[child].sort_unstable();
                 // About its share of the parent's events, and its straddlers' new ones.
-                events[axis].reserve(list.len() * prims.len() / n.max(1) + extra[child].len());
+                events[axis]
+                    .try_reserve(list.len() * prims.len() / n.max(1) + extra[child].len())?;
             }
             // One pass: the parent's one-sided events go to their child in order, each child's
             // sorted straddler events merged in as they fall due.
@@ -380,14 +383,14 @@ impl Sah<'_> {
                     Side::Both => continue,
                 };
                 let e = e.renumbered(moved[e.prim()]);
-                merges[child].push(&mut children[child].1[axis], e);
+                merges[child].push(&mut children[child].1[axis], e)?;
             }
             for ((_, events), merge) in children.iter_mut().zip(merges) {
-                merge.finish(&mut events[axis]);
+                merge.finish(&mut events[axis])?;
             }
         }
         drop(events);
-        children
+        Ok(children)
     }
 }
 
@@ -458,9 +461,9 @@ mod tests {
             expected.sort_unstable();
             let (mut out, mut merge) = (Vec::new(), Merge::new(&extra));
             for &e in &list {
-                merge.push(&mut out, e);
+                merge.push(&mut out, e).unwrap();
             }
-            merge.finish(&mut out);
+            merge.finish(&mut out).unwrap();
             assert_eq!(out, expected);
         }
     }

@@ -2,6 +2,7 @@
 //! primitive to one or both sides of a split plane, and the parallel recursion.
 
 use super::{BuildInput, KdNode};
+use crate::fallible::{self, Fallible, TryGrow};
 use crate::geometry::Aabb;
 
 /// A tree (or a subtree built on its own thread) in the final node format, written by a builder
@@ -21,25 +22,25 @@ pub(super) struct Subtree {
 
 impl Subtree {
     /// The subtree that `build` writes from its root.
-    pub(super) fn built(build: impl FnOnce(Slot)) -> Self {
+    pub(super) fn built(build: impl FnOnce(Slot) -> Fallible<()>) -> Fallible<Self> {
         let mut sub = Subtree {
-            nodes: vec![KdNode::leaf(0, 0)],
+            nodes: fallible::filled(KdNode::leaf(0, 0), 1)?,
             prims: Vec::new(),
         };
         build(Slot {
             tree: &mut sub,
             at: 0,
-        });
-        sub
+        })?;
+        Ok(sub)
     }
 
     /// Appends `sub` (built on its own) and writes its root at `at`: its nodes' child indices
     /// and leaf list starts move by where its arrays land in these.
-    fn graft(&mut self, at: usize, sub: Subtree) {
+    fn graft(&mut self, at: usize, sub: Subtree) -> Fallible<()> {
         let (node_shift, prim_shift) = (self.nodes.len() as u32 - 1, self.prims_end());
         // The moved leaf starts fit in u32 when the joined lists do: `prims_end` checks that,
         // as it does for every leaf written here.
-        self.prims.extend_from_slice(&sub.prims);
+        self.prims.try_extend_from_slice(&sub.prims)?;
         self.prims_end();
         let moved = |n: KdNode| {
             if n.is_leaf() {
@@ -50,7 +51,8 @@ impl Subtree {
             }
         };
         self.nodes[at] = moved(sub.nodes[0]);
-        self.nodes.extend(sub.nodes[1..].iter().map(|&n| moved(n)));
+        self.nodes
+            .try_extend(sub.nodes[1..].iter().map(|&n| moved(n)))
     }
 
     /// Where the next leaf list starts.
@@ -69,22 +71,22 @@ pub(super) struct Slot<'a> {
 impl<'a> Slot<'a> {
     /// Writes a leaf listing `prims` in ascending order, so that equal inputs give equal
     /// leaves and a traversal meets the lowest index first.
-    pub(super) fn leaf(self, mut prims: Vec<u32>) {
+    pub(super) fn leaf(self, mut prims: Vec<u32>) -> Fallible<()> {
         prims.sort_unstable();
         let first = self.tree.prims_end();
         self.tree.nodes[self.at] = KdNode::leaf(first, prims.len() as u32);
-        self.tree.prims.extend_from_slice(&prims);
+        self.tree.prims.try_extend_from_slice(&prims)
     }
 
     /// Writes an inner node and appends its child pair, to be written by [`fork`].
-    pub(super) fn inner(self, axis: usize, split: f32) -> Children<'a> {
+    pub(super) fn inner(self, axis: usize, split: f32) -> Fallible<Children<'a>> {
         let first = self.tree.nodes.len();
+        self.tree.nodes.try_extend([KdNode::leaf(0, 0); 2])?;
         self.tree.nodes[self.at] = KdNode::inner(axis, split, first as u32);
-        self.tree.nodes.extend([KdNode::leaf(0, 0); 2]);
-        Children {
+        Ok(Children {
             tree: self.tree,
             first,
-        }
+        })
     }
 }
 
@@ -181,24 +183,30 @@ pub(super) fn parallel(depth: u32, prims: usize) -> bool {
 /// Builds the two `children` of an inner node, in parallel near the root (each into its own
 /// [`Subtree`], grafted below then above). The arrays do not depend on whether the closures ran
 /// in parallel.
-pub(super) fn fork<A, B>(depth: u32, prims: usize, children: Children, below: A, above: B)
+pub(super) fn fork<A, B>(
+    depth: u32,
+    prims: usize,
+    children: Children,
+    below: A,
+    above: B,
+) -> Fallible<()>
 where
-    A: FnOnce(Slot) + Send,
-    B: FnOnce(Slot) + Send,
+    A: FnOnce(Slot) -> Fallible<()> + Send,
+    B: FnOnce(Slot) -> Fallible<()> + Send,
 {
     let Children { tree, first } = children;
     if parallel(depth, prims) {
         let (b, a) = rayon::join(|| Subtree::built(below), || Subtree::built(above));
-        tree.graft(first, b);
-        tree.graft(first + 1, a);
+        tree.graft(first, b?)?;
+        tree.graft(first + 1, a?)
     } else {
         below(Slot {
             tree: &mut *tree,
             at: first,
-        });
+        })?;
         above(Slot {
             tree,
             at: first + 1,
-        });
+        })
     }
 }

@@ -6,12 +6,20 @@
 //! does not change.
 
 use super::PrimOrigin;
+use crate::fallible::{self, Fallible};
 use crate::geometry::PrimitiveSet;
 use crate::kdtree::KdTree;
 
 /// Renumbers the bounded primitives of `prims` (planes keep their numbers), with `origins` and
 /// the leaf lists of `tree` (each list stays ascending).
-pub(super) fn renumber(prims: &mut PrimitiveSet, origins: &mut [PrimOrigin], tree: &mut KdTree) {
+///
+/// Fails when its tables cannot be allocated, with `prims`, `origins` and `tree` part renumbered:
+/// the commit that called it then throws them away.
+pub(super) fn renumber(
+    prims: &mut PrimitiveSet,
+    origins: &mut [PrimOrigin],
+    tree: &mut KdTree,
+) -> Fallible<()> {
     let counts = [
         prims.triangles.len(),
         prims.spheres.len(),
@@ -23,29 +31,35 @@ pub(super) fn renumber(prims: &mut PrimitiveSet, origins: &mut [PrimOrigin], tre
     let kind = |p: usize| starts.iter().rposition(|&s| p >= s).unwrap_or(0);
     // Old numbers in their new order, kind by kind: first as the leaves list them, then those
     // no leaf holds (empty or non-finite bounds) in their old order.
-    let mut by_kind: [Vec<u32>; 4] = counts.map(Vec::with_capacity);
-    let mut seen = vec![false; n];
+    let mut by_kind: [Vec<u32>; 4] = Default::default();
+    for (list, count) in by_kind.iter_mut().zip(counts) {
+        *list = fallible::with_capacity(count)?;
+    }
+    let mut seen = fallible::filled(false, n)?;
     let unlisted = 0..n as u32;
     for p in tree.prim_indices.iter().copied().chain(unlisted) {
         if !std::mem::replace(&mut seen[p as usize], true) {
             by_kind[kind(p as usize)].push(p);
         }
     }
-    let order = by_kind.concat();
-    let mut new_of = vec![0u32; n];
+    let mut order = fallible::with_capacity(n)?;
+    for list in &by_kind {
+        order.extend_from_slice(list);
+    }
+    let mut new_of = fallible::filled(0u32, n)?;
     for (new, &old) in order.iter().enumerate() {
         new_of[old as usize] = new as u32;
     }
 
     let [tri, sph, ell, bx] = starts;
-    prims.triangles = permuted(&prims.triangles, &order[..sph], tri);
+    prims.triangles = permuted(&prims.triangles, &order[..sph], tri)?;
     if !prims.vertices.is_empty() {
-        prims.vertices = permuted(&prims.vertices, &order[..sph], tri);
+        prims.vertices = permuted(&prims.vertices, &order[..sph], tri)?;
     }
-    prims.spheres = permuted(&prims.spheres, &order[sph..ell], sph);
-    prims.ellipsoids = permuted(&prims.ellipsoids, &order[ell..bx], ell);
-    prims.boxes = permuted(&prims.boxes, &order[bx..], bx);
-    let bounded = permuted(&origins[..n], &order, 0);
+    prims.spheres = permuted(&prims.spheres, &order[sph..ell], sph)?;
+    prims.ellipsoids = permuted(&prims.ellipsoids, &order[ell..bx], ell)?;
+    prims.boxes = permuted(&prims.boxes, &order[bx..], bx)?;
+    let bounded = permuted(&origins[..n], &order, 0)?;
     origins[..n].copy_from_slice(&bounded);
 
     for p in &mut tree.prim_indices {
@@ -54,11 +68,12 @@ pub(super) fn renumber(prims: &mut PrimitiveSet, origins: &mut [PrimOrigin], tre
     for n in tree.nodes.iter().filter(|n| n.is_leaf()) {
         tree.prim_indices[n.prim_range()].sort_unstable();
     }
+    Ok(())
 }
 
 /// `v` in the order `old` gives, each number counted from `base` (the kind's first number).
-fn permuted<T: Copy>(v: &[T], old: &[u32], base: usize) -> Vec<T> {
-    old.iter().map(|&o| v[o as usize - base]).collect()
+fn permuted<T: Copy>(v: &[T], old: &[u32], base: usize) -> Fallible<Vec<T>> {
+    fallible::collect(old.iter().map(|&o| v[o as usize - base]))
 }
 
 #[cfg(test)]

@@ -3,6 +3,7 @@
 //! object), e.g. the primitive a secondary ray leaves.
 
 use super::PrimOrigin;
+use crate::fallible::{self, Fallible};
 use crate::geometry::{PrimIndex, INVALID};
 
 /// Global index of each `(object, prim)`, object by object. Built on demand
@@ -19,23 +20,23 @@ pub struct PrimLookup {
 impl PrimLookup {
     /// The lookup of `origins` (`origins[g]` = where global primitive `g` came from) for
     /// `objects` objects.
-    pub fn new(origins: &[PrimOrigin], objects: usize) -> Self {
+    pub fn new(origins: &[PrimOrigin], objects: usize) -> Fallible<Self> {
         // Entries per object: its largest index + 1 (an object may have gaps).
-        let mut len = vec![0usize; objects];
+        let mut len = fallible::filled(0usize, objects)?;
         for o in origins {
             let l = &mut len[o.object as usize];
             *l = (*l).max(o.prim as usize + 1);
         }
-        let mut first = Vec::with_capacity(objects + 1);
+        let mut first = fallible::with_capacity(objects + 1)?;
         first.push(0);
         for l in len {
             first.push(first.last().copied().unwrap_or(0) + l);
         }
-        let mut global = vec![INVALID; *first.last().unwrap_or(&0)];
+        let mut global = fallible::filled(INVALID, *first.last().unwrap_or(&0))?;
         for (g, o) in origins.iter().enumerate() {
             global[first[o.object as usize] + o.prim as usize] = g as PrimIndex;
         }
-        PrimLookup { first, global }
+        Ok(PrimLookup { first, global })
     }
 
     /// Whether this is the lookup of a scene with primitives (an empty one is not built yet,
@@ -70,7 +71,7 @@ mod tests {
         let o = |object, prim| PrimOrigin { object, prim };
         // Object 1 has no primitives; object 2 lacks index 1.
         let origins = [o(2, 2), o(0, 1), o(0, 0), o(2, 0), o(3, 0)];
-        let lookup = PrimLookup::new(&origins, 4);
+        let lookup = PrimLookup::new(&origins, 4).unwrap();
         for (g, p) in origins.iter().enumerate() {
             assert_eq!(lookup.get(p.object, p.prim), Some(g as PrimIndex));
         }

@@ -17,6 +17,7 @@ pub use material::{Checker, Material, PointLight};
 pub use object::{Object, PrimOrigin, Shape};
 
 use crate::error::{Error, Result};
+use crate::fallible;
 use crate::geometry::{Aabb, PrimitiveSet};
 use crate::kdtree::{self, BuildOptions, KdTree};
 use glam::{Affine3A, Vec3};
@@ -316,18 +317,48 @@ impl Scene {
         self.dirty = true;
     }
 
-    /// Places every object in world space and builds the kd-tree.
+    /// Places every object in world space and builds the kd-tree. A commit that cannot have
+    /// the memory it needs fails with `OutOfMemory` and leaves the last commit in place (see
+    /// [`crate::fallible`]).
     pub fn commit(&mut self) -> Result<()> {
         let start = Instant::now();
-        let mut prims = PrimitiveSet::default();
+        // Room for every placed primitive and its origin, taken before placing: the placement
+        // then pushes without growing. A mesh places its triangles; any other object one
+        // primitive of one of the other four kinds.
+        let triangles: usize = self
+            .objects
+            .iter()
+            .map(|o| match &o.shape {
+                Shape::Mesh { triangles, .. } => triangles.len(),
+                _ => 0,
+            })
+            .sum();
+        let others = self.objects.len();
+        let mut prims = PrimitiveSet {
+            triangles: fallible::with_capacity(triangles)?,
+            spheres: fallible::with_capacity(others)?,
+            ellipsoids: fallible::with_capacity(others)?,
+            boxes: fallible::with_capacity(others)?,
+            vertices: Vec::new(),
+            planes: fallible::with_capacity(others)?,
+        };
         // One origin list per kind, concatenated in the order of the global index.
-        let mut by_kind: Vec<Vec<PrimOrigin>> = vec![Vec::new(); 5];
+        let mut by_kind: [Vec<PrimOrigin>; 5] = Default::default();
+        for (list, n) in by_kind
+            .iter_mut()
+            .zip([triangles, others, others, others, others])
+        {
+            *list = fallible::with_capacity(n)?;
+        }
         for (id, obj) in self.objects.iter().enumerate() {
             object::place(obj, id as u32, &mut prims, &mut by_kind)?;
         }
-        let mut origins: Vec<PrimOrigin> = by_kind.concat();
-        let mut tree = kdtree::build(&prims, &self.build);
-        locality::renumber(&mut prims, &mut origins, &mut tree);
+        let mut origins = fallible::with_capacity(by_kind.iter().map(Vec::len).sum())?;
+        for list in &by_kind {
+            origins.extend_from_slice(list);
+        }
+        let mut tree = kdtree::build(&prims, &self.build)?;
+        locality::renumber(&mut prims, &mut origins, &mut tree)?;
         self.committed = Some(Committed {
             bounds: prims.scene_bounds(),
             prims,
@@ -349,7 +380,7 @@ impl Scene {
     pub fn ensure_ropes(&mut self) -> Result<()> {
         self.committed()?;
         if let Some(c) = &mut self.committed {
-            c.tree.ensure_ropes();
+            c.tree.ensure_ropes()?;
         }
         Ok(())
     }
@@ -364,8 +395,8 @@ impl Scene {
                 // The corners come in placement order (object by object, file order); the
                 // committed triangles are renumbered (`locality`): their origins say where
                 // each one was placed.
-                let corners = object::triangle_corners(&self.objects);
-                let mut first = Vec::with_capacity(self.objects.len());
+                let corners = object::triangle_corners(&self.objects)?;
+                let mut first = fallible::with_capacity(self.objects.len())?;
                 let mut placed = 0;
                 for obj in &self.objects {
                     first.push(placed);
@@ -373,10 +404,11 @@ impl Scene {
                         placed += triangles.len();
                     }
                 }
-                c.prims.vertices = c.origins[..c.prims.triangles.len()]
-                    .iter()
-                    .map(|o| corners[first[o.object as usize] + o.prim as usize])
-                    .collect();
+                c.prims.vertices = fallible::collect(
+                    c.origins[..c.prims.triangles.len()]
+                        .iter()
+                        .map(|o| corners[first[o.object as usize] + o.prim as usize]),
+                )?;
             }
         }
         Ok(())
@@ -392,7 +424,7 @@ impl Scene {
         self.committed()?;
         if let Some(c) = &mut self.committed {
             if c.lookup.is_empty() {
-                let lookup = PrimLookup::new(&c.origins, self.objects.len());
+                let lookup = PrimLookup::new(&c.origins, self.objects.len())?;
                 check(&lookup)?;
                 c.lookup = lookup;
             } else {

@@ -3,6 +3,7 @@
 //! a non-uniform scale becomes an ellipsoid, never a mesh.
 
 use crate::error::{Error, Result};
+use crate::fallible::{Fallible, TryGrow};
 use crate::geometry::{unit, Aabb, Ellipsoid, Plane, PrimitiveSet, Sphere, Triangle};
 use glam::{Affine3A, Mat3, Vec3};
 
@@ -80,7 +81,7 @@ fn world_corners(positions: &[Vec3], tri: &[u32; 3], t: &Affine3A) -> [Vec3; 3] 
 
 /// The exact corners of every triangle of `objects`, in the order [`place`] gives the
 /// triangles (`PrimitiveSet::vertices`, for the watertight test).
-pub fn triangle_corners(objects: &[Object]) -> Vec<[[f32; 3]; 3]> {
+pub fn triangle_corners(objects: &[Object]) -> Fallible<Vec<[[f32; 3]; 3]>> {
     let mut out = Vec::new();
     for obj in objects {
         if let Shape::Mesh {
@@ -88,14 +89,14 @@ pub fn triangle_corners(objects: &[Object]) -> Vec<[[f32; 3]; 3]> {
             triangles,
         } = &obj.shape
         {
-            out.extend(
+            out.try_extend(
                 triangles
                     .iter()
                     .map(|tri| world_corners(positions, tri, &obj.transform).map(|v| v.to_array())),
-            );
+            )?;
         }
     }
-    out
+    Ok(out)
 }
 
 /// One world-space primitive, as [`place_shape`] hands it on (a triangle with its index in

@@ -1,0 +1,174 @@
+//! A commit that cannot have the memory it needs returns `RT2_STATUS_OUT_OF_MEMORY` instead of
+//! aborting the host program (Rust's default on a failed allocation), and the scene can be
+//! committed again once memory is there.
+//!
+//! The memory is limited as a cluster or `ulimit -v` limits it: an address-space limit
+//! (`RLIMIT_AS`) on this process. That is why this test is alone in its test binary: the limit
+//! holds for every thread of the process while it is set.
+
+#![cfg(target_os = "linux")]
+
+use rt2::api::*;
+use rt2::error::Rt2Status;
+use std::ffi::CStr;
+use std::ptr::{null, null_mut};
+
+/// The process's address space now (`VmSize`), in bytes.
+fn address_space() -> u64 {
+    let status = std::fs::read_to_string("/proc/self/status").expect("Linux /proc");
+    let kib: u64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmSize:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .expect("VmSize in /proc/self/status");
+    kib * 1024
+}
+
+/// Sets the soft address-space limit (`None`: back to the hard limit).
+fn limit_address_space(bytes: Option<u64>) {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: plain system calls on a valid struct.
+    unsafe {
+        assert_eq!(libc::getrlimit(libc::RLIMIT_AS, &mut lim), 0);
+        lim.rlim_cur = bytes.map_or(lim.rlim_max, |b| b.min(lim.rlim_max));
+        assert_eq!(libc::setrlimit(libc::RLIMIT_AS, &lim), 0);
+    }
+}
+
+fn last_error() -> String {
+    unsafe { CStr::from_ptr(rt2_last_error_message()) }
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// A square grid of `k` × `k` cells, two triangles each, in the plane z = 1 over [0, 1]².
+fn grid(k: u32) -> (Vec<f32>, Vec<u32>) {
+    let mut positions = Vec::new();
+    for j in 0..=k {
+        for i in 0..=k {
+            positions.extend([i as f32 / k as f32, j as f32 / k as f32, 1.0]);
+        }
+    }
+    let mut indices = Vec::new();
+    for j in 0..k {
+        for i in 0..k {
+            let v = j * (k + 1) + i;
+            indices.extend([v, v + 1, v + k + 1, v + 1, v + k + 2, v + k + 1]);
+        }
+    }
+    (positions, indices)
+}
+
+/// Where a ray straight down the z axis at (x, y) meets the scene, as `rt2_intersect` says.
+unsafe fn hit_at(ctx: *const rt2_context, scene: *const rt2_scene, x: f32, y: f32) -> rt2_hit {
+    let ray = rt2_ray {
+        org: [x, y, 3.0],
+        tmin: 0.0,
+        dir: [0.0, 0.0, -1.0],
+        tmax: f32::INFINITY,
+    };
+    let mut hit = rt2_hit {
+        t: 0.0,
+        u: 0.0,
+        v: 0.0,
+        object: 0,
+        prim: 0,
+    };
+    let status = rt2_intersect(ctx, scene, &ray, 1, &mut hit, null(), null_mut());
+    assert_eq!(status, Rt2Status::Ok, "{}", last_error());
+    hit
+}
+
+#[test]
+fn a_commit_without_memory_fails_with_out_of_memory_and_can_be_retried() {
+    // 2 million triangles: the commit places them (48 bytes each), builds the tree (its event
+    // lists alone take 48 bytes per triangle) and renumbers them, a few hundred MB in all,
+    // more than the slack in what the allocator has reserved already (address space counts
+    // reservations, and an allocation inside one adds nothing to it).
+    let (positions, indices) = grid(1000);
+    let triangles = indices.len() / 3;
+    unsafe {
+        let mut desc = rt2_context_desc_default();
+        desc.backend = 1; // CPU: the GPU's driver is not what is measured here
+        desc.threads = 2;
+        let mut ctx = null_mut();
+        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
+        // Limits above the address space the process has before the commit: at the smallest
+        // the placed triangles alone do not fit; at the largest the whole commit does; in
+        // between it runs out at different steps (placing, the build's events, its node
+        // arrays, renumbering). At each one the commit either succeeds or says OUT_OF_MEMORY;
+        // an abort ends the test.
+        let mut failed = 0;
+        for extra_mib in [4u64, 24, 48, 72, 96, 120, 144, 168, 192, 256, 384, 4096] {
+            let mut scene = null_mut();
+            assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+            let mut object = 0;
+            let status = rt2_scene_add_mesh(
+                scene,
+                positions.as_ptr(),
+                positions.len() / 3,
+                indices.as_ptr(),
+                triangles,
+                0,
+                &mut object,
+            );
+            assert_eq!(status, Rt2Status::Ok, "{}", last_error());
+
+            limit_address_space(Some(address_space() + (extra_mib << 20)));
+            let status = rt2_scene_commit(scene);
+            let message = last_error();
+            limit_address_space(None);
+            println!("address space + {extra_mib} MiB: {status:?}");
+
+            match status {
+                Rt2Status::Ok => {}
+                Rt2Status::OutOfMemory => {
+                    failed += 1;
+                    assert!(message.contains("out of memory"), "{message}");
+                    // Nothing was committed: the scene refuses queries until a commit works.
+                    let ray = rt2_ray {
+                        org: [0.5, 0.5, 3.0],
+                        tmin: 0.0,
+                        dir: [0.0, 0.0, -1.0],
+                        tmax: f32::INFINITY,
+                    };
+                    let mut hit = std::mem::zeroed();
+                    let refused = rt2_intersect(ctx, scene, &ray, 1, &mut hit, null(), null_mut());
+                    assert_eq!(refused, Rt2Status::InvalidOperation, "{}", last_error());
+                    // With the memory back, the same scene commits (once: each commit of this
+                    // scene takes a second or two).
+                    if failed == 1 {
+                        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok, "{}", last_error());
+                    }
+                }
+                other => panic!("+{extra_mib} MiB: {other:?}: {message}"),
+            }
+            if status == Rt2Status::Ok || failed == 1 {
+                // The committed grid answers: a ray down at (0.3, 0.7) meets the plane z = 1.
+                let hit = hit_at(ctx, scene, 0.3, 0.7);
+                assert_eq!(hit.object, object, "+{extra_mib} MiB");
+                assert!(
+                    (hit.t - 2.0).abs() < 1e-6,
+                    "+{extra_mib} MiB: t = {}",
+                    hit.t
+                );
+            }
+            if extra_mib == 4 {
+                assert_eq!(
+                    status,
+                    Rt2Status::OutOfMemory,
+                    "4 MiB cannot hold the commit"
+                );
+            }
+            if extra_mib == 4096 {
+                assert_eq!(status, Rt2Status::Ok, "4 GiB holds the commit: {message}");
+            }
+            rt2_scene_destroy(scene);
+        }
+        assert!(failed >= 3, "only {failed} limits were too small");
+        rt2_context_destroy(ctx);
+    }
+}
