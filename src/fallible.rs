@@ -8,7 +8,12 @@
 //! `RT2_STATUS_OUT_OF_MEMORY` and the scene as it was.
 //!
 //! [`OutOfMemory`] carries nothing, so failing allocates nothing: the message is written by the
-//! `From` conversion into [`Error`], at the commit, after the build's vectors are dropped.
+//! `From` conversion into [`Error`], once the failing step (the build, say) has dropped its
+//! vectors.
+//!
+//! This helps where the allocator says no: an address-space limit, strict overcommit, a request
+//! larger than the machine. Under Linux's default overcommit a process that fills the RAM is
+//! more often stopped by the kernel's OOM killer, which no library can answer.
 
 use crate::error::{Error, Rt2Status};
 

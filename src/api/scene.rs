@@ -10,6 +10,7 @@ use super::ffi::{
 use super::options::{rt2_build_options, rt2_material};
 use crate::context::Context;
 use crate::error::{Error, Result, Rt2Status};
+use crate::fallible;
 use crate::precision::Intersector;
 use crate::scene::{loaders, PointLight, Scene, Shape};
 use glam::{Affine3A, Mat3, Vec3};
@@ -220,8 +221,8 @@ pub unsafe extern "C" fn rt2_scene_add_mesh(
             return Err(Error::invalid_argument("vertex_count exceeds 2^32 - 1"));
         }
         let shape = Shape::Mesh {
-            positions: p.chunks_exact(3).map(Vec3::from_slice).collect(),
-            triangles: i.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+            positions: fallible::collect(p.chunks_exact(3).map(Vec3::from_slice))?,
+            triangles: fallible::collect(i.chunks_exact(3).map(|t| [t[0], t[1], t[2]]))?,
         };
         s.add_object(shape, material)
     })

@@ -7,7 +7,7 @@
 
 use super::split::{child_voxels, classify, clip, fork, Budget, Side, Slot, Subtree};
 use super::{BuildInput, BuildOptions};
-use crate::fallible::{self, Fallible, TryGrow};
+use crate::fallible::{Fallible, TryGrow};
 use crate::geometry::Aabb;
 
 /// `prims` are (index, bounds inside `voxel`) pairs.
@@ -52,7 +52,9 @@ impl Midpoint<'_> {
         let Some((axis, split, [below, above], [bb, ba])) =
             self.split(&prims, &voxel, depth, budget)?
         else {
-            return slot.leaf(fallible::collect(prims.into_iter().map(|(p, _)| p))?);
+            // Collected in place, into the pairs' own buffer (std reuses it): a leaf allocates
+            // no list of its own before `leaf` copies it into the tree.
+            return slot.leaf(prims.into_iter().map(|(p, _)| p).collect());
         };
         drop(prims);
         let [vb, va] = child_voxels(&voxel, axis, split);

@@ -197,8 +197,9 @@ where
     let Children { tree, first } = children;
     if parallel(depth, prims) {
         let (b, a) = rayon::join(|| Subtree::built(below), || Subtree::built(above));
-        tree.graft(first, b?)?;
-        tree.graft(first + 1, a?)
+        let (b, a) = (b?, a?);
+        tree.graft(first, b)?;
+        tree.graft(first + 1, a)
     } else {
         below(Slot {
             tree: &mut *tree,

@@ -322,9 +322,8 @@ impl Scene {
     /// [`crate::fallible`]).
     pub fn commit(&mut self) -> Result<()> {
         let start = Instant::now();
-        // Room for every placed primitive and its origin, taken before placing: the placement
-        // then pushes without growing. A mesh places its triangles; any other object one
-        // primitive of one of the other four kinds.
+        // Room for the triangles, known exactly, taken before placing (growing by doubling
+        // could take twice as much); the other kinds grow as they are placed.
         let triangles: usize = self
             .objects
             .iter()
@@ -333,23 +332,13 @@ impl Scene {
                 _ => 0,
             })
             .sum();
-        let others = self.objects.len();
         let mut prims = PrimitiveSet {
             triangles: fallible::with_capacity(triangles)?,
-            spheres: fallible::with_capacity(others)?,
-            ellipsoids: fallible::with_capacity(others)?,
-            boxes: fallible::with_capacity(others)?,
-            vertices: Vec::new(),
-            planes: fallible::with_capacity(others)?,
+            ..PrimitiveSet::default()
         };
         // One origin list per kind, concatenated in the order of the global index.
         let mut by_kind: [Vec<PrimOrigin>; 5] = Default::default();
-        for (list, n) in by_kind
-            .iter_mut()
-            .zip([triangles, others, others, others, others])
-        {
-            *list = fallible::with_capacity(n)?;
-        }
+        by_kind[0] = fallible::with_capacity(triangles)?;
         for (id, obj) in self.objects.iter().enumerate() {
             object::place(obj, id as u32, &mut prims, &mut by_kind)?;
         }
@@ -365,9 +354,9 @@ impl Scene {
             tree,
             origins,
             lookup: PrimLookup::default(),
-            object_material: self.objects.iter().map(|o| o.material).collect(),
-            materials: self.materials.clone(),
-            lights: self.lights.clone(),
+            object_material: fallible::collect(self.objects.iter().map(|o| o.material))?,
+            materials: fallible::collect(self.materials.iter().cloned())?,
+            lights: fallible::collect(self.lights.iter().cloned())?,
             commit_ms: start.elapsed().as_secs_f32() * 1e3,
             id: NEXT_COMMIT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         });

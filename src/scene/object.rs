@@ -124,37 +124,41 @@ pub fn place(
     place_shape(&obj.shape, &obj.transform, |p| {
         let (kind, prim) = match p {
             Placed::Triangle(k, t) => {
-                set.triangles.push(t);
+                set.triangles.try_push(t)?;
                 (0, k)
             }
             Placed::Sphere(s) => {
-                set.spheres.push(s);
+                set.spheres.try_push(s)?;
                 (1, 0)
             }
             Placed::Ellipsoid(e) => {
-                set.ellipsoids.push(e);
+                set.ellipsoids.try_push(e)?;
                 (2, 0)
             }
             Placed::Box(b) => {
-                set.boxes.push(b);
+                set.boxes.try_push(b)?;
                 (3, 0)
             }
             Placed::Plane(p) => {
-                set.planes.push(p);
+                set.planes.try_push(p)?;
                 (4, 0)
             }
         };
-        origins[kind].push(PrimOrigin {
+        origins[kind].try_push(PrimOrigin {
             object: object_id,
             prim,
-        });
+        })
     })
 }
 
 /// The one placement algorithm: hands each world-space primitive of `shape` placed by `t` to
 /// `emit`, in order (a mesh's triangles in file order), after checking that it fits. Stops at
 /// the first primitive that does not fit; primitives handed on before stay handed on.
-fn place_shape(shape: &Shape, t: &Affine3A, mut emit: impl FnMut(Placed)) -> Result<()> {
+fn place_shape(
+    shape: &Shape,
+    t: &Affine3A,
+    mut emit: impl FnMut(Placed) -> Fallible<()>,
+) -> Result<()> {
     let lin = Mat3::from(t.matrix3);
     match shape {
         Shape::Mesh {
@@ -171,7 +175,7 @@ fn place_shape(shape: &Shape, t: &Affine3A, mut emit: impl FnMut(Placed)) -> Res
                         [a, b, c]
                     )));
                 }
-                emit(Placed::Triangle(k as u32, triangle));
+                emit(Placed::Triangle(k as u32, triangle))?;
             }
         }
         Shape::Sphere { center, radius } => {
@@ -197,9 +201,9 @@ fn place_shape(shape: &Shape, t: &Affine3A, mut emit: impl FnMut(Placed)) -> Res
                         sphere.radius
                     )));
                 }
-                emit(Placed::Sphere(sphere));
+                emit(Placed::Sphere(sphere))?;
             } else {
-                emit(Placed::Ellipsoid(ellipsoid(c, lin * *radius, "sphere")?));
+                emit(Placed::Ellipsoid(ellipsoid(c, lin * *radius, "sphere")?))?;
             }
         }
         Shape::Ellipsoid { center, radii } => {
@@ -208,7 +212,7 @@ fn place_shape(shape: &Shape, t: &Affine3A, mut emit: impl FnMut(Placed)) -> Res
                 t.transform_point3(*center),
                 m,
                 "ellipsoid",
-            )?));
+            )?))?;
         }
         Shape::Box { min, max } => {
             let (a, b) = (t.transform_point3(*min), t.transform_point3(*max));
@@ -218,10 +222,10 @@ fn place_shape(shape: &Shape, t: &Affine3A, mut emit: impl FnMut(Placed)) -> Res
                     "the box does not fit in f32 in world space: corners {a} and {b}"
                 )));
             }
-            emit(Placed::Box(bounds));
+            emit(Placed::Box(bounds))?;
         }
         Shape::Plane { normal, offset } => {
-            emit(Placed::Plane(plane(t, *normal, *offset)?));
+            emit(Placed::Plane(plane(t, *normal, *offset)?))?;
         }
     }
     Ok(())
@@ -236,7 +240,7 @@ fn place_shape(shape: &Shape, t: &Affine3A, mut emit: impl FnMut(Placed)) -> Res
 /// builds) but keeps nothing: primitives are checked one at a time, so checking a mesh needs
 /// no memory beyond the mesh (materialising it would double a large mesh's footprint).
 pub fn check(shape: &Shape, t: &Affine3A) -> Result<()> {
-    place_shape(shape, t, |_| {})
+    place_shape(shape, t, |_| Ok(()))
 }
 
 /// Whether a triangle's stored corner, the edges it stores and the corners rebuilt from them
