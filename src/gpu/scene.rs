@@ -6,7 +6,10 @@
 use super::device::Device;
 use super::layout::{GpuAabb, GpuLight, GpuMaterial, GpuParams};
 use super::{GpuError, GpuResult};
+use crate::fallible::{self, Fallible};
+use crate::geometry::Aabb;
 use crate::scene::Committed;
+use std::borrow::Cow;
 use std::hash::{DefaultHasher, Hasher};
 
 /// Scene arrays in binding order (common.wgsl, group 0).
@@ -51,42 +54,50 @@ fn hash(bytes: &[u8]) -> u64 {
     h.finish()
 }
 
-/// The arrays of `c` in binding order, as bytes.
-fn arrays(c: &Committed) -> Vec<Vec<u8>> {
+/// The arrays of `c` in binding order, as bytes: the ones in the device's layout already are
+/// borrowed (the tree, the triangles: no host copy of a large scene), the others converted
+/// into new arrays, allocated fallibly (`OutOfMemory` instead of an abort).
+fn arrays(c: &Committed) -> Fallible<Vec<Cow<'_, [u8]>>> {
     let t = &c.tree;
     let p = &c.prims;
-    let bytes = |s: &[u8]| s.to_vec();
-    let boxes: Vec<GpuAabb> = p.boxes.iter().map(GpuAabb::from).collect();
-    let (rank, links, leaf_boxes): (Vec<u8>, Vec<u8>, Vec<GpuAabb>) = match &t.ropes {
+    let (rank, links, leaf_bounds): (&[u8], &[u8], &[Aabb]) = match &t.ropes {
         Some(r) => (
-            bytemuck::cast_slice(&r.rank).to_vec(),
-            bytemuck::cast_slice(&r.links.words).to_vec(),
-            r.leaf_bounds.iter().map(GpuAabb::from).collect(),
+            bytemuck::cast_slice(&r.rank),
+            bytemuck::cast_slice(&r.links.words),
+            &r.leaf_bounds,
         ),
-        None => (Vec::new(), Vec::new(), Vec::new()),
+        None => (&[], &[], &[]),
     };
-    let prim_material: Vec<u32> = c
-        .origins
-        .iter()
-        .map(|o| c.object_material[o.object as usize])
-        .collect();
-    let materials: Vec<GpuMaterial> = c.materials.iter().map(GpuMaterial::from).collect();
-    let lights: Vec<GpuLight> = c.lights.iter().map(GpuLight::from).collect();
-    vec![
-        bytes(bytemuck::cast_slice(&t.nodes)),
-        rank,
-        bytes(bytemuck::cast_slice(&t.prim_indices)),
-        bytes(bytemuck::cast_slice(&p.triangles)),
-        bytes(bytemuck::cast_slice(&p.spheres)),
-        bytes(bytemuck::cast_slice(&p.ellipsoids)),
-        bytes(bytemuck::cast_slice(&boxes)),
-        bytes(bytemuck::cast_slice(&p.planes)),
-        links,
-        bytes(bytemuck::cast_slice(&leaf_boxes)),
-        bytes(bytemuck::cast_slice(&prim_material)),
-        bytes(bytemuck::cast_slice(&materials)),
-        bytes(bytemuck::cast_slice(&lights)),
-    ]
+    Ok(vec![
+        Cow::Borrowed(bytemuck::cast_slice(&t.nodes)),
+        Cow::Borrowed(rank),
+        Cow::Borrowed(bytemuck::cast_slice(&t.prim_indices)),
+        Cow::Borrowed(bytemuck::cast_slice(&p.triangles)),
+        Cow::Borrowed(bytemuck::cast_slice(&p.spheres)),
+        Cow::Borrowed(bytemuck::cast_slice(&p.ellipsoids)),
+        converted(p.boxes.iter().map(GpuAabb::from))?,
+        Cow::Borrowed(bytemuck::cast_slice(&p.planes)),
+        Cow::Borrowed(links),
+        converted(leaf_bounds.iter().map(GpuAabb::from))?,
+        converted(
+            c.origins
+                .iter()
+                .map(|o| c.object_material[o.object as usize]),
+        )?,
+        converted(c.materials.iter().map(GpuMaterial::from))?,
+        converted(c.lights.iter().map(GpuLight::from))?,
+    ])
+}
+
+/// The bytes of `items` in the device's layout.
+fn converted<T: bytemuck::Pod>(
+    items: impl ExactSizeIterator<Item = T>,
+) -> Fallible<Cow<'static, [u8]>> {
+    let mut bytes = fallible::with_capacity(items.len() * std::mem::size_of::<T>())?;
+    for x in items {
+        bytes.extend_from_slice(bytemuck::bytes_of(&x));
+    }
+    Ok(Cow::Owned(bytes))
 }
 
 impl SceneCache {
@@ -115,7 +126,9 @@ impl SceneCache {
             self.last_uploads.clear();
             return Ok(());
         }
-        let data = arrays(c);
+        let data = arrays(c).map_err(|_| {
+            GpuError::OutOfMemory("no host memory to convert the scene for the device".into())
+        })?;
         for (name, d) in NAMES.iter().zip(&data) {
             if d.len() as u64 > dev.max_binding() {
                 return Err(GpuError::Limits(format!(
