@@ -91,21 +91,23 @@ fn incoherent_rays(c: &Committed, n: usize) -> Vec<Ray> {
         .collect()
 }
 
-/// Fastest of `runs` timed passes (after a warm-up) tracing every batch once with `mode` and
-/// `width` on `ctx`'s threads. The fastest rather than the median: the machine is shared, and
-/// other processes only ever add time.
+/// Fastest of `runs` timed passes (after a warm-up) tracing every batch once, for each of
+/// `configs` (a mode and a lane width), on `ctx`'s threads, in seconds. Each run times every
+/// config in turn, so that a busy spell of this shared machine slows them all rather than
+/// the one measured then (the ratios between modes are what the tables compare). The fastest
+/// rather than the median: other processes only ever add time.
 fn seconds(
     ctx: &Context,
     c: &Committed,
     batches: &[Vec<Ray>],
-    mode: QueryMode,
-    width: Width,
+    configs: &[(QueryMode, Width)],
     runs: usize,
-) -> f64 {
+) -> Vec<f64> {
     let longest = batches.iter().map(Vec::len).max().unwrap_or(0);
     let mut hits = vec![Hit::MISS; longest];
     let opts = TraverseOptions::default();
-    let mut pass = || {
+    let mut pass = |(mode, width): (QueryMode, Width)| {
+        let t = Instant::now();
         for b in batches {
             ctx.install(|| {
                 query::trace(
@@ -119,15 +121,28 @@ fn seconds(
                 )
             });
         }
+        t.elapsed().as_secs_f64()
     };
-    pass();
-    (0..runs)
-        .map(|_| {
-            let t = Instant::now();
-            pass();
-            t.elapsed().as_secs_f64()
-        })
-        .fold(f64::INFINITY, f64::min)
+    for &config in configs {
+        pass(config);
+    }
+    let mut fastest = vec![f64::INFINITY; configs.len()];
+    for _ in 0..runs {
+        for (f, &config) in fastest.iter_mut().zip(configs) {
+            *f = f.min(pass(config));
+        }
+    }
+    fastest
+}
+
+/// The paper's three modes at the default width ([`MODES`]), then 4-lane packets.
+fn with_packets4(width: Width) -> [(QueryMode, Width); 4] {
+    [
+        (MODES[0], width),
+        (MODES[1], width),
+        (MODES[2], width),
+        (QueryMode::Packet, Width::W4),
+    ]
 }
 
 fn rays_of(batches: &[Vec<Ray>]) -> f64 {
@@ -147,7 +162,8 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          caches. Trees: SAH with perfect splits (the library default; the \
          paper used midpoint trees). Paper: Pentium-M, 1 core; its third model is the Buddha, the \
          Snowden bust stands in for it. Ratios are measured in this run on a shared 2-core machine \
-         (±10%); each figure is the fastest of the timed runs, because other processes only add time.\n\n",
+         (±10%); each figure is the fastest of the timed runs, because other processes only add time, \
+         and each run times every mode in turn, so that a busy spell slows them all.\n\n",
         w = width.lanes(),
         hi = STREAM_MAX
     );
@@ -190,11 +206,8 @@ pub(super) fn streams(a: &Args) -> Result<String> {
                 )
             })
             .collect();
-        let secs: Vec<f64> = MODES
-            .iter()
-            .map(|&m| seconds(&one, c, &orbit, m, width, a.runs))
-            .collect();
-        let secs4 = seconds(&one, c, &orbit, QueryMode::Packet, Width::W4, a.runs);
+        let secs = seconds(&one, c, &orbit, &with_packets4(width), a.runs);
+        let (secs4, secs) = (secs[3], &secs[..3]);
         let mr4 = rays_of(&orbit) / secs4 / 1e6;
         let mr: Vec<f64> = secs.iter().map(|s| rays_of(&orbit) / s / 1e6).collect();
         let paper = PAPER_COHERENT.iter().find(|p| p.0 == model).map(|p| p.1);
@@ -233,12 +246,11 @@ pub(super) fn streams(a: &Args) -> Result<String> {
         )
         .ok();
         let inco = vec![incoherent_rays(c, 262_144)];
-        let mi: Vec<f64> = MODES
+        let mi: Vec<f64> = seconds(&one, c, &inco, &with_packets4(width), a.runs)
             .iter()
-            .map(|&m| rays_of(&inco) / seconds(&one, c, &inco, m, width, a.runs) / 1e6)
+            .map(|s| rays_of(&inco) / s / 1e6)
             .collect();
-        let mi4 =
-            rays_of(&inco) / seconds(&one, c, &inco, QueryMode::Packet, Width::W4, a.runs) / 1e6;
+        let mi4 = mi[3];
         let paper = PAPER_INCOHERENT.iter().find(|p| p.0 == model).map(|p| p.1);
         writeln!(
             t3,
@@ -258,9 +270,10 @@ pub(super) fn streams(a: &Args) -> Result<String> {
                 orbit_rays(c, 1376, 768, angle)
             })
             .collect();
-        let mw: Vec<f64> = MODES
+        let configs = MODES.map(|m| (m, width));
+        let mw: Vec<f64> = seconds(&one, c, &big, &configs, a.runs.min(3))
             .iter()
-            .map(|&m| rays_of(&big) / seconds(&one, c, &big, m, width, a.runs.min(3)) / 1e6)
+            .map(|s| rays_of(&big) / s / 1e6)
             .collect();
         writeln!(
             wide,
@@ -374,22 +387,27 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
                 .file_stem()
                 .map_or(String::new(), |s| s.to_string_lossy().into());
             let mut row = format!("| {model} {stem} |");
+            // Streams and packets at every width (None where the CPU lacks it), then single
+            // rays, all timed in each run.
+            let columns: Vec<Option<(QueryMode, Width)>> = [QueryMode::Stream, QueryMode::Packet]
+                .iter()
+                .flat_map(|&m| Width::ALL.map(|w| w.supported().then_some((m, w))))
+                .chain([Some((QueryMode::Single, Width::W4))])
+                .collect();
+            let configs: Vec<(QueryMode, Width)> = columns.iter().flatten().copied().collect();
+            let mut mrays = seconds(one, c, &rays, &configs, a.runs)
+                .into_iter()
+                .map(|s| rays_of(&rays) / s / 1e6);
             let mut best: f64 = 0.0;
-            for mode in [QueryMode::Stream, QueryMode::Packet] {
-                for w in Width::ALL {
-                    if w.supported() {
-                        let m = rays_of(&rays) / seconds(one, c, &rays, mode, w, a.runs) / 1e6;
+            for column in &columns {
+                match column.and_then(|_| mrays.next()) {
+                    Some(m) => {
                         best = best.max(m);
                         write!(row, " {m:.2} |").ok();
-                    } else {
-                        row += " — |";
                     }
+                    None => row += " — |",
                 }
             }
-            let single =
-                rays_of(&rays) / seconds(one, c, &rays, QueryMode::Single, Width::W4, a.runs) / 1e6;
-            best = best.max(single);
-            write!(row, " {single:.2} |").ok();
             let find = |mode: &str| {
                 embree
                     .iter()
