@@ -8,16 +8,8 @@ use glam::Vec3;
 use rt2::geometry::{PrimitiveSet, Triangle};
 use rt2::kdtree::{build, BuildOptions, Builder};
 
-/// A field of the process's `/proc/self/status` in MiB (`VmRSS`, `VmHWM`).
-fn status_mib(field: &str) -> f64 {
-    let status = std::fs::read_to_string("/proc/self/status").expect("Linux /proc");
-    let kib: f64 = status
-        .lines()
-        .find_map(|l| l.strip_prefix(field))
-        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
-        .unwrap_or_else(|| panic!("{field} in /proc/self/status"));
-    kib / 1024.0
-}
+mod support;
+use support::status_mib;
 
 #[test]
 #[cfg(target_os = "linux")]

@@ -14,15 +14,11 @@ use std::ffi::CStr;
 use std::io::Write;
 use std::ptr::{null, null_mut};
 
+mod support;
+
 /// The process's address space now (`VmSize`), in bytes.
 fn address_space() -> u64 {
-    let status = std::fs::read_to_string("/proc/self/status").expect("Linux /proc");
-    let kib: u64 = status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmSize:"))
-        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
-        .expect("VmSize in /proc/self/status");
-    kib * 1024
+    (support::status_mib("VmSize:") * 1024.0 * 1024.0) as u64
 }
 
 /// Sets the soft address-space limit (`None`: back to the hard limit).

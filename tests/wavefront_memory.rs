@@ -12,16 +12,7 @@ use rt2::frame::Frame;
 use rt2::render::{RenderOptions, Schedule, Transparency};
 use rt2::scene::{Material, Scene, Shape};
 
-/// The process's peak resident memory in MiB, from `/proc/self/status`.
-fn peak_mib() -> f64 {
-    let status = std::fs::read_to_string("/proc/self/status").expect("Linux /proc");
-    let kib: f64 = status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmHWM:"))
-        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
-        .expect("VmHWM in /proc/self/status");
-    kib / 1024.0
-}
+mod support;
 
 #[test]
 #[cfg(target_os = "linux")]
@@ -70,9 +61,9 @@ fn doubling_waves_are_traced_in_bounded_slices() {
             .unwrap();
         frame
     };
-    let before = peak_mib();
+    let before = support::status_mib("VmHWM:");
     let bf = render(Schedule::BreadthFirst);
-    let peak = peak_mib();
+    let peak = support::status_mib("VmHWM:");
     println!("peak {peak:.0} MiB (before the render {before:.0} MiB)");
     assert!(
         peak < 600.0,

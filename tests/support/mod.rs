@@ -110,3 +110,15 @@ pub fn shared_path(rel: &str) -> Option<PathBuf> {
     );
     None
 }
+
+/// A field of this process's `/proc/self/status` in MiB (`VmRSS`, `VmHWM`, `VmSize`): the
+/// memory tests, each alone in its test binary, read the process's own figures.
+pub fn status_mib(field: &str) -> f64 {
+    let status = std::fs::read_to_string("/proc/self/status").expect("Linux /proc");
+    let kib: f64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix(field))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .unwrap_or_else(|| panic!("{field} in /proc/self/status"));
+    kib / 1024.0
+}
