@@ -1,7 +1,8 @@
 //! Frames: RGBA8 images, row-major from the top-left, with an optional HUD mask of pixels
 //! that are not traced at all (their contents are left as they were).
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Rt2Status};
+use crate::fallible::TryGrow;
 use std::path::Path;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -30,10 +31,7 @@ impl Frame {
         let len = (width as usize) * (height as usize) * 4;
         let mut pixels = Vec::new();
         pixels.try_reserve_exact(len).map_err(|_| {
-            Error::new(
-                crate::error::Rt2Status::OutOfMemory,
-                format!("{len} bytes for the frame"),
-            )
+            Error::new(Rt2Status::OutOfMemory, format!("{len} bytes for the frame"))
         })?;
         pixels.resize(len, 0);
         Ok(Frame {
@@ -80,7 +78,21 @@ impl Frame {
                 )));
             }
         }
-        self.mask = mask.map(<[u8]>::to_vec);
+        // A byte per pixel, up to 1 GiB at the largest frame: refused as OUT_OF_MEMORY, like
+        // the frame itself, rather than aborting.
+        self.mask = match mask {
+            Some(m) => {
+                let mut copy = Vec::new();
+                copy.try_extend_from_slice(m).map_err(|_| {
+                    Error::new(
+                        Rt2Status::OutOfMemory,
+                        format!("{} bytes for the frame's mask", m.len()),
+                    )
+                })?;
+                Some(copy)
+            }
+            None => None,
+        };
         Ok(())
     }
 

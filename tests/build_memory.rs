@@ -9,7 +9,6 @@ use rt2::geometry::{PrimitiveSet, Triangle};
 use rt2::kdtree::{build, BuildOptions, Builder};
 
 mod support;
-use support::status_mib;
 
 #[test]
 #[cfg(target_os = "linux")]
@@ -43,11 +42,11 @@ fn a_deep_midpoint_build_peaks_near_the_size_of_its_tree() {
         .num_threads(2)
         .build()
         .expect("a thread pool");
-    let before = status_mib("VmRSS:");
+    let before = support::status_mib("VmRSS:");
     let tree = pool
         .install(|| build(&set, &opts))
         .expect("memory for the tree");
-    let peak = status_mib("VmHWM:") - before;
+    let peak = support::status_mib("VmHWM:") - before;
     let tree_mib = (tree.nodes.len() * std::mem::size_of_val(&tree.nodes[0])
         + tree.prim_indices.len() * 4) as f64
         / (1024.0 * 1024.0);

@@ -1,10 +1,10 @@
-//! A commit that cannot have the memory it needs returns `RT2_STATUS_OUT_OF_MEMORY` instead of
-//! aborting the host program (Rust's default on a failed allocation), and the scene can be
-//! committed again once memory is there.
+//! A commit (or a frame's mask) that cannot have the memory it needs returns
+//! `RT2_STATUS_OUT_OF_MEMORY` instead of aborting the host program (Rust's default on a failed
+//! allocation), and the call works once memory is there.
 //!
 //! The memory is limited as a cluster or `ulimit -v` limits it: an address-space limit
-//! (`RLIMIT_AS`) on this process. That is why this test is alone in its test binary: the limit
-//! holds for every thread of the process while it is set.
+//! (`RLIMIT_AS`) on this process. That is why this is one test alone in its test binary: the
+//! limit holds for every thread of the process while it is set.
 
 #![cfg(target_os = "linux")]
 
@@ -80,7 +80,7 @@ unsafe fn hit_at(ctx: *const rt2_context, scene: *const rt2_scene, x: f32, y: f3
 }
 
 #[test]
-fn a_commit_without_memory_fails_with_out_of_memory_and_can_be_retried() {
+fn calls_without_memory_fail_with_out_of_memory_and_can_be_retried() {
     // 2 million triangles: the commit places them (36 bytes each), builds the tree (its event
     // lists alone take 48 bytes per triangle) and renumbers them, a few hundred MB in all,
     // more than the slack in what the allocator has reserved already (address space counts
@@ -172,5 +172,18 @@ fn a_commit_without_memory_fails_with_out_of_memory_and_can_be_retried() {
         }
         assert!(failed >= 3, "only {failed} limits were too small");
         rt2_context_destroy(ctx);
+
+        // A frame's mask is copied: a byte per pixel, 64 MiB for an 8192² frame.
+        let mut frame = null_mut();
+        assert_eq!(rt2_frame_create(8192, 8192, &mut frame), Rt2Status::Ok);
+        let mask = vec![1u8; 8192 * 8192];
+        libc::malloc_trim(0);
+        limit_address_space(Some(address_space() + (16 << 20)));
+        let status = rt2_frame_set_mask(frame, mask.as_ptr());
+        limit_address_space(None);
+        assert_eq!(status, Rt2Status::OutOfMemory, "{}", last_error());
+        assert!(last_error().contains("mask"), "{}", last_error());
+        assert_eq!(rt2_frame_set_mask(frame, mask.as_ptr()), Rt2Status::Ok);
+        rt2_frame_destroy(frame);
     }
 }

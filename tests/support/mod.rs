@@ -1,5 +1,6 @@
-//! Shared by the integration tests that compile C against `include/rt2.h` or load the built
-//! shared library: where the library is, and a `cc` compiler configured outside build.rs.
+//! Shared by the integration tests: for those that compile C against `include/rt2.h` or load
+//! the built shared library, where the library is and a `cc` compiler configured outside
+//! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`.
 
 #![allow(dead_code)]
 
