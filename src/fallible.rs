@@ -93,6 +93,13 @@ pub fn filled<T: Clone>(x: T, n: usize) -> Fallible<Vec<T>> {
     Ok(v)
 }
 
+/// `to_vec`, failing instead of aborting.
+pub fn copied<T: Copy>(s: &[T]) -> Fallible<Vec<T>> {
+    let mut v = Vec::new();
+    v.try_extend_from_slice(s)?;
+    Ok(v)
+}
+
 /// `collect::<Vec<_>>()`, failing instead of aborting.
 pub fn collect<T>(items: impl IntoIterator<Item = T>) -> Fallible<Vec<T>> {
     let mut v = Vec::new();
@@ -121,5 +128,6 @@ mod tests {
         w.try_push(6).unwrap();
         assert_eq!(w, [0, 0, 0, 0, 5, 6]);
         assert_eq!(collect(1..4).unwrap(), [1, 2, 3]);
+        assert_eq!(copied(&[4u8, 5]).unwrap(), [4, 5]);
     }
 }

@@ -2,7 +2,7 @@
 //! that are not traced at all (their contents are left as they were).
 
 use crate::error::{Error, Result, Rt2Status};
-use crate::fallible::TryGrow;
+use crate::fallible;
 use std::path::Path;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -81,16 +81,12 @@ impl Frame {
         // A byte per pixel, up to 1 GiB at the largest frame: refused as OUT_OF_MEMORY, like
         // the frame itself, rather than aborting.
         self.mask = match mask {
-            Some(m) => {
-                let mut copy = Vec::new();
-                copy.try_extend_from_slice(m).map_err(|_| {
-                    Error::new(
-                        Rt2Status::OutOfMemory,
-                        format!("{} bytes for the frame's mask", m.len()),
-                    )
-                })?;
-                Some(copy)
-            }
+            Some(m) => Some(fallible::copied(m).map_err(|_| {
+                Error::new(
+                    Rt2Status::OutOfMemory,
+                    format!("{} bytes for the frame's mask", m.len()),
+                )
+            })?),
             None => None,
         };
         Ok(())

@@ -563,10 +563,10 @@ impl Device {
         let view = slice
             .get_mapped_range()
             .map_err(|e| gpu_error(format!("reading a result buffer: {e}")))?;
-        let out = view[..bytes as usize].to_vec();
+        let out = crate::fallible::copied(&view[..bytes as usize]);
         drop(view);
         staging.unmap();
-        Ok(out)
+        Ok(out?)
     }
 
     /// Turns what wgpu reported outside error scopes, for this thread's calls, into the job's

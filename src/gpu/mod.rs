@@ -95,6 +95,14 @@ pub enum GpuError {
     Other(crate::error::Error),
 }
 
+/// Host memory for a job's buffers (rays, mask, read-back) that could not be allocated: as
+/// when the device runs out, AUTO runs the job on the CPU.
+impl From<crate::fallible::OutOfMemory> for GpuError {
+    fn from(_: crate::fallible::OutOfMemory) -> Self {
+        GpuError::OutOfMemory("no host memory for the GPU job's buffers".into())
+    }
+}
+
 impl From<crate::error::Error> for GpuError {
     fn from(e: crate::error::Error) -> Self {
         GpuError::Other(e)

@@ -6,6 +6,7 @@ use super::kernels::Program;
 use super::layout::{GpuHit, GpuParams, GpuRay, GpuStats};
 use super::GpuResult;
 use crate::cpu::traverse::Traversal;
+use crate::fallible;
 use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats};
 use crate::scene::Committed;
 
@@ -33,7 +34,7 @@ pub(crate) fn run(
         .max(1) as usize;
     let mut stats = TraversalStats::default();
     for (k, piece) in rays.chunks(per).enumerate() {
-        let gpu_rays: Vec<GpuRay> = piece.iter().map(gpu_ray).collect();
+        let gpu_rays: Vec<GpuRay> = fallible::collect(piece.iter().map(gpu_ray))?;
         let params = cache.job(GpuParams {
             count: piece.len() as u32,
             short_stack: short_stack as u32,

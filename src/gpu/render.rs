@@ -15,6 +15,7 @@ use super::layout::{GpuItem, GpuParams, GpuScanParams};
 use super::{GpuError, GpuResult};
 use crate::camera::Camera;
 use crate::cpu::traverse::Traversal;
+use crate::fallible::{self, Fallible};
 use crate::frame::Frame;
 use crate::precision::OffsetMode;
 use crate::render::{RenderOptions, Transparency};
@@ -178,7 +179,7 @@ impl Job<'_> {
                 count: rows * base.width,
                 ..base
             };
-            let mask = self.mask_words(row, rows);
+            let mask = self.mask_words(row, rows)?;
             let px = match path {
                 GpuPath::Megakernel => {
                     self.megakernel(&pipelines[0], &scene_group, params, &mask)?
@@ -201,13 +202,14 @@ impl Job<'_> {
     }
 
     /// The HUD mask of `rows` rows from `row0`, one word per pixel (empty: no mask).
-    fn mask_words(&self, row0: u32, rows: u32) -> Vec<u32> {
+    fn mask_words(&self, row0: u32, rows: u32) -> Fallible<Vec<u32>> {
         let w = self.base.width as usize;
-        self.mask.map_or_else(Vec::new, |m| {
-            m[row0 as usize * w..(row0 + rows) as usize * w]
-                .iter()
-                .map(|&b| b as u32)
-                .collect()
+        self.mask.map_or(Ok(Vec::new()), |m| {
+            fallible::collect(
+                m[row0 as usize * w..(row0 + rows) as usize * w]
+                    .iter()
+                    .map(|&b| b as u32),
+            )
         })
     }
 
@@ -232,7 +234,7 @@ impl Job<'_> {
         let mut enc = dev.device.create_command_encoder(&Default::default());
         dev.dispatch(&mut enc, pipeline, &[scene, &io], n);
         let bytes = dev.read_back(enc, &frame, 0, 4 * n)?;
-        Ok(bytemuck::cast_slice(&bytes).to_vec())
+        Ok(fallible::copied(bytemuck::cast_slice(&bytes))?)
     }
 
     /// `pipes`: generate, trace, accumulate, compact, finalize.
@@ -305,7 +307,7 @@ impl Job<'_> {
         let mut enc = dev.device.create_command_encoder(&Default::default());
         dev.dispatch(&mut enc, finalize, &[scene, &io(&params)], n);
         let bytes = dev.read_back(enc, &frame, 0, 4 * n)?;
-        Ok(bytemuck::cast_slice(&bytes).to_vec())
+        Ok(fallible::copied(bytemuck::cast_slice(&bytes))?)
     }
 }
 
