@@ -109,10 +109,7 @@ impl Context {
             .map_err(|e| {
                 // The system refused a thread (a process or memory limit): a resource
                 // failure, not a bug.
-                Error::new(
-                    crate::error::Rt2Status::OutOfMemory,
-                    format!("cannot start {threads} worker threads: {e}"),
-                )
+                Error::out_of_memory(format!("cannot start {threads} worker threads: {e}"))
             })?;
         Ok(Context {
             pool,

@@ -47,6 +47,10 @@ impl Error {
         Self::new(Rt2Status::InvalidOperation, message)
     }
 
+    pub fn out_of_memory(message: impl Into<String>) -> Self {
+        Self::new(Rt2Status::OutOfMemory, message)
+    }
+
     pub fn io(message: impl Into<String>) -> Self {
         Self::new(Rt2Status::Io, message)
     }

@@ -15,7 +15,7 @@
 //! larger than the machine. Under Linux's default overcommit a process that fills the RAM is
 //! more often stopped by the kernel's OOM killer, which no library can answer.
 
-use crate::error::{Error, Rt2Status};
+use crate::error::Error;
 
 /// An allocation failed (or a size overflowed `isize`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -31,8 +31,7 @@ impl From<std::collections::TryReserveError> for OutOfMemory {
 
 impl From<OutOfMemory> for Error {
     fn from(_: OutOfMemory) -> Self {
-        Error::new(
-            Rt2Status::OutOfMemory,
+        Error::out_of_memory(
             "out of memory for the scene's primitives or kd-tree (or its ropes, exact corners or \
              primitive lookup); the scene is as it was",
         )
@@ -110,6 +109,7 @@ pub fn collect<T>(items: impl IntoIterator<Item = T>) -> Fallible<Vec<T>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::error::Rt2Status;
 
     /// A request past `isize::MAX` bytes fails in every call instead of aborting, and leaves the
     /// vector as it was.

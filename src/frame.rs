@@ -1,7 +1,7 @@
 //! Frames: RGBA8 images, row-major from the top-left, with an optional HUD mask of pixels
 //! that are not traced at all (their contents are left as they were).
 
-use crate::error::{Error, Result, Rt2Status};
+use crate::error::{Error, Result};
 use crate::fallible;
 use std::path::Path;
 
@@ -29,11 +29,8 @@ impl Frame {
             )));
         }
         let len = (width as usize) * (height as usize) * 4;
-        let mut pixels = Vec::new();
-        pixels.try_reserve_exact(len).map_err(|_| {
-            Error::new(Rt2Status::OutOfMemory, format!("{len} bytes for the frame"))
-        })?;
-        pixels.resize(len, 0);
+        let pixels = fallible::filled(0, len)
+            .map_err(|_| Error::out_of_memory(format!("{len} bytes for the frame")))?;
         Ok(Frame {
             width,
             height,
@@ -82,10 +79,7 @@ impl Frame {
         // the frame itself, rather than aborting.
         self.mask = match mask {
             Some(m) => Some(fallible::copied(m).map_err(|_| {
-                Error::new(
-                    Rt2Status::OutOfMemory,
-                    format!("{} bytes for the frame's mask", m.len()),
-                )
+                Error::out_of_memory(format!("{} bytes for the frame's mask", m.len()))
             })?),
             None => None,
         };

@@ -9,6 +9,7 @@ use super::options::{
 use super::scene::rt2_scene;
 use crate::context::QueryOptions;
 use crate::error::{Error, Rt2Status};
+use crate::fallible;
 use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
 use crate::scene::PrimLookup;
 use glam::Vec3;
@@ -123,15 +124,11 @@ fn excluded_all(
     scene: &super::scene::rt2_scene,
     exclude: &[rt2_hit],
 ) -> crate::error::Result<(Vec<PrimIndex>, u64)> {
-    let mut global = Vec::new();
-    global.try_reserve_exact(exclude.len()).map_err(|_| {
-        Error::new(
-            Rt2Status::OutOfMemory,
-            format!(
-                "no memory for the {} excluded primitives of opt.exclude",
-                exclude.len()
-            ),
-        )
+    let mut global = fallible::with_capacity(exclude.len()).map_err(|_| {
+        Error::out_of_memory(format!(
+            "no memory for the {} excluded primitives of opt.exclude",
+            exclude.len()
+        ))
     })?;
     let map = |lookup: &PrimLookup, global: &mut Vec<PrimIndex>| {
         for (i, h) in exclude.iter().enumerate() {

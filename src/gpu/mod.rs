@@ -115,7 +115,7 @@ impl GpuError {
         use crate::error::{Error, Rt2Status};
         match self {
             GpuError::Limits(m) | GpuError::Lost(m) => Error::new(Rt2Status::BackendUnavailable, m),
-            GpuError::OutOfMemory(m) => Error::new(Rt2Status::OutOfMemory, m),
+            GpuError::OutOfMemory(m) => Error::out_of_memory(m),
             GpuError::Other(e) => e,
         }
     }

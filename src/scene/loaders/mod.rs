@@ -12,7 +12,8 @@ use std::path::Path;
 
 use glam::Vec3;
 
-use crate::error::{Error, Result, Rt2Status};
+use crate::error::{Error, Result};
+use crate::fallible;
 
 mod obj;
 mod ply;
@@ -93,20 +94,15 @@ fn read_regular_file(path: &Path, name: &str) -> Result<Vec<u8>> {
         return Err(not_regular(&meta));
     }
     let len = usize::try_from(meta.len()).map_err(|_| {
-        Error::new(
-            Rt2Status::OutOfMemory,
-            format!(
-                "{name}: the file ({} bytes) does not fit in memory",
-                meta.len()
-            ),
-        )
+        Error::out_of_memory(format!(
+            "{name}: the file ({} bytes) does not fit in memory",
+            meta.len()
+        ))
     })?;
-    let mut bytes = Vec::new();
-    bytes.try_reserve_exact(len).map_err(|_| {
-        Error::new(
-            Rt2Status::OutOfMemory,
-            format!("{name}: cannot allocate {len} bytes to read the file"),
-        )
+    let mut bytes = fallible::with_capacity(len).map_err(|_| {
+        Error::out_of_memory(format!(
+            "{name}: cannot allocate {len} bytes to read the file"
+        ))
     })?;
     file.take(meta.len()).read_to_end(&mut bytes).map_err(io)?;
     Ok(bytes)

@@ -6,7 +6,8 @@
 use glam::Vec3;
 
 use super::{finite_coord, line_error, Mesh, Quoted};
-use crate::error::{Error, Result, Rt2Status};
+use crate::error::{Error, Result};
+use crate::fallible::TryGrow;
 
 /// Parses an OBJ file held in memory; `name` is used in error messages.
 ///
@@ -58,8 +59,9 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
                         Quoted(extra)
                     )));
                 }
-                room_for_one(&mut mesh.positions, name)?;
-                mesh.positions.push(Vec3::from_array(xyz));
+                mesh.positions
+                    .try_push(Vec3::from_array(xyz))
+                    .map_err(|_| no_memory(name))?;
             }
             "f" => {
                 let defined = mesh.positions.len();
@@ -74,8 +76,9 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
                 let mut corners = 2;
                 for tok in toks {
                     let v = index(tok)?;
-                    room_for_one(&mut mesh.triangles, name)?;
-                    mesh.triangles.push([v0, prev, v]);
+                    mesh.triangles
+                        .try_push([v0, prev, v])
+                        .map_err(|_| no_memory(name))?;
                     prev = v;
                     corners += 1;
                 }
@@ -98,19 +101,10 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
     Ok(mesh)
 }
 
-/// Makes room for one more element (growing as `push` would), so that running out of memory
-/// on a large file is an `OutOfMemory` error rather than an abort of the host program. OBJ
-/// gives no counts up front, so the arrays grow as lines are read.
-fn room_for_one<T>(v: &mut Vec<T>, name: &str) -> Result<()> {
-    if v.len() == v.capacity() {
-        v.try_reserve(1).map_err(|_| {
-            Error::new(
-                Rt2Status::OutOfMemory,
-                format!("{name}: cannot allocate memory for the mesh"),
-            )
-        })?;
-    }
-    Ok(())
+/// The error of a mesh that outgrew the memory: OBJ gives no counts up front, so the arrays
+/// grow (fallibly: an error, not an abort of the host program) as lines are read.
+fn no_memory(name: &str) -> Error {
+    Error::out_of_memory(format!("{name}: cannot allocate memory for the mesh"))
 }
 
 /// Resolves one face vertex reference (`i`, `i/t`, `i//n`, `i/t/n`) to a 0-based index into

@@ -10,7 +10,7 @@ use std::collections::HashSet;
 use glam::Vec3;
 
 use super::{finite_coord, line_error, offset_error, Mesh, Quoted};
-use crate::error::{Error, Result, Rt2Status};
+use crate::error::{Error, Result};
 
 /// The scalar types of the PLY spec, under either of their two spellings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -169,13 +169,10 @@ pub fn parse_ply(bytes: &[u8], name: &str) -> Result<Mesh> {
             Role::Skip => Ok(()),
         };
         reserved.map_err(|_| {
-            Error::new(
-                Rt2Status::OutOfMemory,
-                format!(
-                    "{name}: cannot allocate memory for {} '{}' entries",
-                    el.count, el.name
-                ),
-            )
+            Error::out_of_memory(format!(
+                "{name}: cannot allocate memory for {} '{}' entries",
+                el.count, el.name
+            ))
         })?;
     }
     let n_verts = header
