@@ -92,7 +92,9 @@ fn rope_walk(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, St
         let leaf = leaf_number(node);
         var ex: Exit;
         if (three_faces) { ex = exit_three_faces(leaf_boxes[leaf], r); } else { ex = exit_six_faces(leaf_boxes[leaf], r); }
-        if (miss_test && ex.t < t_entry) { return; }
+        // A miss only if the ray misses the scene box as `clip_scene` sees it: the leaf's box
+        // is not padded, and on a flat scene its exit may round to just before `tmin`.
+        if (miss_test && ex.t < t_entry && !clip_scene(r).ok) { return; }
         miss_test = false;
         if (visit_leaf(nodes[node], ex.t, r.ray, h, any_hit, st) || ex.t >= t_end) { return; }
         node = rope(leaf, ex.face);

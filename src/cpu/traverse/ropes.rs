@@ -8,7 +8,7 @@
 //! comparison of the pseudo-code with the direction sign deciding points on a split plane, and
 //! rounds exactly like the other traversals' descent.
 
-use super::common::{descend, visit_leaf, LeafQuery, TRay};
+use super::common::{clip, descend, visit_leaf, LeafQuery, TRay};
 use crate::geometry::{Aabb, TraversalStats, INVALID};
 use crate::kdtree::{KdTree, Ropes};
 
@@ -84,15 +84,19 @@ fn tied_exit(b: &Aabb, links: &[u32; 6], ray: &TRay, face: usize, t_exit: f32) -
 }
 
 /// Where a rope walk starts and how it reads leaf boxes.
-struct Walk<Exit> {
+struct Walk<'a, Exit> {
     node: u32,
     t_entry: f32,
     /// Stop once the ray has left the leaf at or beyond this distance.
     t_end: f32,
     exit: Exit,
-    /// ropes++ from the root: a first leaf left before it is entered means the ray missed the
-    /// scene box (the entry-only scene test is completed here).
-    miss_test: bool,
+    /// ropes++ from the root: the scene box whose entry-only test is completed at the first
+    /// leaf. A first leaf left before it is entered means the ray missed the box, unless only
+    /// by rounding: the leaf's own box is not padded, and where the scene box has no depth,
+    /// or the window starts on a primitive in a face of the box, its exit may round to just
+    /// before an entry clamped to `tmin`. The box is then clipped as the other traversals clip
+    /// it, so that they agree on which rays meet it.
+    miss_test: Option<&'a Aabb>,
 }
 
 /// The loop of algorithms 7 and 8: locate the leaf, test its primitives, follow the exit rope.
@@ -100,7 +104,7 @@ fn walk(
     tree: &KdTree,
     ropes: &Ropes,
     ray: &TRay,
-    w: Walk<impl Fn(&Aabb, &TRay) -> (f32, usize)>,
+    w: Walk<'_, impl Fn(&Aabb, &TRay) -> (f32, usize)>,
     query: &mut impl LeafQuery,
     stats: &mut TraversalStats,
 ) {
@@ -110,10 +114,11 @@ fn walk(
         let (at, leaf, _) = descend(tree, ray, node, t_entry, f32::INFINITY, stats, |_| {});
         let leaf_index = ropes.leaf_number(at);
         let (t_exit, face) = (w.exit)(&ropes.leaf_bounds[leaf_index], ray);
-        if miss_test && t_exit < t_entry {
-            return;
+        if let Some(scene_box) = miss_test.take() {
+            if t_exit < t_entry && clip(scene_box, ray).is_none() {
+                return;
+            }
         }
-        miss_test = false;
         if visit_leaf(tree, leaf, t_exit, query, stats) || t_exit >= w.t_end {
             return;
         }
@@ -153,7 +158,7 @@ pub(super) fn ropes(
         t_entry: scene_min,
         t_end: scene_max,
         exit: exit_six_faces,
-        miss_test: false,
+        miss_test: None,
     };
     walk(tree, ropes, ray, w, query, stats);
 }
@@ -182,8 +187,8 @@ pub(super) fn ropes_plus_plus(
         }
     };
     let (node, t_entry, miss_test) = match start {
-        Some(s) if holds_origin(s) => (s, ray.ray.tmin, false),
-        _ => (0, entry_three_faces(scene_box, ray), true),
+        Some(s) if holds_origin(s) => (s, ray.ray.tmin, None),
+        _ => (0, entry_three_faces(scene_box, ray), Some(scene_box)),
     };
     // Past the window, or parallel to a slab it lies outside of.
     if t_entry > ray.ray.tmax || t_entry == f32::INFINITY {
