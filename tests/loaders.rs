@@ -333,6 +333,28 @@ fn ply_header_with_many_elements_parses_in_linear_time() {
     );
 }
 
+#[test]
+fn ply_property_declared_twice_is_refused() {
+    // Two `x` columns: every row would be read with the first and the second dropped unseen.
+    let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+        property float z\nproperty float x\nelement face 1\n\
+        property list uchar int vertex_indices\nend_header\n\
+        0 0 0 5\n1 0 0 5\n0 1 0 5\n3 0 1 2\n";
+    assert_parse_err(
+        parse_ply(text.as_bytes(), "dupx.ply"),
+        "dupx.ply",
+        &["line 7:", "property 'x' declared twice in element 'vertex'"],
+    );
+    // The same name in two elements is two properties.
+    let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+        property float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+        property float x\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 7\n";
+    assert_eq!(
+        parse_ply(text.as_bytes(), "two.ply").unwrap().triangles,
+        vec![[0, 1, 2]]
+    );
+}
+
 // ---------------------------------------------------------------------------------------------
 // OBJ content
 

@@ -222,6 +222,9 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
     let mut names: HashSet<&str> = HashSet::new();
+    // (element, property) names: a property declared twice would be read twice from every
+    // row, and only the first used.
+    let mut prop_names: HashSet<(usize, &str)> = HashSet::new();
     loop {
         line_no += 1;
         let rest = match bytes.get(pos..) {
@@ -304,6 +307,7 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                 });
             }
             "property" => {
+                let element = elements.len();
                 let Some(el) = elements.last_mut() else {
                     return Err(err("property line before any element line".into()));
                 };
@@ -326,6 +330,12 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                 let prop_name = tok
                     .next()
                     .ok_or_else(|| err("property line lacks a name".into()))?;
+                if !prop_names.insert((element, prop_name)) {
+                    return Err(err(format!(
+                        "property '{prop_name}' declared twice in element '{}'",
+                        el.name
+                    )));
+                }
                 el.props.push(Property {
                     name: prop_name.to_string(),
                     kind,
