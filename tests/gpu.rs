@@ -344,6 +344,49 @@ fn queries_match_the_cpu_on_the_hard_cases() {
     assert!(hits.iter().all(|h| !h.is_hit()));
 }
 
+/// Directions far from unit length are scaled on the GPU as on the CPU (`Ray::direction_scale`):
+/// a triangle 1e-8 across is hit 5e-8 away along directions 1e-25 to 1e20 long, with the
+/// CPU's `t`. Unscaled, Möller–Trumbore's `e1 · (d × e2)` underflowed along the shortest.
+#[test]
+fn small_triangles_are_hit_whatever_the_direction_length() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let size = 1e-8f32;
+    let mut scene = Scene::new();
+    let positions = vec![
+        Vec3::new(-size, -size, 0.0),
+        Vec3::new(size, -size, 0.0),
+        Vec3::new(0.0, size, 0.0),
+    ];
+    let triangles = vec![[0, 1, 2]];
+    let mesh = Shape::Mesh {
+        positions,
+        triangles,
+    };
+    scene.add_object(mesh, 0).unwrap();
+    scene.commit().unwrap();
+    let c = scene.committed().unwrap();
+    let lengths = [1e-25f32, 1e-18, 1e-3, 1.0, 1e3, 1e20];
+    let origin = Vec3::new(0.1 * size, 0.1 * size, 5.0 * size);
+    let rays: Vec<Ray> = lengths
+        .iter()
+        .map(|&l| Ray::new(origin, -l * Vec3::Z, 0.0, f32::INFINITY))
+        .collect();
+    let q = QueryOptions::default();
+    let (mut on_gpu, mut on_cpu) = (vec![Hit::MISS; rays.len()], vec![Hit::MISS; rays.len()]);
+    g.intersect(c, &rays, &mut on_gpu, &q).unwrap();
+    cpu().intersect(c, &rays, &mut on_cpu, &q).unwrap();
+    for ((l, h), want) in lengths.iter().zip(&on_gpu).zip(&on_cpu) {
+        let distance = h.t as f64 * *l as f64;
+        assert!(
+            (distance / (5.0 * size as f64) - 1.0).abs() <= 1e-5,
+            "|dir| {l:e}: GPU hit {h:?}, distance {distance:e}"
+        );
+        assert_eq!(h.t, want.t, "|dir| {l:e}: GPU {h:?}, CPU {want:?}");
+    }
+}
+
 /// Mean and 99th percentile of the absolute difference of each colour channel (0-255).
 fn image_diff(a: &Frame, b: &Frame) -> [(f64, u8); 3] {
     let mut out = [(0.0, 0); 3];

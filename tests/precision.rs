@@ -479,31 +479,45 @@ fn offset_modes_and_shadow_acne_far_from_the_origin() {
     assert!(epsilon_acne[2] > 0.1, "far away it fails: {epsilon_acne:?}");
 }
 
-/// Traces `shape` alone along -z from `origin` with directions from 1e-25 to 1e30 long, and
-/// checks that each is hit `distance` away (`t |d|`, within 1e-5).
+/// Traces `shape` alone along -z from `origin` with directions from 1e-25 to 1e30 long, with
+/// both intersectors in every query mode, and checks that each is hit `distance` away (`t |d|`,
+/// within 1e-5) wherever that `t` is a normal f32 (`distance / |d|` above 1e-36: below, `t`
+/// itself has lost bits).
 fn hit_at_every_direction_length(what: &str, shape: Shape, origin: Vec3, distance: f64) {
     let ctx = rt2::context::Context::new(rt2::dispatch::BackendRequest::Cpu, 1).unwrap();
     let mut scene = Scene::new();
     scene.add_object(shape, 0).unwrap();
     scene.commit().unwrap();
-    let lengths = [
+    let lengths: Vec<f32> = [
         1e-25f32, 1e-22, 1e-18, 1e-16, 1e-15, 1e-3, 1.0, 1e3, 1e14, 1e15, 1e16, 1e18, 1e20, 1e30,
-    ];
+    ]
+    .into_iter()
+    .filter(|&s| distance / s as f64 > 1e-36)
+    .collect();
     let rays: Vec<Ray> = lengths
         .iter()
         .map(|&s| Ray::new(origin, -s * Vec3::Z, 0.0, f32::INFINITY))
         .collect();
-    let mut hits = vec![Hit::MISS; rays.len()];
-    let q = rt2::context::QueryOptions::default();
-    ctx.intersect(scene.committed().unwrap(), &rays, &mut hits, &q)
-        .unwrap();
-    for (s, hit) in lengths.iter().zip(&hits) {
-        let got = hit.t as f64 * *s as f64;
-        assert!(
-            (got - distance).abs() <= 1e-5 * distance,
-            "{what}, |dir| {s:e}: distance {got:e} (t {}), want {distance:e}",
-            hit.t
-        );
+    for intersector in Intersector::ALL {
+        for mode in [QueryMode::Single, QueryMode::Packet, QueryMode::Stream] {
+            let mut hits = vec![Hit::MISS; rays.len()];
+            let q = rt2::context::QueryOptions {
+                intersector,
+                mode,
+                ..Default::default()
+            };
+            ctx.intersect(scene.committed().unwrap(), &rays, &mut hits, &q)
+                .unwrap();
+            for (s, hit) in lengths.iter().zip(&hits) {
+                let got = hit.t as f64 * *s as f64;
+                assert!(
+                    (got - distance).abs() <= 1e-5 * distance,
+                    "{what}, {intersector:?}, {mode:?}, |dir| {s:e}: distance {got:e} (t {}), \
+                     want {distance:e}",
+                    hit.t
+                );
+            }
+        }
     }
 }
 
@@ -564,6 +578,27 @@ fn every_kind_of_primitive_is_hit_whatever_the_direction_length() {
     ];
     for (name, shape, distance) in shapes {
         hit_at_every_direction_length(name, shape, origin, distance);
+    }
+}
+
+/// Small triangles along short and long directions: the edge × edge × direction products of
+/// both triangle tests left f32's normal range (a triangle 1e-8 across missed along a direction
+/// 1e-25 long, one 1e-6 across hit at `t = 0` by the watertight test along one 1e30 long) until
+/// the queries scaled such directions by a power of two (`Ray::direction_scale`).
+#[test]
+fn small_triangles_are_hit_whatever_the_direction_length() {
+    for size in [1e-4f32, 1e-6, 1e-8, 1e-10, 1e-12] {
+        let triangle = Shape::Mesh {
+            positions: vec![
+                Vec3::new(-size, -size, 0.0),
+                Vec3::new(size, -size, 0.0),
+                Vec3::new(0.0, size, 0.0),
+            ],
+            triangles: vec![[0, 1, 2]],
+        };
+        let what = format!("triangle {size:e} across");
+        let origin = Vec3::new(0.1 * size, 0.1 * size, 5.0 * size);
+        hit_at_every_direction_length(&what, triangle, origin, 5.0 * size as f64);
     }
 }
 

@@ -71,6 +71,9 @@ pub trait RayAnswer: Copy + Send + Sync + 'static {
     const SINGLE: SingleFn<Self>;
     const PACKETS: BatchFn<Self, TraversalStats>;
     const STREAM: BatchFn<Self, (TraversalStats, StreamMemory)>;
+    /// The answer of a ray traced with its direction scaled by `s` ([`Ray::scaled`]), for
+    /// the unscaled ray.
+    fn scaled_back(self, s: f32) -> Self;
 }
 
 impl RayAnswer for Hit {
@@ -78,6 +81,12 @@ impl RayAnswer for Hit {
     const SINGLE: SingleFn<Self> = traverse::intersect;
     const PACKETS: BatchFn<Self, TraversalStats> = packet::intersect;
     const STREAM: BatchFn<Self, (TraversalStats, StreamMemory)> = stream::intersect;
+    fn scaled_back(self, s: f32) -> Self {
+        Hit {
+            t: self.t * s,
+            ..self
+        }
+    }
 }
 
 impl RayAnswer for bool {
@@ -85,6 +94,9 @@ impl RayAnswer for bool {
     const SINGLE: SingleFn<Self> = traverse::occluded;
     const PACKETS: BatchFn<Self, TraversalStats> = packet::occluded;
     const STREAM: BatchFn<Self, (TraversalStats, StreamMemory)> = stream::occluded;
+    fn scaled_back(self, _: f32) -> Self {
+        self
+    }
 }
 
 /// Answers `rays` into `out` (same length): closest hits or occlusion ([`RayAnswer`]). Ray `i`
@@ -93,9 +105,38 @@ impl RayAnswer for bool {
 /// whatever `how` says; every mode honours `opts.intersector` and the exclusions, with the
 /// same answers.
 ///
+/// Rays whose direction is far from unit length are traced scaled by a power of two
+/// ([`Ray::direction_scale`]), on a copy of the batch made only when it holds such a ray.
+///
 /// # Panics
 /// When `exclude` is not as long as `rays`.
 pub fn trace<T: RayAnswer>(
+    scene: &Committed,
+    (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
+    out: &mut [T],
+    how: Traversal,
+    opts: &TraverseOptions,
+    mode: QueryMode,
+    width: Width,
+) -> TraversalStats {
+    if !rays.iter().any(|r| r.direction_scale().is_some()) {
+        return trace_near_unit(scene, (rays, exclude), out, how, opts, mode, width);
+    }
+    let scaled: Vec<Ray> = rays
+        .iter()
+        .map(|r| r.direction_scale().map_or(*r, |s| r.scaled(s)))
+        .collect();
+    let stats = trace_near_unit(scene, (&scaled, exclude), out, how, opts, mode, width);
+    for (o, r) in out.iter_mut().zip(rays) {
+        if let Some(s) = r.direction_scale() {
+            *o = o.scaled_back(s);
+        }
+    }
+    stats
+}
+
+/// [`trace`] of rays whose directions are near unit length.
+fn trace_near_unit<T: RayAnswer>(
     scene: &Committed,
     (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
     out: &mut [T],
