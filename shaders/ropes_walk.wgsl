@@ -73,12 +73,26 @@ fn tied_exit(leaf: u32, r: TRay, ex: Exit) -> u32 {
     return INVALID;
 }
 
+// `on_exit_side` of ropes.rs: the leaf box lies against the side of the scene box (the tree's,
+// unpadded: the kernels have Möller–Trumbore only) through which the ray leaves it.
+fn on_exit_side(b: Aabb, r: TRay) -> bool {
+    for (var a = 0u; a < 3u; a++) {
+        if (positive(r, a)) {
+            if (b.max[a] == params.bounds_max[a]) { return true; }
+        } else if (b.min[a] == params.bounds_min[a]) { return true; }
+    }
+    return false;
+}
+
 // The loop of algorithms 7 and 8: locate the leaf, test its primitives, follow the rope.
+// `scene_test` (ropes++, which knows no scene exit) clips the scene box where `walk` in
+// ropes.rs does: a first leaf left before it is entered is a miss only if the clip says so,
+// and a leaf against the side the ray leaves the box through ends the walk where the clip
+// ends, so that ropes++ visits the leaves the other traversals visit.
 fn rope_walk(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, Stats>,
-             start: u32, t_start: f32, t_end: f32, three_faces: bool, miss_test_on: bool) {
+             start: u32, t_start: f32, t_end: f32, three_faces: bool, scene_test: bool) {
     var node = start;
     var t_entry = t_start;
-    var miss_test = miss_test_on;
     for (var visit = 0u; visit < params.n_leaves; visit++) {
         var t1 = inf();
         loop {
@@ -90,13 +104,15 @@ fn rope_walk(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, St
             node = c.child;
         }
         let leaf = leaf_number(node);
+        let b = leaf_boxes[leaf];
         var ex: Exit;
-        if (three_faces) { ex = exit_three_faces(leaf_boxes[leaf], r); } else { ex = exit_six_faces(leaf_boxes[leaf], r); }
-        // A miss only if the ray misses the scene box as `clip_scene` sees it: the leaf's box
-        // is not padded, and on a flat scene its exit may round to just before `tmin`.
-        if (miss_test && ex.t < t_entry && !clip_scene(r).ok) { return; }
-        miss_test = false;
+        if (three_faces) { ex = exit_three_faces(b, r); } else { ex = exit_six_faces(b, r); }
+        if (scene_test && visit == 0u && ex.t < t_entry && !clip_scene(r).ok) { return; }
         if (visit_leaf(nodes[node], ex.t, r.ray, h, any_hit, st) || ex.t >= t_end) { return; }
+        if (scene_test && on_exit_side(b, r)) {
+            let scene = clip_scene(r);
+            if (!scene.ok || ex.t >= scene.t1) { return; }
+        }
         node = rope(leaf, ex.face);
         if (node == INVALID) {
             node = tied_exit(leaf, r, ex);

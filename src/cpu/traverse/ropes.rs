@@ -90,16 +90,38 @@ struct Walk<'a, Exit> {
     /// Stop once the ray has left the leaf at or beyond this distance.
     t_end: f32,
     exit: Exit,
-    /// ropes++ from the root: the scene box whose entry-only test is completed at the first
-    /// leaf. A first leaf left before it is entered means the ray missed the box, unless only
-    /// by rounding: the leaf's own box is not padded, and where the scene box has no depth,
-    /// or the window starts on a primitive in a face of the box, its exit may round to just
-    /// before an entry clamped to `tmin`. The box is then clipped as the other traversals clip
-    /// it, so that they agree on which rays meet it.
-    miss_test: Option<&'a Aabb>,
+    /// ropes++: the scene box, whose exit it does not compute up front (`t_end` is the
+    /// window's end). The box is clipped, as the other traversals clip it, in the two rare
+    /// places where they must agree with them: see [`walk`].
+    scene_box: Option<&'a Aabb>,
+    /// ropes++ from the root: a first leaf left before it is entered means the ray missed the
+    /// scene box (the entry-only scene test is completed here).
+    miss_test: bool,
+}
+
+/// Whether the leaf box `b` lies against the side of the tree's box `tree` through which a ray
+/// of direction signs `ray` leaves it.
+fn on_exit_side(b: &Aabb, tree: &Aabb, ray: &TRay) -> bool {
+    (0..3).any(|a| {
+        if ray.positive(a) {
+            b.max[a] == tree.max[a]
+        } else {
+            b.min[a] == tree.min[a]
+        }
+    })
 }
 
 /// The loop of algorithms 7 and 8: locate the leaf, test its primitives, follow the exit rope.
+///
+/// Where ropes++ (which knows no scene exit) meets the scene box, it clips the box once, as the
+/// other traversals do, so that it visits the leaves they visit:
+/// - a first leaf left before it is entered is a miss only if the clip says so: the leaf's own
+///   box is not padded, and where the scene box has no depth, or the window starts on a
+///   primitive in a face of the box, its exit may round to just before an entry clamped to
+///   `tmin` (a hit at `tmin` was lost);
+/// - a leaf against the side the ray leaves the box through ends the walk where the clip's
+///   segment ends: an interior face tied with that exit up to rounding led on into a leaf the
+///   others never enter (a ray leaving at a mesh vertex took a triangle there).
 fn walk(
     tree: &KdTree,
     ropes: &Ropes,
@@ -108,32 +130,41 @@ fn walk(
     query: &mut impl LeafQuery,
     stats: &mut TraversalStats,
 ) {
-    let (mut node, mut t_entry, mut miss_test) = (w.node, w.t_entry, w.miss_test);
+    let (mut node, mut t_entry) = (w.node, w.t_entry);
+    let mut scene: Option<Option<(f32, f32)>> = None;
+    let mut scene_clip = |b: &Aabb| *scene.get_or_insert_with(|| clip(b, ray));
     // Leaves are crossed in a strict front-to-back order: more steps than leaves would be a bug.
-    for _ in 0..tree.leaf_count() {
+    for step in 0..tree.leaf_count() {
         let (at, leaf, _) = descend(tree, ray, node, t_entry, f32::INFINITY, stats, |_| {});
         let leaf_index = ropes.leaf_number(at);
-        let (t_exit, face) = (w.exit)(&ropes.leaf_bounds[leaf_index], ray);
-        if let Some(scene_box) = miss_test.take() {
-            if t_exit < t_entry && clip(scene_box, ray).is_none() {
+        let bounds = &ropes.leaf_bounds[leaf_index];
+        let (t_exit, face) = (w.exit)(bounds, ray);
+        if let Some(b) = w
+            .scene_box
+            .filter(|_| w.miss_test && step == 0 && t_exit < t_entry)
+        {
+            if scene_clip(b).is_none() {
                 return;
             }
         }
         if visit_leaf(tree, leaf, t_exit, query, stats) || t_exit >= w.t_end {
             return;
         }
+        if let Some(b) = w
+            .scene_box
+            .filter(|_| on_exit_side(bounds, &tree.bounds, ray))
+        {
+            if scene_clip(b).is_none_or(|(_, t1)| t_exit >= t1) {
+                return;
+            }
+        }
         node = ropes.links.get(leaf_index, face);
         if node == INVALID {
             // Leaving the scene through an edge or a corner of the leaf: the faces meeting there
             // tie up to rounding, and the neighbour across another of them may hold a hit at
-            // that very point. Go on through such a face rather than stop.
-            match tied_exit(
-                &ropes.leaf_bounds[leaf_index],
-                &ropes.links.leaf(leaf_index),
-                ray,
-                face,
-                t_exit,
-            ) {
+            // that very point (the watertight test's box is padded). Go on through such a face
+            // rather than stop.
+            match tied_exit(bounds, &ropes.links.leaf(leaf_index), ray, face, t_exit) {
                 Some(n) => node = n,
                 None => return,
             }
@@ -158,14 +189,16 @@ pub(super) fn ropes(
         t_entry: scene_min,
         t_end: scene_max,
         exit: exit_six_faces,
-        miss_test: None,
+        scene_box: None,
+        miss_test: false,
     };
     walk(tree, ropes, ray, w, query, stats);
 }
 
 /// Ropes++ (the thesis' algorithm 8): exits from the three planes the direction selects, an
-/// entry-only scene test (on `scene_box`, the tree's box or its padded version), and secondary
-/// rays start at `start`, the leaf node holding their origin.
+/// entry-only scene test (on `scene_box`, the tree's box or its padded version; clipped in
+/// full only where [`walk`] says), and secondary rays start at `start`, the leaf node holding
+/// their origin.
 /// The hint is checked against the leaf's box and used only when the origin is strictly inside:
 /// on the boundary the neighbour holds the origin too (its primitives may touch it), and the
 /// descent from the root searches both. A wrong hint costs the descent, never the answer.
@@ -187,8 +220,8 @@ pub(super) fn ropes_plus_plus(
         }
     };
     let (node, t_entry, miss_test) = match start {
-        Some(s) if holds_origin(s) => (s, ray.ray.tmin, None),
-        _ => (0, entry_three_faces(scene_box, ray), Some(scene_box)),
+        Some(s) if holds_origin(s) => (s, ray.ray.tmin, false),
+        _ => (0, entry_three_faces(scene_box, ray), true),
     };
     // Past the window, or parallel to a slab it lies outside of.
     if t_entry > ray.ray.tmax || t_entry == f32::INFINITY {
@@ -199,6 +232,7 @@ pub(super) fn ropes_plus_plus(
         t_entry,
         t_end: ray.ray.tmax,
         exit: exit_three_faces,
+        scene_box: Some(scene_box),
         miss_test,
     };
     walk(tree, ropes, ray, w, query, stats);
