@@ -144,12 +144,16 @@ impl Triangle {
         }
         // A triangle cut by six planes has at most 9 corners: fixed arrays, no allocation
         // (the SAH builder clips every straddling triangle at every level). Corners are plain
-        // arrays so that the axis indexes them directly.
+        // arrays so that the axis indexes them directly; `exact` has bit `k` set where
+        // coordinate `k` of the corner is the true one (see the padding below).
         let mut poly = [[0f32; 3]; 9];
         let mut next = [[0f32; 3]; 9];
+        let mut exact = [0u8; 9];
+        let mut next_exact = [0u8; 9];
         for (corner, v) in poly.iter_mut().zip(self.vertices()) {
             *corner = v.to_array();
         }
+        exact[..3].fill(0b111);
         let mut len = 3;
         for axis in 0..3 {
             for (plane, keep_below) in [(voxel.min[axis], false), (voxel.max[axis], true)] {
@@ -173,42 +177,62 @@ impl Triangle {
                 let mut n = 0;
                 // Each edge runs from `a` to `b` in the polygon's order, so that a shared edge
                 // is cut at the same point whichever corner the loop starts from.
-                let mut a = poly[len - 1];
-                for &b in &poly[..len] {
+                let (mut a, mut a_exact) = (poly[len - 1], exact[len - 1]);
+                for (&b, &b_exact) in poly[..len].iter().zip(&exact[..len]) {
                     if inside(&a) != inside(&b) {
                         let t = (plane - a[axis]) / (b[axis] - a[axis]);
                         let mut p = [0f32; 3];
+                        // A coordinate the edge keeps constant comes out exactly (`t * 0`).
+                        let mut p_exact = 1 << axis;
                         for k in 0..3 {
                             p[k] = a[k] + t * (b[k] - a[k]);
+                            if a[k] == b[k] {
+                                p_exact |= a_exact & b_exact & (1 << k);
+                            }
                         }
                         p[axis] = plane; // exact on the plane despite rounding
                         next[n] = p;
+                        next_exact[n] = p_exact;
                         n += 1;
                     }
                     if inside(&b) {
                         next[n] = b;
+                        next_exact[n] = b_exact;
                         n += 1;
                     }
-                    a = b;
+                    (a, a_exact) = (b, b_exact);
                 }
                 if n == 0 {
                     return Aabb::EMPTY;
                 }
                 std::mem::swap(&mut poly, &mut next);
+                std::mem::swap(&mut exact, &mut next_exact);
                 len = n;
             }
         }
         // The interpolated corners are off the true edge by rounding, in either direction, and
-        // two triangles sharing the edge round differently: the box is padded by a few ULPs so
-        // that it is conservative (a triangle must be listed in every leaf its true part
-        // touches, or a ray through the shared edge can miss it there; `tests/precision.rs`); the
-        // pad follows the largest coordinate, as the error of the ray's position does,
-        // then clamped back to the voxel.
-        let b = poly[..len]
-            .iter()
-            .fold(Aabb::EMPTY, |b, &p| b.grow(Vec3::from(p)));
-        let pad = 4.0 * f32::EPSILON * b.min.abs().max(b.max.abs()).max_element();
-        Aabb::new(b.min - pad, b.max + pad).intersection(*voxel)
+        // two triangles sharing the edge round differently: their coordinates are padded by a
+        // few ULPs so that the box is conservative (a triangle must be listed in every leaf its
+        // true part touches, or a ray through the shared edge can miss it there;
+        // `tests/precision.rs`); the pad follows the largest coordinate, as the error of the
+        // ray's position does. The box is then clamped back to the voxel.
+        //
+        // Coordinates that are exact (a vertex's, the cutting plane's, one an edge keeps
+        // constant) are not padded. Padding a floor's height made its padded face a split
+        // candidate: the SAH cut off a slab a few ULPs thick holding the floor alone, and a
+        // ray from ten times the scene's size away, whose split distances cannot tell the
+        // slab's two faces apart, skipped it (`tests/traversals.rs`: 79% of the rays aimed
+        // at a floor from 100 units away missed it).
+        let corners = &poly[..len];
+        let magnitude = corners.iter().flatten().fold(0.0f32, |m, c| m.max(c.abs()));
+        let pad = 4.0 * f32::EPSILON * magnitude;
+        let mut b = Aabb::EMPTY;
+        for (c, &e) in corners.iter().zip(&exact[..len]) {
+            let err =
+                Vec3::from_array([0, 1, 2].map(|k| if e & (1 << k) != 0 { 0.0 } else { pad }));
+            b = b.grow(Vec3::from(*c) - err).grow(Vec3::from(*c) + err);
+        }
+        b.intersection(*voxel)
     }
 }
 
