@@ -3,5 +3,5 @@
 fn traverse(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, Stats>) {
     let scene = clip_scene(r);
     if (!scene.ok) { return; }
-    rope_walk(r, h, any_hit, st, 0u, scene.t0, scene.t1, false, false);
+    rope_walk(r, h, any_hit, st, 0u, scene.t0, scene.t1, false);
 }

@@ -48,16 +48,6 @@ fn exit_three_faces(b: Aabb, r: TRay) -> Exit {
     return best;
 }
 
-// ropes++'s entry-only scene test: the three planes facing the ray, no exit.
-fn entry_three_faces(r: TRay) -> f32 {
-    var t = r.ray.tmin;
-    for (var a = 0u; a < 3u; a++) {
-        let tn = dist(r, a, select(params.bounds_max[a], params.bounds_min[a], positive(r, a)));
-        if (tn > t) { t = tn; }
-    }
-    return t;
-}
-
 // `tied_exit` of ropes.rs: leaving the scene through an edge or a corner of the leaf, the faces
 // meeting there tie up to rounding; go on through another of them whose rope leads somewhere.
 fn tied_exit(leaf: u32, r: TRay, ex: Exit) -> u32 {
@@ -73,24 +63,10 @@ fn tied_exit(leaf: u32, r: TRay, ex: Exit) -> u32 {
     return INVALID;
 }
 
-// `on_exit_side` of ropes.rs: the leaf box lies against the side of the scene box (the tree's,
-// unpadded: the kernels have Möller–Trumbore only) through which the ray leaves it.
-fn on_exit_side(b: Aabb, r: TRay) -> bool {
-    for (var a = 0u; a < 3u; a++) {
-        if (positive(r, a)) {
-            if (b.max[a] == params.bounds_max[a]) { return true; }
-        } else if (b.min[a] == params.bounds_min[a]) { return true; }
-    }
-    return false;
-}
-
-// The loop of algorithms 7 and 8: locate the leaf, test its primitives, follow the rope.
-// `scene_test` (ropes++, which knows no scene exit) clips the scene box where `walk` in
-// ropes.rs does: a first leaf left before it is entered is a miss only if the clip says so,
-// and a leaf against the side the ray leaves the box through ends the walk where the clip
-// ends, so that ropes++ visits the leaves the other traversals visit.
+// The loop of algorithms 7 and 8: locate the leaf, test its primitives, follow the rope, up to
+// `t_end`, the end of the scene box's clip.
 fn rope_walk(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, Stats>,
-             start: u32, t_start: f32, t_end: f32, three_faces: bool, scene_test: bool) {
+             start: u32, t_start: f32, t_end: f32, three_faces: bool) {
     var node = start;
     var t_entry = t_start;
     for (var visit = 0u; visit < params.n_leaves; visit++) {
@@ -104,15 +80,9 @@ fn rope_walk(r: TRay, h: ptr<function, Hit>, any_hit: bool, st: ptr<function, St
             node = c.child;
         }
         let leaf = leaf_number(node);
-        let b = leaf_boxes[leaf];
         var ex: Exit;
-        if (three_faces) { ex = exit_three_faces(b, r); } else { ex = exit_six_faces(b, r); }
-        if (scene_test && visit == 0u && ex.t < t_entry && !clip_scene(r).ok) { return; }
+        if (three_faces) { ex = exit_three_faces(leaf_boxes[leaf], r); } else { ex = exit_six_faces(leaf_boxes[leaf], r); }
         if (visit_leaf(nodes[node], ex.t, r.ray, h, any_hit, st) || ex.t >= t_end) { return; }
-        if (scene_test && on_exit_side(b, r)) {
-            let scene = clip_scene(r);
-            if (!scene.ok || ex.t >= scene.t1) { return; }
-        }
         node = rope(leaf, ex.face);
         if (node == INVALID) {
             node = tied_exit(leaf, r, ex);

@@ -227,10 +227,6 @@ fn traverse(
         short_stack,
         push_down,
     };
-    // Ropes++ does its own, entry-only, scene test.
-    if let (Traversal::RopesPlusPlus, Some(ropes)) = (how, &tree.ropes) {
-        return ropes::ropes_plus_plus(tree, ropes, &bounds, &ray, opts.start_node, query, stats);
-    }
     let Some(scene) = clip(&bounds, &ray) else {
         return;
     };
@@ -249,6 +245,10 @@ fn traverse(
             restart::traverse(tree, &ray, scene, restart(short, true), query, stats)
         }
         (Traversal::Ropes, Some(ropes)) => ropes::ropes(tree, ropes, &ray, scene, query, stats),
+        (Traversal::RopesPlusPlus, Some(ropes)) => {
+            let start = opts.start_node;
+            ropes::ropes_plus_plus(tree, ropes, scene, &ray, start, query, stats)
+        }
         // Standard, and rope traversals on a tree without ropes.
         _ => {
             let (t0, t1) = scene;

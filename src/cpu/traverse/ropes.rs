@@ -8,7 +8,7 @@
 //! comparison of the pseudo-code with the direction sign deciding points on a split plane, and
 //! rounds exactly like the other traversals' descent.
 
-use super::common::{clip, descend, visit_leaf, LeafQuery, TRay};
+use super::common::{descend, visit_leaf, LeafQuery, TRay};
 use crate::geometry::{Aabb, TraversalStats, INVALID};
 use crate::kdtree::{KdTree, Ropes};
 
@@ -51,24 +51,6 @@ fn exit_three_faces(b: &Aabb, ray: &TRay) -> (f32, usize) {
     best
 }
 
-/// ropes++'s "entry-only" scene test: the distance to the scene box's entry point (the three
-/// planes facing the ray), no exit. A ray that misses the box is caught at the first leaf.
-fn entry_three_faces(b: &Aabb, ray: &TRay) -> f32 {
-    let mut t = ray.ray.tmin;
-    for axis in 0..3 {
-        let plane = if ray.positive(axis) {
-            b.min[axis]
-        } else {
-            b.max[axis]
-        };
-        let tn = ray.dist(axis, plane);
-        if tn > t {
-            t = tn;
-        }
-    }
-    t
-}
-
 /// A rope other than `face` whose exit plane the ray meets at `t_exit` too, up to a few ULPs of
 /// rounding (the ray leaves the leaf through an edge or a corner), and that leads somewhere.
 fn tied_exit(b: &Aabb, links: &[u32; 6], ray: &TRay, face: usize, t_exit: f32) -> Option<u32> {
@@ -84,86 +66,40 @@ fn tied_exit(b: &Aabb, links: &[u32; 6], ray: &TRay, face: usize, t_exit: f32) -
 }
 
 /// Where a rope walk starts and how it reads leaf boxes.
-struct Walk<'a, Exit> {
+struct Walk<Exit> {
     node: u32,
     t_entry: f32,
-    /// Stop once the ray has left the leaf at or beyond this distance.
+    /// Stop once the ray has left the leaf at or beyond this distance: the end of the scene
+    /// box's clip, where every other traversal's segment ends.
     t_end: f32,
     exit: Exit,
-    /// ropes++: the scene box, whose exit it does not compute up front (`t_end` is the
-    /// window's end). The box is clipped, as the other traversals clip it, in the two rare
-    /// places where they must agree with them: see [`walk`].
-    scene_box: Option<&'a Aabb>,
-    /// ropes++ from the root: a first leaf left before it is entered means the ray missed the
-    /// scene box (the entry-only scene test is completed here).
-    miss_test: bool,
-}
-
-/// Whether the leaf box `b` lies against the side of the tree's box `tree` through which a ray
-/// of direction signs `ray` leaves it.
-fn on_exit_side(b: &Aabb, tree: &Aabb, ray: &TRay) -> bool {
-    (0..3).any(|a| {
-        if ray.positive(a) {
-            b.max[a] == tree.max[a]
-        } else {
-            b.min[a] == tree.min[a]
-        }
-    })
 }
 
 /// The loop of algorithms 7 and 8: locate the leaf, test its primitives, follow the exit rope.
-///
-/// Where ropes++ (which knows no scene exit) meets the scene box, it clips the box once, as the
-/// other traversals do, so that it visits the leaves they visit:
-/// - a first leaf left before it is entered is a miss only if the clip says so: the leaf's own
-///   box is not padded, and where the scene box has no depth, or the window starts on a
-///   primitive in a face of the box, its exit may round to just before an entry clamped to
-///   `tmin` (a hit at `tmin` was lost);
-/// - a leaf against the side the ray leaves the box through ends the walk where the clip's
-///   segment ends: an interior face tied with that exit up to rounding led on into a leaf the
-///   others never enter (a ray leaving at a mesh vertex took a triangle there).
 fn walk(
     tree: &KdTree,
     ropes: &Ropes,
     ray: &TRay,
-    w: Walk<'_, impl Fn(&Aabb, &TRay) -> (f32, usize)>,
+    w: Walk<impl Fn(&Aabb, &TRay) -> (f32, usize)>,
     query: &mut impl LeafQuery,
     stats: &mut TraversalStats,
 ) {
     let (mut node, mut t_entry) = (w.node, w.t_entry);
-    let mut scene: Option<Option<(f32, f32)>> = None;
-    let mut scene_clip = |b: &Aabb| *scene.get_or_insert_with(|| clip(b, ray));
     // Leaves are crossed in a strict front-to-back order: more steps than leaves would be a bug.
-    for step in 0..tree.leaf_count() {
+    for _ in 0..tree.leaf_count() {
         let (at, leaf, _) = descend(tree, ray, node, t_entry, f32::INFINITY, stats, |_| {});
         let leaf_index = ropes.leaf_number(at);
         let bounds = &ropes.leaf_bounds[leaf_index];
         let (t_exit, face) = (w.exit)(bounds, ray);
-        if let Some(b) = w
-            .scene_box
-            .filter(|_| w.miss_test && step == 0 && t_exit < t_entry)
-        {
-            if scene_clip(b).is_none() {
-                return;
-            }
-        }
         if visit_leaf(tree, leaf, t_exit, query, stats) || t_exit >= w.t_end {
             return;
-        }
-        if let Some(b) = w
-            .scene_box
-            .filter(|_| on_exit_side(bounds, &tree.bounds, ray))
-        {
-            if scene_clip(b).is_none_or(|(_, t1)| t_exit >= t1) {
-                return;
-            }
         }
         node = ropes.links.get(leaf_index, face);
         if node == INVALID {
             // Leaving the scene through an edge or a corner of the leaf: the faces meeting there
             // tie up to rounding, and the neighbour across another of them may hold a hit at
-            // that very point (the watertight test's box is padded). Go on through such a face
-            // rather than stop.
+            // that very point (the watertight test's scene box is padded). Go on through such
+            // a face rather than stop.
             match tied_exit(bounds, &ropes.links.leaf(leaf_index), ray, face, t_exit) {
                 Some(n) => node = n,
                 None => return,
@@ -189,23 +125,27 @@ pub(super) fn ropes(
         t_entry: scene_min,
         t_end: scene_max,
         exit: exit_six_faces,
-        scene_box: None,
-        miss_test: false,
     };
     walk(tree, ropes, ray, w, query, stats);
 }
 
-/// Ropes++ (the thesis' algorithm 8): exits from the three planes the direction selects, an
-/// entry-only scene test (on `scene_box`, the tree's box or its padded version; clipped in
-/// full only where [`walk`] says), and secondary rays start at `start`, the leaf node holding
-/// their origin.
+/// Ropes++ (the thesis' algorithm 8): exits from the three planes the direction selects, and
+/// secondary rays start at `start`, the leaf node holding their origin.
+///
+/// The thesis' entry-only scene test (the box's entry distance, its exit left to the first
+/// leaf) is not kept: the scene box (`scene_box`, the tree's or its padded version) is clipped
+/// as the other traversals clip it. A walk that does not know where their segments end went on,
+/// at rounding ties with the box's exit, into leaves they never enter, and lost a hit at
+/// `tmin` on a flat scene (both found by a helper's fuzz; `tests/traversals.rs`). The exit
+/// costs three plane distances per ray.
+///
 /// The hint is checked against the leaf's box and used only when the origin is strictly inside:
 /// on the boundary the neighbour holds the origin too (its primitives may touch it), and the
 /// descent from the root searches both. A wrong hint costs the descent, never the answer.
 pub(super) fn ropes_plus_plus(
     tree: &KdTree,
     ropes: &Ropes,
-    scene_box: &Aabb,
+    (t0, t1): (f32, f32),
     ray: &TRay,
     start: Option<u32>,
     query: &mut impl LeafQuery,
@@ -219,21 +159,15 @@ pub(super) fn ropes_plus_plus(
             b.min.cmplt(origin).all() && origin.cmplt(b.max).all()
         }
     };
-    let (node, t_entry, miss_test) = match start {
-        Some(s) if holds_origin(s) => (s, ray.ray.tmin, false),
-        _ => (0, entry_three_faces(scene_box, ray), true),
+    let node = match start {
+        Some(s) if holds_origin(s) => s,
+        _ => 0,
     };
-    // Past the window, or parallel to a slab it lies outside of.
-    if t_entry > ray.ray.tmax || t_entry == f32::INFINITY {
-        return;
-    }
     let w = Walk {
         node,
-        t_entry,
-        t_end: ray.ray.tmax,
+        t_entry: t0,
+        t_end: t1,
         exit: exit_three_faces,
-        scene_box: Some(scene_box),
-        miss_test,
     };
     walk(tree, ropes, ray, w, query, stats);
 }
