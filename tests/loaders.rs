@@ -345,6 +345,15 @@ fn ply_property_declared_twice_is_refused() {
         "dupx.ply",
         &["line 7:", "property 'x' declared twice in element 'vertex'"],
     );
+    // A face's list under both of its names.
+    let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+        property float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+        property list uchar int vertex_index\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 3 2 1 0\n";
+    assert_parse_err(
+        parse_ply(text.as_bytes(), "both.ply"),
+        "both.ply",
+        &["line 7:", "both 'vertex_indices' and 'vertex_index'"],
+    );
     // The same name in two elements is two properties.
     let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
         property float z\nelement face 1\nproperty list uchar int vertex_indices\n\

@@ -1,6 +1,7 @@
 //! PLY (Stanford polygon file format) parsing: the header, then an ASCII or binary
 //! (little/big-endian) body from which `vertex` x/y/z and `face` index lists are kept and every
-//! other property and element is skipped.
+//! other property and element is skipped. A header that would make a column ambiguous (an
+//! element or a property declared twice, a face list under both its names) is an error.
 //!
 //! Errors in the header and in ASCII bodies name the 1-based line; errors in binary bodies name
 //! the byte offset from the start of the file, since a binary body has no lines.
@@ -307,6 +308,7 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                 });
             }
             "property" => {
+                // The element this property belongs to (the last one), counted from 1.
                 let element = elements.len();
                 let Some(el) = elements.last_mut() else {
                     return Err(err("property line before any element line".into()));
@@ -392,15 +394,18 @@ fn plan(header: &Header, name: &str) -> Result<Vec<Role>> {
             }
             "face" => {
                 have_face = true;
-                let Some(i) = el
-                    .props
-                    .iter()
-                    .position(|p| p.name == "vertex_indices" || p.name == "vertex_index")
-                else {
+                let is_list = |p: &Property| p.name == "vertex_indices" || p.name == "vertex_index";
+                let Some(i) = el.props.iter().position(is_list) else {
                     return Err(err(
                         "element 'face' has no 'vertex_indices' or 'vertex_index' property".into(),
                     ));
                 };
+                // Both names: one list would be read and the other dropped unseen.
+                if el.props.iter().filter(|p| is_list(p)).count() > 1 {
+                    return Err(err(
+                        "element 'face' has both 'vertex_indices' and 'vertex_index'".into(),
+                    ));
+                }
                 match el.props[i].kind {
                     Kind::List { item, .. } if item.int_range().is_some() => {}
                     _ => {
