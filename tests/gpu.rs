@@ -346,7 +346,8 @@ fn queries_match_the_cpu_on_the_hard_cases() {
 
 /// Directions far from unit length are scaled on the GPU as on the CPU (`Ray::direction_scale`):
 /// a triangle 1e-8 across is hit 5e-8 away along directions 1e-25 to 1e20 long, with the
-/// CPU's `t`. Unscaled, Möller–Trumbore's `e1 · (d × e2)` underflowed along the shortest.
+/// CPU's `t` (within the 1e-5 of `compare_queries`: hardware GPUs fuse multiply-adds).
+/// Unscaled, Möller–Trumbore's `e1 · (d × e2)` underflowed along the shortest.
 #[test]
 fn small_triangles_are_hit_whatever_the_direction_length() {
     let Some(g) = gpu(GpuOptions::default()) else {
@@ -383,7 +384,10 @@ fn small_triangles_are_hit_whatever_the_direction_length() {
             (distance / (5.0 * size as f64) - 1.0).abs() <= 1e-5,
             "|dir| {l:e}: GPU hit {h:?}, distance {distance:e}"
         );
-        assert_eq!(h.t, want.t, "|dir| {l:e}: GPU {h:?}, CPU {want:?}");
+        assert!(
+            (h.t / want.t - 1.0).abs() <= 1e-5,
+            "|dir| {l:e}: GPU {h:?}, CPU {want:?}"
+        );
     }
 }
 

@@ -482,7 +482,9 @@ fn offset_modes_and_shadow_acne_far_from_the_origin() {
 /// Traces `shape` alone along -z from `origin` with directions from 1e-25 to 1e30 long, with
 /// both intersectors in every query mode, and checks that each is hit `distance` away (`t |d|`,
 /// within 1e-5) wherever that `t` is a normal f32 (`distance / |d|` above 1e-36: below, `t`
-/// itself has lost bits).
+/// itself has lost bits). Each length also gets a window that ends before the hit (a miss)
+/// and one that just holds it (the same hit), and `occluded` must agree with every answer:
+/// the windows are scaled with the direction.
 fn hit_at_every_direction_length(what: &str, shape: Shape, origin: Vec3, distance: f64) {
     let ctx = rt2::context::Context::new(rt2::dispatch::BackendRequest::Cpu, 1).unwrap();
     let mut scene = Scene::new();
@@ -494,28 +496,46 @@ fn hit_at_every_direction_length(what: &str, shape: Shape, origin: Vec3, distanc
     .into_iter()
     .filter(|&s| distance / s as f64 > 1e-36)
     .collect();
-    let rays: Vec<Ray> = lengths
+    // (length, window, hit expected) for each ray.
+    let cases: Vec<(f32, [f32; 2], bool)> = lengths
         .iter()
-        .map(|&s| Ray::new(origin, -s * Vec3::Z, 0.0, f32::INFINITY))
+        .flat_map(|&s| {
+            let t = (distance / s as f64) as f32;
+            [
+                (s, [0.0, f32::INFINITY], true),
+                (s, [0.0, t * 0.999], false),
+                (s, [t * 0.999, t * 1.001], true),
+            ]
+        })
+        .collect();
+    let rays: Vec<Ray> = cases
+        .iter()
+        .map(|&(s, [tmin, tmax], _)| Ray::new(origin, -s * Vec3::Z, tmin, tmax))
         .collect();
     for intersector in Intersector::ALL {
         for mode in [QueryMode::Single, QueryMode::Packet, QueryMode::Stream] {
             let mut hits = vec![Hit::MISS; rays.len()];
+            let mut occluded = vec![false; rays.len()];
             let q = rt2::context::QueryOptions {
                 intersector,
                 mode,
                 ..Default::default()
             };
-            ctx.intersect(scene.committed().unwrap(), &rays, &mut hits, &q)
-                .unwrap();
-            for (s, hit) in lengths.iter().zip(&hits) {
-                let got = hit.t as f64 * *s as f64;
-                assert!(
-                    (got - distance).abs() <= 1e-5 * distance,
-                    "{what}, {intersector:?}, {mode:?}, |dir| {s:e}: distance {got:e} (t {}), \
-                     want {distance:e}",
-                    hit.t
-                );
+            let c = scene.committed().unwrap();
+            ctx.intersect(c, &rays, &mut hits, &q).unwrap();
+            ctx.occluded(c, &rays, &mut occluded, &q).unwrap();
+            for ((&(s, window, expected), hit), &o) in cases.iter().zip(&hits).zip(&occluded) {
+                let ctx = format!("{what}, {intersector:?}, {mode:?}, |dir| {s:e}, {window:?}");
+                assert_eq!(hit.is_hit(), expected, "{ctx}: {hit:?}");
+                assert_eq!(o, expected, "{ctx}: occluded");
+                if expected {
+                    let got = hit.t as f64 * s as f64;
+                    assert!(
+                        (got - distance).abs() <= 1e-5 * distance,
+                        "{ctx}: distance {got:e} (t {}), want {distance:e}",
+                        hit.t
+                    );
+                }
             }
         }
     }

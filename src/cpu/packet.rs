@@ -209,6 +209,7 @@ pub(crate) fn lanes_of<const N: usize>(roots: &[Root]) -> Lanes<N> {
 }
 
 /// Closest hits of `rays` (primitive tests `tests`) with N-ray packets (one thread).
+/// Traced as given, as `traverse::intersect`.
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
@@ -226,6 +227,7 @@ pub fn intersect(
 }
 
 /// Any-hit queries of `rays` (primitive tests `tests`) with N-ray packets (one thread).
+/// Traced as given, as `traverse::intersect`.
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or

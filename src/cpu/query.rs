@@ -122,13 +122,15 @@ pub fn trace<T: RayAnswer>(
     if !rays.iter().any(|r| r.direction_scale().is_some()) {
         return trace_near_unit(scene, (rays, exclude), out, how, opts, mode, width);
     }
+    let scales: Vec<Option<f32>> = rays.iter().map(Ray::direction_scale).collect();
     let scaled: Vec<Ray> = rays
         .iter()
-        .map(|r| r.direction_scale().map_or(*r, |s| r.scaled(s)))
+        .zip(&scales)
+        .map(|(r, s)| s.map_or(*r, |s| r.scaled(s)))
         .collect();
     let stats = trace_near_unit(scene, (&scaled, exclude), out, how, opts, mode, width);
-    for (o, r) in out.iter_mut().zip(rays) {
-        if let Some(s) = r.direction_scale() {
+    for (o, s) in out.iter_mut().zip(scales) {
+        if let Some(s) = s {
             *o = o.scaled_back(s);
         }
     }

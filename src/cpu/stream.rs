@@ -329,6 +329,7 @@ impl Mode for StreamMode {
 }
 
 /// Closest hits of `rays` (primitive tests `tests`) with the n-ray traversal (one thread).
+/// Traced as given, as `traverse::intersect`.
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
@@ -346,6 +347,7 @@ pub fn intersect(
 }
 
 /// Any-hit queries of `rays` (primitive tests `tests`) with the n-ray traversal (one thread).
+/// Traced as given, as `traverse::intersect`.
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or

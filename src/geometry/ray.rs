@@ -28,13 +28,16 @@ impl Ray {
     }
 
     /// The power of two by which the queries scale this ray's direction, if its largest
-    /// component lies outside `[2^-10, 2^10]` (and the ray is not degenerate): into [1, 2)
-    /// (see [`power_of_two_scale`]). The primitive tests multiply the direction by edges or
-    /// by itself; far from unit length those products leave f32's normal range (a triangle
-    /// 1e-8 across was missed along a direction 1e-25 long, the watertight test put a
-    /// triangle 1e-6 across at `t = 0` along one 1e30 long). A power of two scales exactly, so
-    /// a scaled ray's hits are the unscaled one's, bit for bit, wherever those are right.
-    pub fn direction_scale(&self) -> Option<f32> {
+    /// component lies outside `[2^-10, 2^10]` (and the ray is not degenerate): into [1, 2),
+    /// or (0, 2) for a subnormal one (see [`power_of_two_scale`]). The primitive tests
+    /// multiply the direction by edges or by itself; far from unit length those products
+    /// leave f32's normal range (a triangle 1e-8 across was missed along a direction 1e-25
+    /// long, the watertight test put a triangle 1e-6 across at `t = 0` along one 1e30 long).
+    /// A power of two scales exactly wherever the scaled values stay normal, so a scaled ray's
+    /// hits are then the unscaled one's, bit for bit. (A component more than 2^126 times
+    /// smaller than the largest, or a window end that the scale makes subnormal, loses bits:
+    /// they are below anything a hit can resolve at that length.)
+    pub(crate) fn direction_scale(&self) -> Option<f32> {
         const NEAR_UNIT: std::ops::RangeInclusive<f32> = 1.0 / 1024.0..=1024.0;
         let m = self.dir.abs().max_element();
         if NEAR_UNIT.contains(&m) || self.is_degenerate() {
@@ -43,10 +46,10 @@ impl Ray {
         power_of_two_scale(m)
     }
 
-    /// This ray with its direction multiplied by the power of two `s` and its window divided
-    /// by it, so that `t' * s` of a hit on it is the hit's `t` on this ray. The window ends at
-    /// `f32::MAX / s` at most: every hit's `t' * s` is finite.
-    pub fn scaled(&self, s: f32) -> Ray {
+    /// This (non-degenerate) ray with its direction multiplied by the power of two `s` and
+    /// its window divided by it, so that `t' * s` of a hit on it is the hit's `t` on this
+    /// ray. The window ends at `f32::MAX / s` at most: every hit's `t' * s` is finite.
+    pub(crate) fn scaled(&self, s: f32) -> Ray {
         Ray {
             org: self.org,
             dir: self.dir * s,

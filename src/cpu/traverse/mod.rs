@@ -116,7 +116,9 @@ pub(crate) fn scene_box(tree: &KdTree, intersector: Intersector) -> Aabb {
 }
 
 /// Closest hit of `ray` in `[tmin, tmax)` among the tree's primitives and the planes.
-/// Degenerate rays are misses that touch nothing.
+/// Degenerate rays are misses that touch nothing. The ray is traced as given: the queries
+/// (`cpu::query::trace`, `Context`) first scale a direction far from unit length
+/// (`Ray::direction_scale`); the renderers' rays are unit length.
 pub fn intersect(
     tree: &KdTree,
     prims: &PrimitiveSet,
@@ -141,6 +143,7 @@ pub fn intersect(
 }
 
 /// Whether anything is hit in `[tmin, tmax)` (shadow rays); stops at the first hit found.
+/// Traced as given, as [`intersect`].
 pub fn occluded(
     tree: &KdTree,
     prims: &PrimitiveSet,
