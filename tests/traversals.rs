@@ -122,6 +122,17 @@ fn trees(prims: &PrimitiveSet) -> Vec<(String, KdTree)> {
     out
 }
 
+/// Two triangles per cell of the `n` × `n` grid whose corners are `p(i, j)`, `i, j` in `0..=n`.
+fn quad_grid(prims: &mut PrimitiveSet, n: usize, p: impl Fn(usize, usize) -> Vec3) {
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, c, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
+            prims.triangles.push(Triangle::from_vertices(a, b, c));
+            prims.triangles.push(Triangle::from_vertices(a, c, d));
+        }
+    }
+}
+
 /// Best and second-best `(t, prim)` of the f64 brute force (distinct primitives).
 struct Reference {
     best: Option<(f64, u32)>,
@@ -745,19 +756,9 @@ fn rays_grazing_flat_cells() {
     let mut rng = Rng(8);
     let mut prims = soup(&mut rng, 200, 0.1);
     let n = 16;
-    for i in 0..n {
-        for j in 0..n {
-            let (x0, y0, s) = (i as f32 / n as f32, j as f32 / n as f32, 1.0 / n as f32);
-            let (a, b, c, d) = (
-                Vec3::new(x0, y0, 0.0),
-                Vec3::new(x0 + s, y0, 0.0),
-                Vec3::new(x0 + s, y0 + s, 0.0),
-                Vec3::new(x0, y0 + s, 0.0),
-            );
-            prims.triangles.push(Triangle::from_vertices(a, b, c));
-            prims.triangles.push(Triangle::from_vertices(a, c, d));
-        }
-    }
+    quad_grid(&mut prims, n, |i, j| {
+        Vec3::new(i as f32 / n as f32, j as f32 / n as f32, 0.0)
+    });
     let trees = trees(&prims);
     let rays: Vec<Ray> = (0..1500)
         .map(|i| {
@@ -1062,14 +1063,9 @@ fn windows_starting_at_a_hit_on_a_flat_scene() {
     let mut rng = Rng(12);
     let mut prims = PrimitiveSet::default();
     let n = 4;
-    let p = |i: usize, j: usize| Vec3::new(i as f32 / n as f32, j as f32 / n as f32, 0.5);
-    for i in 0..n {
-        for j in 0..n {
-            let (a, b, c, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
-            prims.triangles.push(Triangle::from_vertices(a, b, c));
-            prims.triangles.push(Triangle::from_vertices(a, c, d));
-        }
-    }
+    quad_grid(&mut prims, n, |i, j| {
+        Vec3::new(i as f32 / n as f32, j as f32 / n as f32, 0.5)
+    });
     let trees = trees(&prims);
     // Half of the windows start at the Möller–Trumbore hit, half at the watertight one.
     let rays: Vec<Ray> = (0..1000)
@@ -1166,17 +1162,11 @@ fn floors_seen_from_far_away() {
     let mut rng = Rng(14);
     let n = 16;
     let mut prims = PrimitiveSet::default();
+    let s = 2.0 / n as f32;
     for y in [0.0f32, 1.0] {
-        for i in 0..n {
-            for j in 0..n {
-                let s = 2.0 / n as f32;
-                let (x, z) = (-1.0 + s * i as f32, -1.0 + s * j as f32);
-                let p = |dx: f32, dz: f32| Vec3::new(x + dx, y, z + dz);
-                let (a, b, c, d) = (p(0.0, 0.0), p(s, 0.0), p(s, s), p(0.0, s));
-                prims.triangles.push(Triangle::from_vertices(a, b, c));
-                prims.triangles.push(Triangle::from_vertices(a, c, d));
-            }
-        }
+        quad_grid(&mut prims, n, |i, j| {
+            Vec3::new(-1.0 + s * i as f32, y, -1.0 + s * j as f32)
+        });
     }
     // Spheres between the floors and above the upper one, so that the tree splits around both.
     for _ in 0..30 {

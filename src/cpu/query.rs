@@ -119,34 +119,15 @@ pub fn trace<T: RayAnswer>(
     mode: QueryMode,
     width: Width,
 ) -> TraversalStats {
-    if !rays.iter().any(|r| r.direction_scale().is_some()) {
-        return trace_near_unit(scene, (rays, exclude), out, how, opts, mode, width);
-    }
-    let scales: Vec<Option<f32>> = rays.iter().map(Ray::direction_scale).collect();
-    let scaled: Vec<Ray> = rays
-        .iter()
-        .zip(&scales)
-        .map(|(r, s)| s.map_or(*r, |s| r.scaled(s)))
-        .collect();
-    let stats = trace_near_unit(scene, (&scaled, exclude), out, how, opts, mode, width);
-    for (o, s) in out.iter_mut().zip(scales) {
-        if let Some(s) = s {
-            *o = o.scaled_back(s);
-        }
-    }
-    stats
-}
-
-/// [`trace`] of rays whose directions are near unit length.
-fn trace_near_unit<T: RayAnswer>(
-    scene: &Committed,
-    (rays, exclude): (&[Ray], Option<&[PrimIndex]>),
-    out: &mut [T],
-    how: Traversal,
-    opts: &TraverseOptions,
-    mode: QueryMode,
-    width: Width,
-) -> TraversalStats {
+    // Only a batch holding a direction far from unit length is copied.
+    let scaled: Option<(Vec<Option<f32>>, Vec<Ray>)> =
+        rays.iter().any(|r| r.direction_scale().is_some()).then(|| {
+            let scales: Vec<Option<f32>> = rays.iter().map(Ray::direction_scale).collect();
+            let rays = rays.iter().zip(&scales);
+            let scaled = rays.map(|(r, s)| s.map_or(*r, |s| r.scaled(s))).collect();
+            (scales, scaled)
+        });
+    let rays = scaled.as_ref().map_or(rays, |(_, r)| r);
     let exclude = match exclude {
         None => Excluded::All(opts.exclude),
         Some(e) => {
@@ -156,7 +137,7 @@ fn trace_near_unit<T: RayAnswer>(
     };
     let rays = (rays, exclude);
     let (tree, prims, intersector) = (&scene.tree, &scene.prims, opts.intersector);
-    match mode {
+    let stats = match mode {
         QueryMode::Single => chunked(rays, out, CHUNK, |r, e, o| {
             serial((r, e), o, |ray, exclude, stats| {
                 let opts = TraverseOptions { exclude, ..*opts };
@@ -169,7 +150,13 @@ fn trace_near_unit<T: RayAnswer>(
         QueryMode::Stream => streamed(rays, out, |r, e, o| {
             T::STREAM(tree, prims, r, RayTests::new(intersector, e), o, width).0
         }),
+    };
+    for (o, s) in out.iter_mut().zip(scaled.iter().flat_map(|(s, _)| s)) {
+        if let Some(s) = s {
+            *o = o.scaled_back(*s);
+        }
     }
+    stats
 }
 
 /// Rays and the primitives they ignore.
