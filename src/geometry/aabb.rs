@@ -134,3 +134,19 @@ impl Aabb {
         (t0 <= t1).then_some((t0, t1))
     }
 }
+
+/// Bounds of a primitive's part inside a voxel, for the kd-tree builders. `padded` has bit
+/// `2 * axis` (min face) or `2 * axis + 1` (max face) set where the face was moved out by a
+/// few ULPs to cover rounding: no geometry lies there, so the SAH does not split there.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Clipped {
+    pub bounds: Aabb,
+    pub padded: u8,
+}
+
+impl Clipped {
+    /// Bounds whose every face is where the geometry is.
+    pub fn exact(bounds: Aabb) -> Self {
+        Clipped { bounds, padded: 0 }
+    }
+}

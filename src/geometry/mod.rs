@@ -8,7 +8,7 @@ mod ray;
 mod scale;
 mod triangle;
 
-pub use aabb::Aabb;
+pub use aabb::{Aabb, Clipped};
 pub use analytic::{box_intersect, box_normal, Ellipsoid, Plane, Sphere};
 pub use primitives::{PrimKind, PrimitiveSet, RayTest};
 pub use ray::{Hit, PrimIndex, Ray, TraversalStats, INVALID};

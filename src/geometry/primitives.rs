@@ -5,8 +5,8 @@
 
 use super::triangle::watertight;
 use super::{
-    box_intersect, box_normal, Aabb, Ellipsoid, Hit, Plane, PrimIndex, Ray, Sphere, Triangle,
-    TriangleTest,
+    box_intersect, box_normal, Aabb, Clipped, Ellipsoid, Hit, Plane, PrimIndex, Ray, Sphere,
+    Triangle, TriangleTest,
 };
 use crate::precision::Intersector;
 use glam::Vec3;
@@ -90,12 +90,12 @@ impl PrimitiveSet {
 
     /// Bounds of the part of primitive `i` inside `voxel` (perfect splits). Ellipsoids and
     /// boxes use their box clipped to the voxel, which is exact for boxes and tight enough for
-    /// ellipsoids.
-    pub fn clipped_bounds(&self, i: usize, voxel: &Aabb) -> Aabb {
+    /// ellipsoids; only a clipped triangle's faces may be padded.
+    pub fn clipped_bounds(&self, i: usize, voxel: &Aabb) -> Clipped {
         match self.locate(i) {
             (PrimKind::Triangle, k) => self.triangles[k].clipped_bounds(voxel),
-            (PrimKind::Sphere, k) => self.spheres[k].clipped_bounds(voxel),
-            _ => self.bounds(i).intersection(*voxel),
+            (PrimKind::Sphere, k) => Clipped::exact(self.spheres[k].clipped_bounds(voxel)),
+            _ => Clipped::exact(self.bounds(i).intersection(*voxel)),
         }
     }
 

@@ -2,7 +2,7 @@
 //! of vertices per test (the precomputation of the vectorised-traversal paper), and the two
 //! ray–triangle tests of [`crate::precision::Intersector`].
 
-use super::{Aabb, Ray};
+use super::{Aabb, Clipped, Ray};
 use crate::precision::Intersector;
 use glam::Vec3;
 
@@ -134,13 +134,13 @@ impl Triangle {
 
     /// Bounds of the part of the triangle inside `voxel` (Sutherland–Hodgman clipping against
     /// the six slabs): the "perfect splits" of Havran's thesis used by the SAH builder.
-    pub fn clipped_bounds(&self, voxel: &Aabb) -> Aabb {
+    pub fn clipped_bounds(&self, voxel: &Aabb) -> Clipped {
         let bounds = self.bounds();
         if !bounds.overlaps(voxel) {
-            return Aabb::EMPTY;
+            return Clipped::exact(Aabb::EMPTY);
         }
         if voxel.contains_point(bounds.min) && voxel.contains_point(bounds.max) {
-            return bounds;
+            return Clipped::exact(bounds);
         }
         // A triangle cut by six planes has at most 9 corners: fixed arrays, no allocation
         // (the SAH builder clips every straddling triangle at every level). Corners are plain
@@ -203,7 +203,7 @@ impl Triangle {
                     (a, a_exact) = (b, b_exact);
                 }
                 if n == 0 {
-                    return Aabb::EMPTY;
+                    return Clipped::exact(Aabb::EMPTY);
                 }
                 std::mem::swap(&mut poly, &mut next);
                 std::mem::swap(&mut exact, &mut next_exact);
@@ -217,22 +217,33 @@ impl Triangle {
         // `tests/precision.rs`); the pad follows the largest coordinate, as the error of the
         // ray's position does. The box is then clamped back to the voxel.
         //
-        // Coordinates that are exact (a vertex's, the cutting plane's, one an edge keeps
-        // constant) are not padded. Padding a floor's height made its padded face a split
-        // candidate: the SAH cut off a slab a few ULPs thick holding the floor alone, and a
-        // ray from ten times the scene's size away, whose split distances cannot tell the
-        // slab's two faces apart, skipped it (`tests/traversals.rs`: 79% of the rays aimed
-        // at a floor from 100 units away missed it).
+        // A padded face lies where no geometry is, a few ULPs off it: it must not become a
+        // split plane. The SAH would cut off a slab that thin holding only the geometry next
+        // to it, and a ray from ten times the scene's size away, whose split distances cannot
+        // tell the slab's two faces apart, skips it (`tests/traversals.rs`: 79% of the rays
+        // aimed at a floor from 100 units away missed it). So exact coordinates (a vertex's,
+        // the cutting plane's, one an edge keeps constant) are not padded, and the faces
+        // that are padded are marked (`Clipped::padded`) for the builder.
         let corners = &poly[..len];
         let magnitude = corners.iter().flatten().fold(0.0f32, |m, c| m.max(c.abs()));
         let pad = 4.0 * f32::EPSILON * magnitude;
-        let mut b = Aabb::EMPTY;
+        let (mut padded_box, mut plain) = (Aabb::EMPTY, Aabb::EMPTY);
         for (c, &e) in corners.iter().zip(&exact[..len]) {
             let err =
                 Vec3::from_array([0, 1, 2].map(|k| if e & (1 << k) != 0 { 0.0 } else { pad }));
-            b = b.grow(Vec3::from(*c) - err).grow(Vec3::from(*c) + err);
+            let c = Vec3::from(*c);
+            padded_box = padded_box.grow(c - err).grow(c + err);
+            plain = plain.grow(c);
         }
-        b.intersection(*voxel)
+        let mut padded = 0;
+        for k in 0..3 {
+            padded |= u8::from(padded_box.min[k] < plain.min[k]) << (2 * k);
+            padded |= u8::from(padded_box.max[k] > plain.max[k]) << (2 * k + 1);
+        }
+        Clipped {
+            bounds: padded_box.intersection(*voxel),
+            padded,
+        }
     }
 }
 

@@ -7,14 +7,15 @@ use std::time::Instant;
 use super::split::Subtree;
 use super::{layout, midpoint, sah, stats, KdTree};
 use crate::fallible::{self, Fallible};
-use crate::geometry::Aabb;
+use crate::geometry::{Aabb, Clipped};
 
 /// What a builder needs to know of the primitives.
 pub trait BuildInput: Sync {
     fn prim_count(&self) -> usize;
     fn bounds(&self, prim: usize) -> Aabb;
-    /// Bounds of the part of `prim` inside `voxel`; `Aabb::EMPTY` when they do not overlap.
-    fn clipped_bounds(&self, prim: usize, voxel: &Aabb) -> Aabb;
+    /// Bounds of the part of `prim` inside `voxel` (`Aabb::EMPTY` when they do not overlap),
+    /// and which of their faces are padded.
+    fn clipped_bounds(&self, prim: usize, voxel: &Aabb) -> Clipped;
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -125,7 +126,7 @@ pub fn build(input: &dyn BuildInput, opts: &BuildOptions) -> Fallible<KdTree> {
         Subtree::built(|slot| slot.leaf(Vec::new()))?
     } else {
         match opts.builder {
-            // Beyond 2^30 primitives (more memory than a machine of this kind has) the SAH
+            // Beyond 2^29 primitives (more memory than a machine of this kind has) the SAH
             // builder's packed events run out of bits; the midpoint builder still works.
             Builder::Sah if prims.len() <= sah::MAX_PRIMS => {
                 sah::build(input, prims, bounds, max_depth, opts)?

@@ -134,7 +134,7 @@ impl Midpoint<'_> {
                 Side::Both => {
                     for (side, v) in sides.iter_mut().zip(&voxels) {
                         if let Some(c) = clip(self.input, p, v) {
-                            side.try_push((p, c))?;
+                            side.try_push((p, c.bounds))?;
                         }
                     }
                 }

@@ -24,7 +24,7 @@ mod walk;
 pub use build::{build, BuildInput, BuildOptions, Builder, Layout, MAX_DEPTH_LIMIT};
 
 use crate::fallible::{self, Fallible};
-use crate::geometry::{Aabb, PrimitiveSet, INVALID};
+use crate::geometry::{Aabb, Clipped, PrimitiveSet, INVALID};
 
 /// 8-byte node. `bits & 3` is the split axis (0–2) of an inner node or 3 for a leaf.
 ///
@@ -304,7 +304,7 @@ impl BuildInput for PrimitiveSet {
         PrimitiveSet::bounds(self, prim)
     }
 
-    fn clipped_bounds(&self, prim: usize, voxel: &Aabb) -> Aabb {
+    fn clipped_bounds(&self, prim: usize, voxel: &Aabb) -> Clipped {
         PrimitiveSet::clipped_bounds(self, prim, voxel)
     }
 }

@@ -20,7 +20,7 @@ use rayon::prelude::*;
 use super::split::{child_voxels, clip, fork, parallel, Budget, Side, Slot, Subtree};
 use super::{BuildInput, BuildOptions};
 use crate::fallible::{self, Fallible, TryGrow};
-use crate::geometry::Aabb;
+use crate::geometry::{Aabb, Clipped};
 
 /// Cost of one primitive test, the unit of the cost model.
 const INTERSECTION_COST: f32 = 1.0;
@@ -35,22 +35,27 @@ enum Kind {
 }
 
 /// Bits of an event's key left for the primitive's index in its node (the top two hold the
-/// kind): a node of the SAH builder holds fewer than 2^30 primitives (`MAX_PRIMS`).
-const PRIM_BITS: u32 = 30;
+/// kind, the next one [`PADDED`]): a node of the SAH builder holds fewer than 2^29 primitives
+/// (`MAX_PRIMS`).
+const PRIM_BITS: u32 = 29;
 const PRIM_MASK: u32 = (1 << PRIM_BITS) - 1;
+/// Marks an event at a padded face (`Clipped::padded`): counted by the sweep, never a split.
+const PADDED: u32 = 1 << PRIM_BITS;
+const KIND_SHIFT: u32 = PRIM_BITS + 1;
 
 /// Most primitives the SAH builder takes; `build` hands larger inputs to the midpoint builder.
 pub(super) const MAX_PRIMS: usize = PRIM_MASK as usize;
 
 /// One event packed in a `u64` whose integer order is the sweep order: position (the `f32`
-/// bits mapped to an order-preserving `u32`), then kind, then primitive. Eight bytes instead of
+/// bits mapped to an order-preserving `u32`), then kind, then the padded flag and the primitive.
+/// Eight bytes instead of
 /// a 12-byte struct, and sorts and merges compare one integer: the event lists are most of the
 /// builder's memory traffic.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 struct Event(u64);
 
 impl Event {
-    fn new(pos: f32, prim: u32, kind: Kind) -> Self {
+    fn new(pos: f32, prim: u32, kind: Kind, padded: bool) -> Self {
         // `+ 0.0` turns -0 into +0, so that both zeros are one position of the sweep.
         let bits = (pos + 0.0).to_bits();
         let ordered = if bits >> 31 == 1 {
@@ -58,7 +63,8 @@ impl Event {
         } else {
             bits | 1 << 31
         };
-        Event(u64::from(ordered) << 32 | u64::from(kind as u32) << PRIM_BITS | u64::from(prim))
+        let low = ((kind as u32) << KIND_SHIFT) | (u32::from(padded) * PADDED) | prim;
+        Event(u64::from(ordered) << 32 | u64::from(low))
     }
 
     /// The position's key: equal for equal positions, ordered like them.
@@ -77,7 +83,12 @@ impl Event {
 
     /// The kind as its numeric value.
     fn kind_bits(self) -> u32 {
-        (self.0 as u32) >> PRIM_BITS
+        (self.0 as u32) >> KIND_SHIFT
+    }
+
+    /// Whether the event lies at a padded face, where the SAH must not split.
+    fn padded(self) -> bool {
+        self.0 as u32 & PADDED != 0
     }
 
     fn kind(self) -> Kind {
@@ -101,14 +112,15 @@ impl Event {
 /// Sorted event lists of one node, one per axis.
 type Events = [Vec<Event>; 3];
 
-fn push_events(b: &Aabb, prim: u32, events: &mut Events) -> Fallible<()> {
+fn push_events(c: &Clipped, prim: u32, events: &mut Events) -> Fallible<()> {
     for (axis, list) in events.iter_mut().enumerate() {
-        let (lo, hi) = (b.min[axis], b.max[axis]);
+        let (lo, hi) = (c.bounds.min[axis], c.bounds.max[axis]);
+        let padded = |face: usize| c.padded >> (2 * axis + face) & 1 != 0;
         if lo == hi {
-            list.try_push(Event::new(lo, prim, Kind::Planar))?;
+            list.try_push(Event::new(lo, prim, Kind::Planar, padded(0) && padded(1)))?;
         } else {
-            list.try_push(Event::new(lo, prim, Kind::Start))?;
-            list.try_push(Event::new(hi, prim, Kind::End))?;
+            list.try_push(Event::new(lo, prim, Kind::Start, padded(0)))?;
+            list.try_push(Event::new(hi, prim, Kind::End, padded(1)))?;
         }
     }
     Ok(())
@@ -152,7 +164,7 @@ pub(super) fn build(
 ) -> Fallible<Subtree> {
     let mut events: Events = Default::default();
     for (local, (_, b)) in prims.iter().enumerate() {
-        push_events(b, local as u32, &mut events)?;
+        push_events(&Clipped::exact(*b), local as u32, &mut events)?;
     }
     for list in &mut events {
         list.par_sort_unstable();
@@ -266,23 +278,35 @@ impl Sah<'_> {
         let (mut best_cost, mut best_pos) = (f32::INFINITY, 0.0);
         // Primitives that start before the current plane, and that do not end before it.
         let (mut below, mut above) = (0usize, n);
+        // A plane at padded faces only (`Triangle::clipped_bounds`) is a candidate unless it
+        // lies within a few pads of the planes next to it or of the voxel's faces: there it
+        // would cut off a slab that thin, holding only the geometry at its other face, which a
+        // ray from afar cannot enter. (Keeping every padded plane out made the bunny's tree
+        // hold 38% more references: clipped triangles propose most of the useful planes.)
+        let gap = 8.0 * f32::EPSILON * voxel.min.abs().max(voxel.max.abs()).max_element();
+        let mut previous = lo;
         let mut i = 0;
         while i < list.len() {
             let key = list[i].pos_key();
             let (mut ends, mut planar, mut starts) = (0usize, 0usize, 0usize);
+            let mut geometry = false;
             loop {
                 // The kind's raw bits: integer compares, no branch per event.
                 let kind = list[i].kind_bits();
                 ends += usize::from(kind == Kind::End as u32);
                 planar += usize::from(kind == Kind::Planar as u32);
                 starts += usize::from(kind == Kind::Start as u32);
+                geometry |= !list[i].padded();
                 i += 1;
                 if i == list.len() || list[i].pos_key() != key {
                     break;
                 }
             }
             let pos = list[i - 1].pos();
-            if pos > lo && pos < hi {
+            let next = list.get(i).map_or(hi, |e| e.pos()).min(hi);
+            let apart = pos - previous.max(lo) > gap && next - pos > gap;
+            previous = pos;
+            if pos > lo && pos < hi && (geometry || apart) {
                 // `split::classify` sends every primitive touching the plane (ending, lying or
                 // starting on it) to both children: the cost counts them on both sides, or the
                 // builder would split forever at planes that only duplicate primitives.
@@ -417,16 +441,17 @@ mod tests {
         let mut all = Vec::new();
         for &pos in &POSITIONS {
             for kind in kinds {
-                for prim in [0, 7, PRIM_MASK] {
-                    let e = Event::new(pos, prim, kind);
-                    assert_eq!(e.pos(), pos + 0.0, "position of {pos:e}");
-                    assert_eq!((e.kind(), e.prim()), (kind, prim as usize));
-                    assert_eq!(e.renumbered(3).prim(), 3);
-                    assert_eq!(
-                        (e.renumbered(3).pos(), e.renumbered(3).kind()),
-                        (e.pos(), kind)
-                    );
-                    all.push((pos + 0.0, kind as u32, prim, e));
+                for padded in [false, true] {
+                    for prim in [0, 7, PRIM_MASK] {
+                        let e = Event::new(pos, prim, kind, padded);
+                        assert_eq!(e.pos(), pos + 0.0, "position of {pos:e}");
+                        assert_eq!((e.kind(), e.prim()), (kind, prim as usize));
+                        assert_eq!(e.padded(), padded);
+                        let r = e.renumbered(3);
+                        assert_eq!(r.prim(), 3);
+                        assert_eq!((r.pos(), r.kind(), r.padded()), (e.pos(), kind, padded));
+                        all.push((pos + 0.0, kind as u32, (padded, prim), e));
+                    }
                 }
             }
         }
@@ -445,7 +470,7 @@ mod tests {
             let mut v: Vec<Event> = positions
                 .iter()
                 .enumerate()
-                .map(|(i, &p)| Event::new(p, i as u32, Kind::Start))
+                .map(|(i, &p)| Event::new(p, i as u32, Kind::Start, false))
                 .collect();
             v.sort_unstable();
             v

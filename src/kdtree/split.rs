@@ -3,7 +3,7 @@
 
 use super::{BuildInput, KdNode};
 use crate::fallible::{self, Fallible, TryGrow};
-use crate::geometry::Aabb;
+use crate::geometry::{Aabb, Clipped};
 
 /// A tree (or a subtree built on its own thread) in the final node format, written by a builder
 /// as it recurses: the root at index 0, and every inner node's child pair appended when the
@@ -140,9 +140,9 @@ pub(super) fn child_voxels(voxel: &Aabb, axis: usize, split: f32) -> [Aabb; 2] {
 }
 
 /// Clipped bounds of `prim` in `voxel`, `None` when the prim does not reach into it.
-pub(super) fn clip(input: &dyn BuildInput, prim: u32, voxel: &Aabb) -> Option<Aabb> {
-    let b = input.clipped_bounds(prim as usize, voxel);
-    (!b.is_empty()).then_some(b)
+pub(super) fn clip(input: &dyn BuildInput, prim: u32, voxel: &Aabb) -> Option<Clipped> {
+    let c = input.clipped_bounds(prim as usize, voxel);
+    (!c.bounds.is_empty()).then_some(c)
 }
 
 /// The most leaf references (entries of the leaves' primitive lists) a subtree may hold
