@@ -1100,7 +1100,7 @@ fn windows_starting_at_a_hit_on_a_flat_scene() {
 
 /// Rays that cross a height field's box and leave it exactly at a vertex of its border, with
 /// boxes above it that shape the tree: where such a ray leaves the scene box through a leaf's
-/// edge, ropes++ (which computes no scene exit) went on into a neighbouring leaf, across a
+/// edge, ropes++ (which then computed no scene exit) went on into a neighbouring leaf, across a
 /// face tied with its exit up to rounding, and took a triangle there that the others, whose
 /// scene segment ends at that exit, never see (found by a helper's fuzz through the C API;
 /// about 1 in 1000 such rays here).
