@@ -327,7 +327,17 @@ impl Context {
     ) -> Result<TraversalStats> {
         q.validate()?;
         check_exclusions(rays, exclude)?;
-        self.job(
+        // Rays whose direction is far from unit length go to either backend scaled by a power
+        // of two (`Ray::direction_scale`), on a copy made only when the batch holds one.
+        let scaled: Option<(Vec<Option<f32>>, Vec<Ray>)> =
+            rays.iter().any(|r| r.direction_scale().is_some()).then(|| {
+                let scales: Vec<Option<f32>> = rays.iter().map(Ray::direction_scale).collect();
+                let rays = rays.iter().zip(&scales);
+                let scaled = rays.map(|(r, s)| s.map_or(*r, |s| r.scaled(s))).collect();
+                (scales, scaled)
+            });
+        let rays = scaled.as_ref().map_or(rays, |(_, r)| r);
+        let stats = self.job(
             out,
             gpu_lacks(q.intersector),
             |g, out, choices| {
@@ -341,7 +351,13 @@ impl Context {
                     cpu::query::trace(scene, (rays, exclude), out, how, &opts, q.mode, width)
                 })
             },
-        )
+        )?;
+        for (o, s) in out.iter_mut().zip(scaled.iter().flat_map(|(s, _)| s)) {
+            if let Some(s) = s {
+                *o = o.scaled_back(*s);
+            }
+        }
+        Ok(stats)
     }
 
     fn query_setup(

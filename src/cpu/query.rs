@@ -105,8 +105,8 @@ impl RayAnswer for bool {
 /// whatever `how` says; every mode honours `opts.intersector` and the exclusions, with the
 /// same answers.
 ///
-/// Rays whose direction is far from unit length are traced scaled by a power of two
-/// ([`Ray::direction_scale`]), on a copy of the batch made only when it holds such a ray.
+/// Rays are traced as given: `Context` scales a direction far from unit length first
+/// ([`Ray::direction_scale`], [`RayAnswer::scaled_back`]).
 ///
 /// # Panics
 /// When `exclude` is not as long as `rays`.
@@ -119,15 +119,6 @@ pub fn trace<T: RayAnswer>(
     mode: QueryMode,
     width: Width,
 ) -> TraversalStats {
-    // Only a batch holding a direction far from unit length is copied.
-    let scaled: Option<(Vec<Option<f32>>, Vec<Ray>)> =
-        rays.iter().any(|r| r.direction_scale().is_some()).then(|| {
-            let scales: Vec<Option<f32>> = rays.iter().map(Ray::direction_scale).collect();
-            let rays = rays.iter().zip(&scales);
-            let scaled = rays.map(|(r, s)| s.map_or(*r, |s| r.scaled(s))).collect();
-            (scales, scaled)
-        });
-    let rays = scaled.as_ref().map_or(rays, |(_, r)| r);
     let exclude = match exclude {
         None => Excluded::All(opts.exclude),
         Some(e) => {
@@ -137,7 +128,7 @@ pub fn trace<T: RayAnswer>(
     };
     let rays = (rays, exclude);
     let (tree, prims, intersector) = (&scene.tree, &scene.prims, opts.intersector);
-    let stats = match mode {
+    match mode {
         QueryMode::Single => chunked(rays, out, CHUNK, |r, e, o| {
             serial((r, e), o, |ray, exclude, stats| {
                 let opts = TraverseOptions { exclude, ..*opts };
@@ -150,13 +141,7 @@ pub fn trace<T: RayAnswer>(
         QueryMode::Stream => streamed(rays, out, |r, e, o| {
             T::STREAM(tree, prims, r, RayTests::new(intersector, e), o, width).0
         }),
-    };
-    for (o, s) in out.iter_mut().zip(scaled.iter().flat_map(|(s, _)| s)) {
-        if let Some(s) = s {
-            *o = o.scaled_back(*s);
-        }
     }
-    stats
 }
 
 /// Rays and the primitives they ignore.

@@ -109,9 +109,8 @@ pub(crate) fn run(
         let base = k * per;
         for (i, h) in gh.iter().enumerate() {
             if let Some(out) = hits.as_deref_mut() {
-                let scale = piece[i].direction_scale().unwrap_or(1.0);
                 out[base + i] = Hit {
-                    t: h.t * scale,
+                    t: h.t,
                     u: h.u,
                     v: h.v,
                     prim: h.prim,
@@ -132,10 +131,8 @@ pub(crate) fn run(
 
 /// A degenerate ray (NaN, infinities, zero direction, empty window) becomes an empty window:
 /// the kernel checks too, but its NaN tests must not be the only guard against compilers
-/// that assume finite math. A direction far from unit length is scaled as the CPU's queries
-/// scale it ([`Ray::direction_scale`]; the hit's `t` is scaled back by `run`).
+/// that assume finite math. (`Context` has scaled directions far from unit length.)
 fn gpu_ray(r: &Ray) -> GpuRay {
-    let r = &r.direction_scale().map_or(*r, |s| r.scaled(s));
     if r.is_degenerate() {
         return GpuRay {
             org: [0.0; 3],

@@ -116,9 +116,9 @@ pub(crate) fn scene_box(tree: &KdTree, intersector: Intersector) -> Aabb {
 }
 
 /// Closest hit of `ray` in `[tmin, tmax)` among the tree's primitives and the planes.
-/// Degenerate rays are misses that touch nothing. The ray is traced as given: the queries
-/// (`cpu::query::trace`, `Context`) first scale a direction far from unit length
-/// (`Ray::direction_scale`); the renderers' rays are unit length.
+/// Degenerate rays are misses that touch nothing. The ray is traced as given: `Context`'s
+/// queries first scale a direction far from unit length (`Ray::direction_scale`); the
+/// renderers' rays are unit length.
 pub fn intersect(
     tree: &KdTree,
     prims: &PrimitiveSet,
