@@ -186,4 +186,66 @@ fn calls_without_memory_fail_with_out_of_memory_and_can_be_retried() {
         assert_eq!(rt2_frame_set_mask(frame, mask.as_ptr()), Rt2Status::Ok);
         rt2_frame_destroy(frame);
     }
+    models_without_memory_fail_with_out_of_memory();
+}
+
+/// A model file of one polygon with ten million corners: 20 MB of file, 120 MB of fan
+/// triangles. Each format says OUT_OF_MEMORY under a limit that holds the file but not the
+/// triangles, and leaves the scene without the object.
+fn models_without_memory_fail_with_out_of_memory() {
+    const CORNERS: usize = 10_000_000;
+    let header = |format: &str, count: &str| {
+        format!(
+            "ply\nformat {format} 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+             property float z\nelement face 1\nproperty list {count} uchar vertex_indices\n\
+             end_header\n"
+        )
+        .into_bytes()
+    };
+    let mut binary = header("binary_little_endian", "uint");
+    for c in [0f32, 0., 0., 1., 0., 0., 0., 1., 0.] {
+        binary.extend(c.to_le_bytes());
+    }
+    binary.extend((CORNERS as u32).to_le_bytes());
+    binary.extend([0u8, 1]);
+    binary.resize(binary.len() + CORNERS - 2, 2);
+    let mut ascii = header("ascii", "uint");
+    ascii.extend(format!("0 0 0\n1 0 0\n0 1 0\n{CORNERS} 0 1").bytes());
+    ascii.extend(" 2".repeat(CORNERS - 2).bytes());
+    ascii.push(b'\n');
+    let mut obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2".to_vec();
+    obj.extend(" 3".repeat(CORNERS - 2).bytes());
+    obj.push(b'\n');
+
+    let dir = std::env::temp_dir().join(format!("rt2-oom-models-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    unsafe {
+        let mut desc = rt2_context_desc_default();
+        desc.backend = 1;
+        let mut ctx = null_mut();
+        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
+        let mut scene = null_mut();
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        for (file, bytes) in [("binary.ply", binary), ("ascii.ply", ascii), ("big.obj", obj)] {
+            let path = dir.join(file);
+            std::fs::write(&path, &bytes).unwrap();
+            let c_path = std::ffi::CString::new(path.to_str().unwrap()).unwrap();
+            writeln!(std::io::stderr(), "loading {file}").unwrap();
+            libc::malloc_trim(0);
+            limit_address_space(Some(address_space() + bytes.len() as u64 + (32 << 20)));
+            let mut object = 7;
+            let status = rt2_scene_load_file(scene, c_path.as_ptr(), 0, &mut object);
+            limit_address_space(None);
+            std::fs::remove_file(&path).unwrap();
+            assert_eq!(status, Rt2Status::OutOfMemory, "{file}: {}", last_error());
+            assert!(last_error().contains(file), "{file}: {}", last_error());
+            assert_eq!(object, 7, "{file}: no object id on failure");
+        }
+        // None of the three was added: the scene commits empty, and a ray misses.
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok, "{}", last_error());
+        assert_eq!(hit_at(ctx, scene, 0.1, 0.1).object, RT2_INVALID_ID);
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+    std::fs::remove_dir(&dir).unwrap();
 }

@@ -12,6 +12,7 @@ use glam::Vec3;
 
 use super::{finite_coord, line_error, offset_error, Mesh, Quoted};
 use crate::error::{Error, Result};
+use crate::fallible::TryGrow;
 
 /// The scalar types of the PLY spec, under either of their two spellings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -343,7 +344,7 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                     kind,
                 });
             }
-            "end_header" => break,
+            "end_header" => {}
             other => return Err(err(format!("unknown PLY header keyword {}", Quoted(other)))),
         }
         if let Some(extra) = tok.next() {
@@ -351,6 +352,9 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
                 "unexpected {} at the end of the line",
                 Quoted(extra)
             )));
+        }
+        if keyword == "end_header" {
+            break;
         }
     }
     let format =
@@ -476,6 +480,28 @@ fn check_counts(header: &Header, body_len: usize, name: &str) -> Result<()> {
                 ))
             }
         }
+    }
+    Ok(())
+}
+
+/// Appends the fan triangulation `(v0, v(k), v(k+1))` of a face of `n` vertices (n ≥ 3) whose
+/// indices `index` reads in order. The triangles were reserved one per face: a polygon's
+/// others grow the array fallibly, since a file of a few bytes per index can hold a polygon
+/// of more triangles than memory does.
+fn fan(
+    n: usize,
+    mut index: impl FnMut() -> Result<u32>,
+    triangles: &mut Vec<[u32; 3]>,
+    name: &str,
+) -> Result<()> {
+    let v0 = index()?;
+    let mut prev = index()?;
+    for _ in 2..n {
+        let v = index()?;
+        triangles.try_push([v0, prev, v]).map_err(|_| {
+            Error::out_of_memory(format!("{name}: cannot allocate memory for the triangles"))
+        })?;
+        prev = v;
     }
     Ok(())
 }
@@ -645,19 +671,14 @@ fn read_binary(
                                 if n < 3.0 {
                                     return Err(cur.error(at, face_size_error(i, n)));
                                 }
-                                let index = |cur: &mut Cursor| -> Result<u32> {
+                                let name = cur.name;
+                                let index = || -> Result<u32> {
                                     let at = cur.pos;
                                     let v = cur.read(item, what(el, i, p))?;
                                     vertex_index(v, n_verts)
                                         .map_err(|m| cur.error(at, format!("face {i}: {m}")))
                                 };
-                                let v0 = index(cur)?;
-                                let mut prev = index(cur)?;
-                                for _ in 2..n as usize {
-                                    let v = index(cur)?;
-                                    mesh.triangles.push([v0, prev, v]);
-                                    prev = v;
-                                }
+                                fan(n as usize, index, &mut mesh.triangles, name)?;
                             }
                             _ => cur.skip(p, what(el, i, p))?,
                         }
@@ -775,17 +796,11 @@ fn read_ascii(
                         if n < 3.0 {
                             return Err(err(face_size_error(i, n)));
                         }
-                        let mut index = || -> Result<u32> {
+                        let index = || -> Result<u32> {
                             let v = value(item, &p.name)?;
                             vertex_index(v, n_verts).map_err(|m| err(format!("face {i}: {m}")))
                         };
-                        let v0 = index()?;
-                        let mut prev = index()?;
-                        for _ in 2..n as usize {
-                            let v = index()?;
-                            mesh.triangles.push([v0, prev, v]);
-                            prev = v;
-                        }
+                        fan(n as usize, index, &mut mesh.triangles, name)?;
                     }
                 }
             }
