@@ -402,6 +402,26 @@ fn obj_all_face_forms_and_ignored_statements() {
     );
 }
 
+/// What other exporters write: a byte-order mark, names and comments in Latin-1 (bytes that
+/// are not UTF-8), and MeshLab's per-vertex colours. The loader ignores all three, as it does
+/// normals and groups, and reads the same mesh as from the plain file.
+#[test]
+fn obj_from_other_exporters_byte_order_mark_latin1_names_vertex_colours() {
+    let plain = parse_obj(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "plain.obj").unwrap();
+    let mut text = b"\xef\xbb\xbfv 0 0 0 0.5 0.25 1\n".to_vec();
+    text.extend(b"# caf\xe9\no caf\xe9\ng t\xeate\nmtllib \xe9t\xe9.mtl\nusemtl rouge\xe9\n");
+    text.extend(b"v 1 0 0 1 0 0\nv 0 1 0 0 1 0 # vert \xe0 gauche\nf 1 2 3\n");
+    let mesh = parse_obj(&text, "exporters.obj").unwrap();
+    assert_eq!(mesh.positions, plain.positions);
+    assert_eq!(mesh.triangles, plain.triangles);
+    // A byte-order mark only at the start of the file.
+    assert_parse_err(
+        parse_obj(b"v 0 0 0\n\xef\xbb\xbfv 1 0 0\n", "bom2.obj"),
+        "bom2.obj",
+        &["line 2:", "unsupported OBJ statement"],
+    );
+}
+
 #[test]
 fn obj_negative_indices_are_relative_to_vertices_so_far() {
     let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nv 5 5 5\nf -1 -2/1 -3//2 -4/1/1\n";
@@ -464,6 +484,11 @@ fn malformed_ascii_ply_errors_name_file_and_line() {
             "noend.ply",
             "ply\nformat ascii 1.0\nelement vertex 1\n".into(),
             vec!["line 4:", "no end_header"],
+        ),
+        (
+            "endjunk.ply",
+            "ply\nformat ascii 1.0\nelement vertex 0\nend_header garbage\n".into(),
+            vec!["line 4:", "unexpected 'garbage'"],
         ),
         (
             "keyword.ply",
@@ -803,11 +828,16 @@ fn malformed_obj_errors_name_file_and_line() {
             "v 0 0 0\nv 1 x 0\n",
             &["line 2:", "'x' is not a number"],
         ),
-        ("short.obj", "v 0 0\n", &["line 1:", "3 coordinates"]),
+        ("short.obj", "v 0 0\n", &["line 1:", "not 2 numbers"]),
+        (
+            "five.obj",
+            "v 0 0 0 1 2\n",
+            &["line 1:", "x y z r g b, not 5 numbers"],
+        ),
         (
             "toolong.obj",
-            "v 0 0 0 1 2\n",
-            &["line 1:", "unexpected '2'"],
+            "v 0 0 0 1 2 3 4\n",
+            &["line 1:", "unexpected '4'"],
         ),
         (
             "nan.obj",
@@ -876,6 +906,13 @@ fn malformed_obj_errors_name_file_and_line() {
     }
     let bytes = b"v 0 0 0\nv 1 0 0\n\xff\xfe\n";
     assert_parse_err(parse_obj(bytes, "bin.obj"), "bin.obj", &["line 3:"]);
+    // A byte that is not UTF-8 (Latin-1 'é') where a number belongs.
+    let bytes = b"v 0 0 0\nv 1 \xe9 0\n";
+    assert_parse_err(
+        parse_obj(bytes, "latin1.obj"),
+        "latin1.obj",
+        &["line 2:", "is not a number"],
+    );
     // A huge garbage token is cut short in the message.
     let long = format!("v 0 0 0\nv 0 {} 0\n", "z".repeat(10_000));
     let err = parse_obj(long.as_bytes(), "long.obj").unwrap_err();

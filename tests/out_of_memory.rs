@@ -226,7 +226,11 @@ fn models_without_memory_fail_with_out_of_memory() {
         assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
         let mut scene = null_mut();
         assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
-        for (file, bytes) in [("binary.ply", binary), ("ascii.ply", ascii), ("big.obj", obj)] {
+        for (file, bytes) in [
+            ("binary.ply", binary),
+            ("ascii.ply", ascii),
+            ("big.obj", obj),
+        ] {
             let path = dir.join(file);
             std::fs::write(&path, &bytes).unwrap();
             let c_path = std::ffi::CString::new(path.to_str().unwrap()).unwrap();

@@ -11,7 +11,8 @@ use crate::fallible::TryGrow;
 
 /// Parses an OBJ file held in memory; `name` is used in error messages.
 ///
-/// Reads `v x y z [w]` (w ignored) and `f` with vertex references of the forms `i`, `i/t`,
+/// Reads `v x y z`, `v x y z w` (w ignored) or `v x y z r g b` (a vertex colour, as MeshLab
+/// and ZBrush write it; ignored) and `f` with vertex references of the forms `i`, `i/t`,
 /// `i//n`, `i/t/n`; only `i` is used. Indices are 1-based; negative ones count back from the
 /// last vertex defined so far, and a positive one must refer to a vertex already defined
 /// (the OBJ rule, which lets every index be checked on its own line). Triangles follow the
@@ -19,7 +20,8 @@ use crate::fallible::TryGrow;
 /// `(v0, v(k), v(k+1))`.
 ///
 /// Ignored statements: `vt`, `vn`, `vp`, `g`, `o`, `s`, `usemtl`, `mtllib`, comments and
-/// blank lines; CRLF line endings are accepted. Any other statement is an error, so that a
+/// blank lines; CRLF line endings and a UTF-8 byte-order mark are accepted, and bytes that are
+/// not UTF-8 are only an error where a number is expected. Any other statement is an error, so that a
 /// file that is not OBJ (or uses features this loader would silently drop, like curves) is
 /// reported rather than half-loaded. A file without faces is an error too.
 pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
@@ -29,8 +31,14 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
         let line_no = i + 1;
         let err = |msg: String| line_error(name, line_no, msg);
         let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
-        let line =
-            std::str::from_utf8(raw).map_err(|_| err("line is not text (invalid UTF-8)".into()))?;
+        let raw = if i == 0 {
+            raw.strip_prefix(UTF8_BOM).unwrap_or(raw)
+        } else {
+            raw
+        };
+        // Lossy: exporters write names and comments in other encodings (Latin-1), which this
+        // loader ignores; a byte that is not UTF-8 inside a number fails to parse as one.
+        let line = String::from_utf8_lossy(raw);
         let line = line.split('#').next().unwrap_or_default();
         let mut toks = line.split_whitespace();
         let Some(keyword) = toks.next() else {
@@ -39,25 +47,25 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
         saw_statement = true;
         match keyword {
             "v" => {
-                let mut xyz = [0f32; 3];
-                for (axis, c) in xyz.iter_mut().enumerate() {
-                    let tok = toks
-                        .next()
-                        .ok_or_else(|| err("vertex needs 3 coordinates".into()))?;
-                    let v = tok
+                let mut values = [0f32; 6];
+                let mut count = 0;
+                for tok in toks {
+                    if count == values.len() {
+                        return Err(err(format!("unexpected {} after the vertex", Quoted(tok))));
+                    }
+                    values[count] = tok
                         .parse::<f32>()
                         .map_err(|_| err(format!("{} is not a number", Quoted(tok))))?;
-                    *c = finite_coord(v.into(), axis).map_err(err)?;
+                    count += 1;
                 }
-                if let Some(w) = toks.next() {
-                    w.parse::<f32>()
-                        .map_err(|_| err(format!("{} is not a number", Quoted(w))))?;
-                }
-                if let Some(extra) = toks.next() {
+                if !matches!(count, 3 | 4 | 6) {
                     return Err(err(format!(
-                        "unexpected {} after the vertex",
-                        Quoted(extra)
+                        "a vertex is x y z, x y z w or x y z r g b, not {count} numbers"
                     )));
+                }
+                let mut xyz = [0f32; 3];
+                for (axis, c) in xyz.iter_mut().enumerate() {
+                    *c = finite_coord(values[axis].into(), axis).map_err(err)?;
                 }
                 mesh.positions
                     .try_push(Vec3::from_array(xyz))
@@ -100,6 +108,9 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
     }
     Ok(mesh)
 }
+
+/// What some editors write at the start of a UTF-8 file.
+const UTF8_BOM: &[u8] = b"\xef\xbb\xbf";
 
 /// The error of a mesh that outgrew the memory: OBJ gives no counts up front, so the arrays
 /// grow (fallibly: an error, not an abort of the host program) as lines are read.
