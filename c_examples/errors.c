@@ -45,6 +45,7 @@ static void must(rt2_status s, const char *what) {
 /* Runs after main returns, when this thread's storage is already torn down (as in a C++ static
  * destructor): a failing call must still return its status rather than abort. Silent on
  * success (the summary stays the last line of the output); exits 3 on failure. */
+static rt2_context *exit_ctx; /* asked for its properties during exit, then destroyed */
 static void call_during_exit(void) {
     rt2_status s = rt2_scene_commit(NULL);
     const char *msg = rt2_last_error_message();
@@ -54,6 +55,17 @@ static void call_during_exit(void) {
         _Exit(3);
     }
     fprintf(stderr, "rt2_scene_commit(NULL) during exit: %s, message \"%s\"\n", rt2_status_string(s), msg);
+    /* rt2_context_info keeps per-thread copies of its texts, gone by now: still OK, with a note
+     * in place of each copy. */
+    rt2_context_properties props = {.struct_size = sizeof props};
+    s = rt2_context_info(exit_ctx, &props);
+    if (s != RT2_STATUS_OK || props.reason == NULL || props.auto_choice == NULL) {
+        printf("FAIL rt2_context_info during exit: %s\n", rt2_status_string(s));
+        fflush(stdout);
+        _Exit(3);
+    }
+    fprintf(stderr, "rt2_context_info during exit: %s, auto_choice \"%s\"\n", rt2_status_string(s), props.auto_choice);
+    rt2_context_destroy(exit_ctx);
 }
 
 /* The parts of the statistics that depend only on the scene's content (not on timing). */
@@ -443,7 +455,10 @@ int main(int argc, char **argv) {
     rt2_frame_destroy(frame);
     rt2_camera_destroy(camera);
     rt2_scene_destroy(scene);
-    rt2_context_destroy(ctx2);
+    /* Asked again from `call_during_exit`: this thread has asked before, so its copies exist. */
+    rt2_context_properties props2 = {.struct_size = sizeof props2};
+    expect(rt2_context_info(ctx2, &props2), RT2_STATUS_OK, NULL, "rt2_context_info of the second context");
+    exit_ctx = ctx2;
     printf("%d passed, %d failed\n", passed, failed);
     return failed == 0 ? 0 : 1;
 }

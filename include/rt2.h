@@ -332,7 +332,8 @@ typedef struct rt2_context_properties {
    */
   uint32_t threads;
   /**
-   * Why that backend was chosen; valid while the context lives.
+   * Why that backend was chosen; valid until `rt2_context_destroy` (scenes may keep the
+   * context's work alive longer, not this string).
    */
   const char *reason;
   /**

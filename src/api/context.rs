@@ -43,7 +43,8 @@ pub struct rt2_context_properties {
     pub backend: u32,
     /// Worker threads of the context's pool.
     pub threads: u32,
-    /// Why that backend was chosen; valid while the context lives.
+    /// Why that backend was chosen; valid until `rt2_context_destroy` (scenes may keep the
+    /// context's work alive longer, not this string).
     pub reason: *const c_char,
     /// Why the context's last render or ray query ran on the CPU although `backend` is GPU:
     /// an AUTO context whose device could not take that job (the scene or the job exceeds a
@@ -134,14 +135,25 @@ pub unsafe extern "C" fn rt2_context_info(
             |s: Option<String>| s.map(|s| CString::new(s.replace('\0', "")).unwrap_or_default());
         let (fallback, auto_choice) = c.inner.last_job();
         let copies = [c_string(fallback), c_string(auto_choice)];
+        let present = copies.each_ref().map(Option::is_some);
         // Every check passed: only now are the pointers of the previous call replaced.
-        let [fallback, auto_choice] = LAST_JOB.with(|cell| {
-            let mut slots = cell.borrow_mut();
-            *slots = copies;
-            slots
-                .each_ref()
-                .map(|s| s.as_ref().map_or(std::ptr::null(), |s| s.as_ptr()))
-        });
+        // During thread exit (an `atexit` handler, a thread-local destructor) this thread's
+        // copies are gone, and `with` would panic: each text present is then a static note.
+        let [fallback, auto_choice] = LAST_JOB
+            .try_with(|cell| {
+                let mut slots = cell.borrow_mut();
+                *slots = copies;
+                slots
+                    .each_ref()
+                    .map(|s| s.as_ref().map_or(std::ptr::null(), |s| s.as_ptr()))
+            })
+            .unwrap_or(present.map(|p| {
+                if p {
+                    c"(not available: the thread is exiting)".as_ptr()
+                } else {
+                    std::ptr::null()
+                }
+            }));
         write_out(
             out,
             "out",
