@@ -48,17 +48,30 @@ fn phong(m: Material, base: vec3<f32>, p: vec3<f32>, n: vec3<f32>, view: vec3<f3
     return (m.diffuse * ndotl * base + vec3<f32>(m.specular * spec)) * v3(light.color) * light.intensity;
 }
 
-// Outward normal of a box face nearest to p (`box_normal`).
-fn box_normal(b: Aabb, p: vec3<f32>) -> vec3<f32> {
-    let c = 0.5 * (v3(b.min) + v3(b.max));
-    let h = 0.5 * max(v3(b.max) - v3(b.min), vec3<f32>(0.0));
-    let d = (p - c) / max(h, vec3<f32>(1.17549435e-38));
-    let a = abs(d);
+// `box_face`: the box face nearest to p by distance, as (axis, whether it is the max face).
+fn box_face(b: Aabb, p: vec3<f32>) -> vec2<u32> {
+    let below = p - v3(b.min);
+    let above = v3(b.max) - p;
+    let gap = min(below, above);
     var axis = 2u;
-    if (a.x >= a.y && a.x >= a.z) { axis = 0u; } else if (a.y >= a.z) { axis = 1u; }
+    if (gap.x <= gap.y && gap.x <= gap.z) { axis = 0u; } else if (gap.y <= gap.z) { axis = 1u; }
+    return vec2<u32>(axis, select(0u, 1u, above[axis] <= below[axis]));
+}
+
+// Outward normal of the box face nearest to p (`box_normal`).
+fn box_normal(b: Aabb, p: vec3<f32>) -> vec3<f32> {
+    let f = box_face(b, p);
     var n = vec3<f32>(0.0);
-    n[axis] = select(1.0, -1.0, negative(d[axis]));
+    n[f.x] = select(-1.0, 1.0, f.y == 1u);
     return n;
+}
+
+// `box_on_surface`: p moved onto the box face nearest to it.
+fn box_on_surface(b: Aabb, p: vec3<f32>) -> vec3<f32> {
+    let f = box_face(b, p);
+    var q = clamp(p, v3(b.min), v3(b.max));
+    q[f.x] = select(v3(b.min), v3(b.max), f.y == 1u)[f.x];
+    return q;
 }
 
 // `PrimitiveSet::normal`: geometric normal at p, not oriented towards the ray.
@@ -112,21 +125,39 @@ fn offset_ray_origin(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
 }
 
 // `PrimitiveSet::hit_point`: the hit recomputed on the surface, from the barycentrics for
-// triangles, projected onto the sphere for spheres, `org + t·dir` otherwise.
+// triangles; `org + t·dir` projected onto a plane, snapped onto a box face, moved along the
+// line from the centre onto a sphere or an ellipsoid.
 fn hit_point(h: Hit, r: Ray) -> vec3<f32> {
     let p = ray_at(r, h.t);
+    let nb = n_bounded();
+    if (h.prim >= nb) {
+        let pl = planes[h.prim - nb];
+        let n = v3(pl.normal);
+        return p - (dot(n, p) - pl.offset) * n;
+    }
     if (h.prim < params.n_tri) {
         let t = triangles[h.prim];
         return v3(t.v0) + h.u * v3(t.e1) + h.v * v3(t.e2);
     }
-    let k = h.prim - params.n_tri;
-    if (h.prim < n_bounded() && k < params.n_sph) {
+    var k = h.prim - params.n_tri;
+    if (k < params.n_sph) {
         let c = v3(spheres[k].center);
         let d = normalize_or_zero(p - c);
         if (all(d == vec3<f32>(0.0))) { return p; }
         return c + spheres[k].radius * d;
     }
-    return p;
+    k -= params.n_sph;
+    if (k < params.n_ell) {
+        let e = ellipsoids[k];
+        let c = v3(e.center);
+        let u = ell_inv(e) * (p - c);
+        let len = sqrt(dot(u, u));
+        // Rust's is_normal for a length (never negative): not zero, subnormal, inf or NaN.
+        let bits = bitcast<u32>(len) & 0x7fffffffu;
+        if (bits < 0x00800000u || bits >= 0x7f800000u) { return p; }
+        return c + (p - c) / len;
+    }
+    return box_on_surface(boxes[k - params.n_ell], p);
 }
 
 // `PrimitiveSet::is_flat`: triangles and planes.

@@ -509,6 +509,80 @@ fn offset_modes_match_the_cpu() {
     }
 }
 
+/// The robust offset's hit points on planes, boxes (one of zero thickness), spheres and
+/// ellipsoids seen from 1e4 away (`tests/precision.rs` checks the CPU's against acne): the
+/// GPU's `hit_point` and `box_normal` must agree, or the acne shows as dark pixels.
+#[test]
+fn robust_offsets_seen_from_far_away_match_the_cpu() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let mut scene = Scene::new();
+    let shapes = [
+        Shape::Plane {
+            normal: Vec3::Y,
+            offset: 0.0,
+        },
+        Shape::Box {
+            min: Vec3::new(-2.0, -1.0, -0.5),
+            max: Vec3::new(-1.0, 0.2, 0.5),
+        },
+        Shape::Box {
+            min: Vec3::new(-0.5, 0.3, -0.5),
+            max: Vec3::new(0.5, 0.3, 0.5),
+        },
+        Shape::Sphere {
+            center: Vec3::new(1.5, 0.0, 0.0),
+            radius: 0.5,
+        },
+        Shape::Ellipsoid {
+            center: Vec3::new(0.0, 0.0, 1.5),
+            radii: Vec3::new(0.8, 0.3, 0.5),
+        },
+    ];
+    for shape in shapes {
+        scene.add_object(shape, 0).unwrap();
+    }
+    scene
+        .add_light(PointLight {
+            position: Vec3::new(0.3, 5.0, 0.1),
+            color: Vec3::ONE,
+            intensity: 1.0,
+        })
+        .unwrap();
+    scene.commit().unwrap();
+    let mut camera = rt2::camera::Camera::default();
+    camera
+        .look_at(Vec3::new(0.0, 0.8, 0.6) * 1e4, Vec3::ZERO, Vec3::Y)
+        .unwrap();
+    camera.set_fov(0.03).unwrap();
+    let opts = RenderOptions {
+        offset_mode: OffsetMode::Robust,
+        ..RenderOptions::default()
+    };
+    let frame = |ctx: &Context, opts: &RenderOptions| {
+        let mut f = Frame::new(64, 64).unwrap();
+        ctx.render(scene.committed().unwrap(), &camera, opts, &mut f)
+            .unwrap();
+        f
+    };
+    let want = frame(&cpu(), &opts);
+    for path in [GpuPathRequest::Megakernel, GpuPathRequest::Wavefront] {
+        let got = frame(
+            &g,
+            &RenderOptions {
+                gpu_path: path,
+                ..opts
+            },
+        );
+        let d = image_diff(&got, &want);
+        println!("{path:?}: (mean, p99) per channel {d:?}");
+        for (mean, p99) in d {
+            assert!(mean <= MEAN_MAX && p99 <= P99_MAX, "{path:?}: {d:?}");
+        }
+    }
+}
+
 /// Spheres1 (1.2 M spheres, ray casting) at 64x36: its scene build dominates the time.
 #[test]
 fn images_match_the_cpu_on_spheres1() {

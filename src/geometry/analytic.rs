@@ -97,6 +97,17 @@ impl Sphere {
     pub fn normal(&self, p: Vec3) -> Vec3 {
         (p - Vec3::from(self.center)).normalize_or_zero()
     }
+
+    /// `p`, a point near the surface, moved onto it along the line from the centre.
+    pub fn on_surface(&self, p: Vec3) -> Vec3 {
+        let c = Vec3::from(self.center);
+        let d = (p - c).normalize_or_zero();
+        if d == Vec3::ZERO {
+            p
+        } else {
+            c + self.radius * d
+        }
+    }
 }
 
 /// An ellipsoid as the image of the unit sphere under `x = center + M s`; stored as the
@@ -157,6 +168,19 @@ impl Ellipsoid {
         let s = inv * (p - Vec3::from(self.center));
         (inv.transpose() * s).normalize_or_zero()
     }
+
+    /// `p`, a point near the surface, moved onto it along the line from the centre: in the
+    /// unit sphere's space the point `M⁻¹(p − c)` is scaled to length 1, which in world space
+    /// divides `p − c` by that length (no `M` needed).
+    pub fn on_surface(&self, p: Vec3) -> Vec3 {
+        let c = Vec3::from(self.center);
+        let length = (Mat3::from_cols_array(&self.inv) * (p - c)).length();
+        if length.is_normal() {
+            c + (p - c) / length
+        } else {
+            p
+        }
+    }
 }
 
 /// Solid axis-aligned box; a ray starting inside hits its exit face.
@@ -166,22 +190,37 @@ pub fn box_intersect(b: &Aabb, ray: &Ray, tmax: f32) -> Option<f32> {
     [t0, t1].into_iter().find(|&t| t >= ray.tmin && t < tmax)
 }
 
-/// Outward normal of the box face nearest to `p`.
-pub fn box_normal(b: &Aabb, p: Vec3) -> Vec3 {
-    let c = b.center();
-    let h = 0.5 * b.extent();
-    let d = (p - c) / h.max(Vec3::splat(f32::MIN_POSITIVE));
-    let a = d.abs();
-    let axis = if a.x >= a.y && a.x >= a.z {
+/// The box face nearest to `p`: its axis, and whether it is the `max` face. Nearest by
+/// distance, not by distance relative to the box's size: a point on a face is nearer to it
+/// than to any other face up to the rounding of its coordinates, even on a box of zero
+/// thickness (the faces of the flat axis then tie at distance 0, and `max` is taken).
+fn box_face(b: &Aabb, p: Vec3) -> (usize, bool) {
+    let (below, above) = (p - b.min, b.max - p);
+    let gap = below.min(above);
+    let axis = if gap.x <= gap.y && gap.x <= gap.z {
         0
-    } else if a.y >= a.z {
+    } else if gap.y <= gap.z {
         1
     } else {
         2
     };
+    (axis, above[axis] <= below[axis])
+}
+
+/// Outward normal of the box face nearest to `p`.
+pub fn box_normal(b: &Aabb, p: Vec3) -> Vec3 {
+    let (axis, max) = box_face(b, p);
     let mut n = Vec3::ZERO;
-    n[axis] = d[axis].signum();
+    n[axis] = if max { 1.0 } else { -1.0 };
     n
+}
+
+/// `p`, a point near the box's surface, moved onto the face nearest to it.
+pub fn box_on_surface(b: &Aabb, p: Vec3) -> Vec3 {
+    let (axis, max) = box_face(b, p);
+    let mut q = p.clamp(b.min, b.max);
+    q[axis] = if max { b.max[axis] } else { b.min[axis] };
+    q
 }
 
 /// The infinite plane `normal · x = offset`. Unbounded, so it lives outside the kd-tree and
@@ -202,5 +241,11 @@ impl Plane {
         }
         let t = (self.offset - n.dot(ray.org)) / denom;
         (t >= ray.tmin && t < tmax).then_some(t)
+    }
+
+    /// `p`, a point near the plane, projected onto it (the normal is unit length).
+    pub fn on_surface(&self, p: Vec3) -> Vec3 {
+        let n = Vec3::from(self.normal);
+        p - (n.dot(p) - self.offset) * n
     }
 }

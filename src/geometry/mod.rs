@@ -9,7 +9,7 @@ mod scale;
 mod triangle;
 
 pub use aabb::{Aabb, Clipped};
-pub use analytic::{box_intersect, box_normal, Ellipsoid, Plane, Sphere};
+pub use analytic::{box_intersect, box_normal, box_on_surface, Ellipsoid, Plane, Sphere};
 pub use primitives::{PrimKind, PrimitiveSet, RayTest};
 pub use ray::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
 pub use scale::{power_of_two_scale, unit};

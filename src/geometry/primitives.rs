@@ -5,8 +5,8 @@
 
 use super::triangle::watertight;
 use super::{
-    box_intersect, box_normal, Aabb, Clipped, Ellipsoid, Hit, Plane, PrimIndex, Ray, Sphere,
-    Triangle, TriangleTest,
+    box_intersect, box_normal, box_on_surface, Aabb, Clipped, Ellipsoid, Hit, Plane, PrimIndex,
+    Ray, Sphere, Triangle, TriangleTest,
 };
 use crate::precision::Intersector;
 use glam::Vec3;
@@ -204,30 +204,26 @@ impl PrimitiveSet {
         i >= self.len() || self.locate(i).0 == PrimKind::Triangle
     }
 
-    /// The hit point of `hit` recomputed on the surface: from the barycentrics for triangles
-    /// (exact up to one rounding per coordinate, where `org + t·dir` carries the error of `t`
-    /// times the ray length), projected onto the sphere for spheres, `org + t·dir` otherwise.
+    /// The hit point of `hit` recomputed on the surface, for the robust offset: `org + t·dir`
+    /// carries the error of `t` times the ray's length, which from far away exceeds the
+    /// offset. From the barycentrics for triangles (exact up to one rounding per
+    /// coordinate); `org + t·dir` moved onto the surface for the other primitives (projected
+    /// onto a plane, snapped onto a box's face, along the line from the centre of a sphere
+    /// or an ellipsoid), which leaves an error across the surface only.
     pub fn hit_point(&self, hit: &Hit, ray: &Ray) -> Vec3 {
         let p = ray.at(hit.t);
-        if hit.prim as usize >= self.len() {
-            return p;
+        let i = hit.prim as usize;
+        if i >= self.len() {
+            return self.planes[i - self.len()].on_surface(p);
         }
-        match self.locate(hit.prim as usize) {
+        match self.locate(i) {
             (PrimKind::Triangle, k) => {
                 let t = &self.triangles[k];
                 Vec3::from(t.v0) + hit.u * Vec3::from(t.e1) + hit.v * Vec3::from(t.e2)
             }
-            (PrimKind::Sphere, k) => {
-                let s = &self.spheres[k];
-                let c = Vec3::from(s.center);
-                let d = (p - c).normalize_or_zero();
-                if d == Vec3::ZERO {
-                    p
-                } else {
-                    c + s.radius * d
-                }
-            }
-            _ => p,
+            (PrimKind::Sphere, k) => self.spheres[k].on_surface(p),
+            (PrimKind::Ellipsoid, k) => self.ellipsoids[k].on_surface(p),
+            (PrimKind::Box, k) => box_on_surface(&self.boxes[k], p),
         }
     }
 
