@@ -288,10 +288,16 @@ pub unsafe extern "C" fn rt2_intersect(
             for (h, o) in inner.iter().zip(out.iter_mut()) {
                 *o = if h.is_hit() {
                     let origin = committed.origins[h.prim as usize];
+                    // A mirrored mesh's triangles are stored with corners 1 and 2 swapped.
+                    let (u, v) = if committed.object_mirrors[origin.object as usize] {
+                        (h.v, h.u)
+                    } else {
+                        (h.u, h.v)
+                    };
                     rt2_hit {
                         t: h.t,
-                        u: h.u,
-                        v: h.v,
+                        u,
+                        v,
                         object: origin.object,
                         prim: origin.prim,
                     }

@@ -47,6 +47,9 @@ pub struct Committed {
     /// The inverse of `origins`, empty until asked for (`Scene::ensure_prim_lookup`).
     pub lookup: PrimLookup,
     pub object_material: Vec<u32>,
+    /// Whether each object's transform mirrors ([`object::Object::mirrors`]): its triangles'
+    /// hits have `u` and `v` swapped.
+    pub object_mirrors: Vec<bool>,
     pub materials: Vec<Material>,
     pub lights: Vec<PointLight>,
     /// Bounds of the bounded primitives (planes excluded); sets the scale of ray offsets.
@@ -355,6 +358,7 @@ impl Scene {
             origins,
             lookup: PrimLookup::default(),
             object_material: fallible::collect(self.objects.iter().map(|o| o.material))?,
+            object_mirrors: fallible::collect(self.objects.iter().map(Object::mirrors))?,
             materials: fallible::collect(self.materials.iter().cloned())?,
             lights: fallible::collect(self.lights.iter().cloned())?,
             commit_ms: start.elapsed().as_secs_f32() * 1e3,

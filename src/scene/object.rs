@@ -65,6 +65,16 @@ pub struct Object {
     pub transform: Affine3A,
 }
 
+impl Object {
+    /// Whether the transform mirrors (a negative determinant). A mirrored mesh's triangles
+    /// are placed with corners 1 and 2 swapped, so that the world-space winding, and with it
+    /// the normal `e1 × e2` the renderer takes for outward (refraction enters and leaves by
+    /// it), stays that of the mesh as given; hits report `u` and `v` swapped back.
+    pub fn mirrors(&self) -> bool {
+        self.transform.matrix3.determinant() < 0.0
+    }
+}
+
 /// Where a global primitive index came from, for hits reported to the caller.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PrimOrigin {
@@ -75,8 +85,13 @@ pub struct PrimOrigin {
 /// The world-space corners of triangle `tri` of a mesh placed by `t`. Each corner is placed
 /// on its own (nothing is allocated): checking a mesh of any size then needs no memory, and
 /// the corners come out bit-identical to placing every vertex once.
-fn world_corners(positions: &[Vec3], tri: &[u32; 3], t: &Affine3A) -> [Vec3; 3] {
-    tri.map(|i| t.transform_point3(positions[i as usize]))
+fn world_corners(positions: &[Vec3], tri: &[u32; 3], t: &Affine3A, mirrors: bool) -> [Vec3; 3] {
+    let [a, b, c] = tri.map(|i| t.transform_point3(positions[i as usize]));
+    if mirrors {
+        [a, c, b]
+    } else {
+        [a, b, c]
+    }
 }
 
 /// The exact corners of every triangle of `objects`, in the order [`place`] gives the
@@ -89,11 +104,9 @@ pub fn triangle_corners(objects: &[Object]) -> Fallible<Vec<[[f32; 3]; 3]>> {
             triangles,
         } = &obj.shape
         {
-            out.try_extend(
-                triangles
-                    .iter()
-                    .map(|tri| world_corners(positions, tri, &obj.transform).map(|v| v.to_array())),
-            )?;
+            out.try_extend(triangles.iter().map(|tri| {
+                world_corners(positions, tri, &obj.transform, obj.mirrors()).map(|v| v.to_array())
+            }))?;
         }
     }
     Ok(out)
@@ -165,8 +178,9 @@ fn place_shape(
             positions,
             triangles,
         } => {
+            let mirrors = lin.determinant() < 0.0;
             for (k, tri) in triangles.iter().enumerate() {
-                let [a, b, c] = world_corners(positions, tri, t);
+                let [a, b, c] = world_corners(positions, tri, t, mirrors);
                 let triangle = Triangle::from_vertices(a, b, c);
                 if !triangle_fits(&triangle) {
                     return Err(Error::invalid_argument(format!(
