@@ -5,16 +5,29 @@
 mod support;
 
 use std::collections::HashSet;
+use std::ffi::OsStr;
 use std::path::Path;
 use std::process::{Command, Output};
 
-fn rt2(args: &[&str], output: &Path) -> Output {
+/// The binary with `args`, its output captured.
+fn run<S: AsRef<OsStr>>(args: &[S]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_rt2"))
         .args(args)
-        .arg("-o")
-        .arg(output)
         .output()
         .expect("run the rt2 binary")
+}
+
+fn rt2(args: &[&str], output: &Path) -> Output {
+    let mut args: Vec<&OsStr> = args.iter().map(OsStr::new).collect();
+    args.extend([OsStr::new("-o"), output.as_os_str()]);
+    run(&args)
+}
+
+/// Exit status 1 with a message on stderr that names `named`, and no panic.
+fn assert_refused(out: &Output, named: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains(named), "should name '{named}': {err}");
 }
 
 /// The README's first command (`rt2 render default -o default.png`), into scratch space.
@@ -103,4 +116,43 @@ fn bad_options_fail_before_any_work() {
     let out = rt2(&["render", "default"], &dir.join("missing-dir/x.png"));
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("missing-dir"));
+}
+
+/// File names are bytes on Unix: a model and an output path that are not UTF-8 are used as
+/// given; any other argument that is not UTF-8 is refused with a message, not a panic.
+#[cfg(unix)]
+#[test]
+fn paths_need_not_be_utf8() {
+    use std::os::unix::ffi::OsStrExt;
+    let dir = support::scratch("cli");
+    let model = dir.join(OsStr::from_bytes(b"caf\xe9.obj"));
+    std::fs::write(&model, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let png = dir.join(OsStr::from_bytes(b"caf\xe9.png"));
+    let _ = std::fs::remove_file(&png);
+    let out = run(&[
+        OsStr::new("render"),
+        model.as_os_str(),
+        OsStr::new("--size"),
+        OsStr::new("8x8"),
+        OsStr::new("--backend"),
+        OsStr::new("cpu"),
+        OsStr::new("-o"),
+        png.as_os_str(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(png.exists(), "no PNG at {}", png.display());
+
+    let bad = OsStr::from_bytes(b"cp\xffu");
+    for args in [
+        vec![OsStr::new("render"), OsStr::new("--backend"), bad],
+        vec![OsStr::new("render"), OsStr::from_bytes(b"--\xff")],
+        vec![bad],
+        vec![OsStr::new("bench"), bad],
+    ] {
+        assert_refused(&run(&args), "not valid UTF-8");
+    }
 }

@@ -1,8 +1,10 @@
 //! The `rt2` command line: `render` draws a built-in scene or a model file to a PNG, `bench`
 //! measures (see `rt2 bench --help`).
 
+mod args;
 mod bench;
 
+use args::{Arg, Reader};
 use glam::Vec3;
 use rt2::camera::Camera;
 use rt2::context::Context;
@@ -14,7 +16,8 @@ use rt2::kdtree::{BuildOptions, Builder};
 use rt2::precision::{Intersector, OffsetMode};
 use rt2::render::{RenderOptions, Transparency};
 use rt2::scene::{builtin, loaders, Material, PointLight, Scene, Shape};
-use std::path::Path;
+use std::ffi::{OsStr, OsString};
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 const USAGE: &str = "usage:
@@ -35,21 +38,30 @@ const USAGE: &str = "usage:
   rt2 bench [frames|build|rays|tables|streams|gpu|chart|memory|all]    measure (rt2 bench --help)";
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let result = match args.first().map(String::as_str) {
-        Some("render") => render(&args[1..]),
-        Some("bench") => bench::run(&args[1..]),
-        Some("-h" | "--help") | None => {
+    // `args_os`, not `args`: a model or output path need not be UTF-8 (and `args` panics).
+    let args: Vec<OsString> = std::env::args_os().skip(1).collect();
+    if let Err(e) = run(&args) {
+        eprintln!("rt2: {}", e.message);
+        std::process::exit(1);
+    }
+}
+
+/// Runs the command that `args` (without the program's name) ask for.
+fn run(args: &[OsString]) -> Result<()> {
+    let Some((command, rest)) = args.split_first() else {
+        println!("{USAGE}");
+        return Ok(());
+    };
+    match args::utf8(command)? {
+        "render" => render(rest),
+        "bench" => bench::run(rest),
+        "-h" | "--help" => {
             println!("{USAGE}");
             Ok(())
         }
-        Some(other) => Err(Error::invalid_argument(format!(
+        other => Err(Error::invalid_argument(format!(
             "unknown command '{other}'\n{USAGE}"
         ))),
-    };
-    if let Err(e) = result {
-        eprintln!("rt2: {}", e.message);
-        std::process::exit(1);
     }
 }
 
@@ -61,9 +73,11 @@ pub struct Loaded {
     pub max_depth: u32,
 }
 
-pub fn load_scene(name: &str) -> Result<Loaded> {
-    if builtin::NAMES.contains(&name) {
-        let b = builtin::by_name(name)?;
+/// A built-in scene by name, or else the model file at that path.
+pub fn load_scene(name: impl AsRef<OsStr>) -> Result<Loaded> {
+    let name = name.as_ref();
+    if let Some(builtin) = name.to_str().filter(|n| builtin::NAMES.contains(n)) {
+        let b = builtin::by_name(builtin)?;
         return Ok(Loaded {
             scene: b.scene,
             camera: b.camera,
@@ -106,70 +120,73 @@ pub fn load_scene(name: &str) -> Result<Loaded> {
     })
 }
 
-fn parse<T: std::str::FromStr>(flag: &str, v: Option<&String>) -> Result<T> {
-    let v = v.ok_or_else(|| Error::invalid_argument(format!("{flag} needs a value")))?;
-    v.parse()
-        .map_err(|_| Error::invalid_argument(format!("{flag}: cannot parse '{v}'")))
-}
-
-fn render(args: &[String]) -> Result<()> {
-    let mut name = "default".to_string();
-    let mut output = "rt2.png".to_string();
+fn render(args: &[OsString]) -> Result<()> {
+    let mut name = OsString::from("default");
+    let mut output = PathBuf::from("rt2.png");
     let (mut width, mut height) = (1376u32, 768u32);
     let mut backend = BackendRequest::Auto;
     let mut opts = RenderOptions::default();
     let mut depth = None;
     let mut threads = 0u32;
     let mut builder = Builder::Sah;
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "-o" | "--output" => output = parse(a, it.next())?,
+    let mut args = Reader::new(args);
+    while let Some(arg) = args.next_arg() {
+        let a = match arg? {
+            Arg::Positional(s) => {
+                name = s.to_owned();
+                continue;
+            }
+            Arg::Flag(a) => a,
+        };
+        match a {
+            "-o" | "--output" => output = args.path(a)?,
             "-s" | "--size" => {
-                let s: String = parse(a, it.next())?;
-                let (w, h) = s
+                let (w, h) = args
+                    .text(a)?
                     .split_once('x')
                     .ok_or_else(|| Error::invalid_argument("--size takes WxH"))?;
-                width = parse(a, Some(&w.to_string()))?;
-                height = parse(a, Some(&h.to_string()))?;
+                width = w
+                    .parse()
+                    .map_err(|_| Error::invalid_argument(format!("{a}: cannot parse '{w}'")))?;
+                height = h
+                    .parse()
+                    .map_err(|_| Error::invalid_argument(format!("{a}: cannot parse '{h}'")))?;
             }
             "--backend" => {
-                let b: String = parse(a, it.next())?;
-                backend = BackendRequest::parse(&b)
+                let b = args.text(a)?;
+                backend = BackendRequest::parse(b)
                     .ok_or_else(|| Error::invalid_argument(format!("unknown backend '{b}'")))?;
             }
             "--traversal" => {
-                let t: String = parse(a, it.next())?;
-                opts.traversal = match t.as_str() {
+                let t = args.text(a)?;
+                opts.traversal = match t {
                     "auto" => None,
-                    _ => Some(Traversal::from_name(&t).ok_or_else(|| {
+                    _ => Some(Traversal::from_name(t).ok_or_else(|| {
                         Error::invalid_argument(format!("unknown traversal '{t}'"))
                     })?),
                 };
             }
-            "--depth" => depth = Some(parse(a, it.next())?),
-            "--samples" => opts.samples = parse(a, it.next())?,
-            "--threads" => threads = parse(a, it.next())?,
+            "--depth" => depth = Some(args.parse(a)?),
+            "--samples" => opts.samples = args.parse(a)?,
+            "--threads" => threads = args.parse(a)?,
             "--straight" => opts.transparency = Transparency::Straight,
             "--builder" => {
-                let b: String = parse(a, it.next())?;
-                builder = match b.as_str() {
+                builder = match args.text(a)? {
                     "sah" => Builder::Sah,
                     "midpoint" => Builder::Midpoint,
-                    _ => return Err(Error::invalid_argument(format!("unknown builder '{b}'"))),
+                    b => return Err(Error::invalid_argument(format!("unknown builder '{b}'"))),
                 };
             }
             "--intersector" => {
-                let i: String = parse(a, it.next())?;
-                opts.intersector = Intersector::from_name(&i)
+                let i = args.text(a)?;
+                opts.intersector = Intersector::from_name(i)
                     .ok_or_else(|| Error::invalid_argument(format!("unknown intersector '{i}'")))?;
             }
             "--offset" => {
-                let m: String = parse(a, it.next())?;
-                opts.offset_mode = OffsetMode::from_name(&m)
+                let m = args.text(a)?;
+                opts.offset_mode = OffsetMode::from_name(m)
                     .ok_or_else(|| Error::invalid_argument(format!("unknown offset mode '{m}'")))?;
             }
-            s if !s.starts_with('-') => name = s.to_string(),
             s => {
                 return Err(Error::invalid_argument(format!(
                     "unknown option '{s}'\n{USAGE}"
@@ -179,7 +196,7 @@ fn render(args: &[String]) -> Result<()> {
     }
     // Before any work: a bad output path, option or size found after a long load, commit or
     // render wastes it (the render checks the options again, with the scene's depth).
-    rt2::frame::check_png_path(Path::new(&output))?;
+    rt2::frame::check_png_path(&output)?;
     if let Some(d) = depth {
         opts.max_depth = d;
     }
@@ -205,8 +222,9 @@ fn render(args: &[String]) -> Result<()> {
     let t1 = Instant::now();
     ctx.render(committed, &loaded.camera, &opts, &mut frame)?;
     let ms = t1.elapsed().as_secs_f64() * 1e3;
-    frame.save_png(Path::new(&output))?;
+    frame.save_png(&output)?;
     let primary = width as f64 * height as f64 * opts.samples as f64;
+    let (name, output) = (name.to_string_lossy(), output.display());
     println!(
         "{name}: {} primitives, load {load_ms:.1} ms, commit {:.1} ms (tree {:.1} ms, {} nodes)",
         committed.prims.len() + committed.prims.planes.len(),

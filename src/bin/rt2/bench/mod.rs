@@ -11,8 +11,10 @@ mod rays;
 mod streams;
 mod tables;
 
+use crate::args::{Arg, Reader};
 use rt2::error::{Error, Result};
 use rt2::scene::{loaders, Scene, Shape};
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
@@ -44,23 +46,23 @@ struct Args {
     write: Option<PathBuf>,
 }
 
-pub fn run(args: &[String]) -> Result<()> {
-    let mut what = "all".to_string();
+pub fn run(args: &[OsString]) -> Result<()> {
+    let mut what = "all";
     let mut a = Args {
         runs: 5,
         write: None,
     };
-    let mut it = args.iter();
-    while let Some(x) = it.next() {
-        match x.as_str() {
-            "--runs" => a.runs = crate::parse(x, it.next())?,
-            "--write" => a.write = Some(PathBuf::from(crate::parse::<String>(x, it.next())?)),
-            "-h" | "--help" => {
+    let mut args = Reader::new(args);
+    while let Some(arg) = args.next_arg() {
+        match arg? {
+            Arg::Flag(x @ "--runs") => a.runs = args.parse(x)?,
+            Arg::Flag(x @ "--write") => a.write = Some(args.path(x)?),
+            Arg::Flag("-h" | "--help") => {
                 println!("{USAGE}");
                 return Ok(());
             }
-            s if !s.starts_with('-') => what = s.to_string(),
-            s => {
+            Arg::Positional(s) => what = crate::args::utf8(s)?,
+            Arg::Flag(s) => {
                 return Err(Error::invalid_argument(format!(
                     "unknown option '{s}'\n{USAGE}"
                 )))
@@ -68,7 +70,7 @@ pub fn run(args: &[String]) -> Result<()> {
         }
     }
     a.runs = a.runs.max(1);
-    let sections: Vec<(&str, Bench)> = match what.as_str() {
+    let sections: Vec<(&str, Bench)> = match what {
         "frames" => vec![("frames", frames::frames)],
         "build" => vec![("build", build::build)],
         "rays" => vec![("rays", rays::rays)],
