@@ -7,12 +7,21 @@ mod support;
 use std::collections::HashSet;
 use std::ffi::OsStr;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::{Command, Output, Stdio};
 
 /// The binary with `args`, its output captured.
 fn run<S: AsRef<OsStr>>(args: &[S]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_rt2"))
         .args(args)
+        .output()
+        .expect("run the rt2 binary")
+}
+
+/// The binary with `args`, writing its stdout to `stdout`; stderr is captured.
+fn run_into<S: AsRef<OsStr>>(args: &[S], stdout: impl Into<Stdio>) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rt2"))
+        .args(args)
+        .stdout(stdout)
         .output()
         .expect("run the rt2 binary")
 }
@@ -154,5 +163,35 @@ fn paths_need_not_be_utf8() {
         vec![OsStr::new("bench"), bad],
     ] {
         assert_refused(&run(&args), "not valid UTF-8");
+    }
+}
+
+/// Stdout that cannot be written never panics: a full disk is an error (status 1, a message
+/// on stderr), a reader that has gone (`| head -1`) ends the command quietly with status 0.
+#[cfg(target_os = "linux")]
+#[test]
+fn unwritable_stdout_is_not_a_panic() {
+    let png = support::scratch("cli").join("stdout.png");
+    let png = png.to_str().expect("a UTF-8 scratch path");
+    let commands: [&[&str]; 3] = [
+        &["--help"],
+        &["bench", "-h"],
+        &["render", "--size", "8x8", "--backend", "cpu", "-o", png],
+    ];
+    for args in commands {
+        let full = std::fs::File::options()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let out = run_into(args, full);
+        assert!(!String::from_utf8_lossy(&out.stderr).contains("panicked"));
+        assert_refused(&out, "stdout");
+
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = run_into(args, writer);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {err}");
+        assert!(err.is_empty(), "{args:?}: {err}");
     }
 }

@@ -3,9 +3,11 @@
 
 mod args;
 mod bench;
+mod output;
 
 use args::{Arg, Reader};
 use glam::Vec3;
+use output::{say, warn};
 use rt2::camera::Camera;
 use rt2::context::Context;
 use rt2::cpu::traverse::Traversal;
@@ -41,7 +43,7 @@ fn main() {
     // `args_os`, not `args`: a model or output path need not be UTF-8 (and `args` panics).
     let args: Vec<OsString> = std::env::args_os().skip(1).collect();
     if let Err(e) = run(&args) {
-        eprintln!("rt2: {}", e.message);
+        warn(format_args!("rt2: {}", e.message));
         std::process::exit(1);
     }
 }
@@ -49,16 +51,12 @@ fn main() {
 /// Runs the command that `args` (without the program's name) ask for.
 fn run(args: &[OsString]) -> Result<()> {
     let Some((command, rest)) = args.split_first() else {
-        println!("{USAGE}");
-        return Ok(());
+        return say(USAGE);
     };
     match args::utf8(command)? {
         "render" => render(rest),
         "bench" => bench::run(rest),
-        "-h" | "--help" => {
-            println!("{USAGE}");
-            Ok(())
-        }
+        "-h" | "--help" => say(USAGE),
         other => Err(Error::invalid_argument(format!(
             "unknown command '{other}'\n{USAGE}"
         ))),
@@ -225,18 +223,17 @@ fn render(args: &[OsString]) -> Result<()> {
     frame.save_png(&output)?;
     let primary = width as f64 * height as f64 * opts.samples as f64;
     let (name, output) = (name.to_string_lossy(), output.display());
-    println!(
+    say(format_args!(
         "{name}: {} primitives, load {load_ms:.1} ms, commit {:.1} ms (tree {:.1} ms, {} nodes)",
         committed.prims.len() + committed.prims.planes.len(),
         committed.commit_ms,
         committed.tree.stats.build_ms,
         committed.tree.stats.node_count
-    );
-    println!(
+    ))?;
+    say(format_args!(
         "rendered {width}x{height} on {} threads ({}): {ms:.1} ms, {:.2} M primary rays/s -> {output}",
         ctx.threads(),
         ctx.decision().reason,
         primary / ms / 1e3
-    );
-    Ok(())
+    ))
 }

@@ -12,6 +12,7 @@ mod streams;
 mod tables;
 
 use crate::args::{Arg, Reader};
+use crate::output::say;
 use rt2::error::{Error, Result};
 use rt2::scene::{loaders, Scene, Shape};
 use std::ffi::OsString;
@@ -57,10 +58,7 @@ pub fn run(args: &[OsString]) -> Result<()> {
         match arg? {
             Arg::Flag(x @ "--runs") => a.runs = args.parse(x)?,
             Arg::Flag(x @ "--write") => a.write = Some(args.path(x)?),
-            Arg::Flag("-h" | "--help") => {
-                println!("{USAGE}");
-                return Ok(());
-            }
+            Arg::Flag("-h" | "--help") => return say(USAGE),
             Arg::Positional(s) => what = crate::args::utf8(s)?,
             Arg::Flag(s) => {
                 return Err(Error::invalid_argument(format!(
@@ -103,10 +101,11 @@ pub fn run(args: &[OsString]) -> Result<()> {
             if name == "chart" { "--features chart " } else { "" },
             a.runs
         );
-        println!("\n{text}");
+        // The file first: it keeps the measurement if stdout's reader has gone (`| head`).
         if let Some(path) = &a.write {
             replace_section(path, name, &text)?;
         }
+        say(format_args!("\n{text}"))?;
     }
     Ok(())
 }
