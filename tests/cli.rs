@@ -195,3 +195,27 @@ fn unwritable_stdout_is_not_a_panic() {
         assert!(err.is_empty(), "{args:?}: {err}");
     }
 }
+
+/// Stderr that cannot be written (a full disk) is not a panic (status 101): an error still
+/// ends with status 1, and a benchmark's notes (here: the models are missing) are dropped.
+#[cfg(target_os = "linux")]
+#[test]
+fn unwritable_stderr_is_not_a_panic() {
+    let empty = support::scratch("cli-no-models");
+    for (args, status) in [
+        (&["render", "--frobnicate"][..], 1),
+        (&["bench", "memory"], 0),
+    ] {
+        let full = std::fs::File::options()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_rt2"))
+            .args(args)
+            .env("RT2_SHARED", &empty)
+            .stderr(full)
+            .output()
+            .expect("run the rt2 binary");
+        assert_eq!(out.status.code(), Some(status), "{args:?}");
+    }
+}

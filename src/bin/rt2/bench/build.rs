@@ -3,6 +3,7 @@
 //! traversal cost.
 
 use super::{embree_rows, find_set, median, mib, model_scene, shared, time_ms, Args};
+use crate::output::warn;
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
@@ -218,7 +219,10 @@ fn layout_effect(a: &Args) -> Result<String> {
     for set in ["incoherent_262144", "primary_262144"] {
         let path = shared().join("raysets/bunny").join(format!("{set}.rays"));
         let Ok(rays) = rayset::read_rays(&path) else {
-            eprintln!("bench: {} is missing; skipped", path.display());
+            warn(format_args!(
+                "bench: {} is missing; skipped",
+                path.display()
+            ));
             continue;
         };
         let mut row = format!("| {set} |");

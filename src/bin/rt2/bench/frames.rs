@@ -3,6 +3,7 @@
 
 use super::{mib, shared, time_ms, Args};
 use crate::load_scene;
+use crate::output::warn;
 use rt2::context::Context;
 use rt2::dispatch::BackendRequest;
 use rt2::error::Result;
@@ -23,10 +24,10 @@ pub(super) fn frames(a: &Args) -> Result<String> {
     if bunny.exists() {
         names.push(bunny.display().to_string());
     } else {
-        eprintln!(
+        warn(format_args!(
             "bench frames: {} is missing; the bunny row is skipped",
             bunny.display()
-        );
+        ));
     }
     for name in names {
         let mut l = load_scene(&name)?;

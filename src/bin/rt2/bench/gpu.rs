@@ -2,6 +2,7 @@
 
 use super::{shared, time_ms, Args};
 use crate::load_scene;
+use crate::output::warn;
 use rt2::context::Context;
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
@@ -55,7 +56,10 @@ pub(super) fn gpu(a: &Args) -> Result<String> {
         if p.exists() {
             names.push(p.display().to_string());
         } else {
-            eprintln!("bench gpu: {} is missing; skipped", p.display());
+            warn(format_args!(
+                "bench gpu: {} is missing; skipped",
+                p.display()
+            ));
         }
     }
     names.extend(["spheres1", "spheres2", "spheres3"].map(String::from));

@@ -12,7 +12,7 @@ mod streams;
 mod tables;
 
 use crate::args::{Arg, Reader};
-use crate::output::say;
+use crate::output::{say, warn};
 use rt2::error::{Error, Result};
 use rt2::scene::{loaders, Scene, Shape};
 use std::ffi::OsString;
@@ -178,7 +178,10 @@ fn mib(bytes: usize) -> f64 {
 fn model_scene(name: &str) -> Result<Option<Scene>> {
     let path = shared().join("models").join(name);
     if !path.exists() {
-        eprintln!("bench: {} is missing; skipped", path.display());
+        warn(format_args!(
+            "bench: {} is missing; skipped",
+            path.display()
+        ));
         return Ok(None);
     }
     let mesh = loaders::load_mesh(&path)?;
@@ -210,7 +213,7 @@ fn ray_generator() -> Option<PathBuf> {
 /// Runs Embree's harness and returns its TSV rows (split into fields).
 fn embree_rows(mesh: &Path, rays: &[PathBuf], runs: usize) -> Vec<Vec<String>> {
     let Some(exe) = embree_harness() else {
-        eprintln!("bench: Embree's harness is not built; Embree columns are empty");
+        warn("bench: Embree's harness is not built; Embree columns are empty");
         return Vec::new();
     };
     let tsv = std::env::temp_dir().join(format!("rt2-embree-{}.tsv", std::process::id()));
@@ -223,7 +226,7 @@ fn embree_rows(mesh: &Path, rays: &[PathBuf], runs: usize) -> Vec<Vec<String>> {
         .stdout(std::process::Stdio::null())
         .status();
     if !status.is_ok_and(|s| s.success()) {
-        eprintln!("bench: Embree's harness failed");
+        warn("bench: Embree's harness failed");
         return Vec::new();
     }
     let text = std::fs::read_to_string(&tsv).unwrap_or_default();
@@ -245,7 +248,10 @@ fn find_set(model: &str, kind: &str) -> Option<PathBuf> {
         })
     });
     if found.is_none() {
-        eprintln!("bench: no {kind}_*.rays in {}; skipped", dir.display());
+        warn(format_args!(
+            "bench: no {kind}_*.rays in {}; skipped",
+            dir.display()
+        ));
     }
     found
 }

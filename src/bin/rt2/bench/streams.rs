@@ -5,6 +5,7 @@
 //! same run, the lane widths and the stream's ray stack memory.
 
 use super::{embree_rows, model_scene, ray_generator, shared, Args};
+use crate::output::warn;
 use rt2::context::Context;
 use rt2::cpu::query::{self, QueryMode, STREAM_CHUNK, STREAM_MAX};
 use rt2::cpu::simd::Width;
@@ -332,7 +333,7 @@ fn primary_1024(mesh: &std::path::Path) -> Option<std::path::PathBuf> {
         .is_ok_and(|s| s.success());
     let set = dir.join("primary_1048576.rays");
     if !(made && set.exists()) {
-        eprintln!("bench: rt2gen made no 1024² primary set; that row is left out");
+        warn("bench: rt2gen made no 1024² primary set; that row is left out");
         let _ = std::fs::remove_dir_all(&dir);
         return None;
     }

@@ -3,6 +3,7 @@
 
 use super::{mib, shared, time_ms, Args};
 use crate::load_scene;
+use crate::output::warn;
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
@@ -53,7 +54,10 @@ pub(super) fn tables(a: &Args) -> Result<String> {
         if p.exists() {
             scenes.push(p.display().to_string());
         } else {
-            eprintln!("bench tables: {} is missing; skipped", p.display());
+            warn(format_args!(
+                "bench tables: {} is missing; skipped",
+                p.display()
+            ));
         }
     }
     scenes.extend(["spheres1", "spheres2", "spheres3"].map(String::from));

@@ -11,6 +11,7 @@ mod queries;
 mod secondary;
 
 use super::Args;
+use crate::output::warn;
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::query::QueryMode;
 use rt2::cpu::traverse::Traversal;
@@ -225,7 +226,7 @@ pub(super) fn chart(a: &Args) -> Result<String> {
     let (sp, st) = secondary::secondary(a, &b)?;
     let psnr = psnr::psnr_table(&b)?;
     let secs = t0.elapsed().as_secs_f64();
-    eprintln!("bench chart: measured in {secs:.0} s");
+    warn(format_args!("bench chart: measured in {secs:.0} s"));
     let images = draw(
         &[("Ray queries", &qp), ("Secondary rays (shadow)", &sp)],
         b.gpu_legend().as_deref(),
@@ -278,7 +279,7 @@ fn draw(panels: &[(&str, &Vec<Point>)], gpu: Option<&str>) -> String {
             "Chart: [docs/chart.svg](docs/chart.svg), [docs/chart.png](docs/chart.png).".into()
         }
         Err(e) => {
-            eprintln!("bench chart: no chart drawn: {e}");
+            warn(format_args!("bench chart: no chart drawn: {e}"));
             format!("(chart not drawn: {e})")
         }
     }
@@ -286,6 +287,6 @@ fn draw(panels: &[(&str, &Vec<Point>)], gpu: Option<&str>) -> String {
 
 #[cfg(not(feature = "chart"))]
 fn draw(_: &[(&str, &Vec<Point>)], _: Option<&str>) -> String {
-    eprintln!("bench chart: built without the `chart` feature; no images drawn");
+    warn("bench chart: built without the `chart` feature; no images drawn");
     "(chart not drawn: build with `--features chart`)".into()
 }

@@ -3,6 +3,7 @@
 
 use super::{Backends, Point};
 use crate::bench::{model_scene, shared, time_ms, Args};
+use crate::output::warn;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use rt2::error::Result;
@@ -259,10 +260,10 @@ fn bunny_sets() -> Result<Vec<(&'static str, RaySet)>> {
     ] {
         let path = shared().join("raysets/bunny").join(format!("{file}.rays"));
         let (Some(scene), Ok(rays)) = (model_scene("bunny.ply")?, rayset::read_rays(&path)) else {
-            eprintln!(
+            warn(format_args!(
                 "bench chart: the bunny or {} is missing; skipped",
                 path.display()
-            );
+            ));
             continue;
         };
         // 4096 of the 262144 rays against the f64 brute force over 69k triangles.
