@@ -219,3 +219,22 @@ fn unwritable_stderr_is_not_a_panic() {
         assert_eq!(out.status.code(), Some(status), "{args:?}");
     }
 }
+
+/// One scene or benchmark per command: a second positional argument is refused, not silently
+/// taken in place of the first.
+#[test]
+fn a_second_positional_argument_is_refused() {
+    let empty = support::scratch("cli-no-models");
+    let png = support::scratch("cli").join("two-scenes.png");
+    let _ = std::fs::remove_file(&png);
+    let out = rt2(&["render", "spheres1", "spheres2", "--size", "8x8"], &png);
+    assert_refused(&out, "spheres2");
+    assert!(!png.exists());
+    let out = Command::new(env!("CARGO_BIN_EXE_rt2"))
+        .args(["bench", "extra", "memory"])
+        .env("RT2_SHARED", &empty)
+        .output()
+        .expect("run the rt2 binary");
+    assert_refused(&out, "memory");
+    assert!(out.stdout.is_empty(), "no benchmark runs");
+}

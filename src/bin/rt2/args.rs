@@ -59,6 +59,20 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// Takes `arg` as the command's one positional argument (`what` it is, for the message): a
+/// second one is an error, not a silent replacement of the first.
+pub fn set_once<'a>(slot: &mut Option<&'a OsStr>, arg: &'a OsStr, what: &str) -> Result<()> {
+    if let Some(first) = slot {
+        return Err(Error::invalid_argument(format!(
+            "unexpected argument '{}': the {what} is already '{}'",
+            arg.to_string_lossy(),
+            first.to_string_lossy()
+        )));
+    }
+    *slot = Some(arg);
+    Ok(())
+}
+
 /// `arg` as text, or an error quoting it (its invalid bytes shown as U+FFFD).
 pub fn utf8(arg: &OsStr) -> Result<&str> {
     arg.to_str().ok_or_else(|| {

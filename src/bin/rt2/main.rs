@@ -119,7 +119,7 @@ pub fn load_scene(name: impl AsRef<OsStr>) -> Result<Loaded> {
 }
 
 fn render(args: &[OsString]) -> Result<()> {
-    let mut name = OsString::from("default");
+    let mut name = None;
     let mut output = PathBuf::from("rt2.png");
     let (mut width, mut height) = (1376u32, 768u32);
     let mut backend = BackendRequest::Auto;
@@ -131,7 +131,7 @@ fn render(args: &[OsString]) -> Result<()> {
     while let Some(arg) = args.next_arg() {
         let a = match arg? {
             Arg::Positional(s) => {
-                name = s.to_owned();
+                args::set_once(&mut name, s, "scene")?;
                 continue;
             }
             Arg::Flag(a) => a,
@@ -192,6 +192,7 @@ fn render(args: &[OsString]) -> Result<()> {
             }
         }
     }
+    let name = name.unwrap_or(OsStr::new("default"));
     // Before any work: a bad output path, option or size found after a long load, commit or
     // render wastes it (the render checks the options again, with the scene's depth).
     rt2::frame::check_png_path(&output)?;
@@ -202,7 +203,7 @@ fn render(args: &[OsString]) -> Result<()> {
     let mut frame = Frame::new(width, height)?;
     let ctx = Context::new(backend, threads)?;
     let t0 = Instant::now();
-    let mut loaded = load_scene(&name)?;
+    let mut loaded = load_scene(name)?;
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     opts.max_depth = depth.unwrap_or(loaded.max_depth);
     loaded.scene.set_build_options(BuildOptions {

@@ -48,7 +48,7 @@ struct Args {
 }
 
 pub fn run(args: &[OsString]) -> Result<()> {
-    let mut what = "all";
+    let mut what = None;
     let mut a = Args {
         runs: 5,
         write: None,
@@ -59,7 +59,7 @@ pub fn run(args: &[OsString]) -> Result<()> {
             Arg::Flag(x @ "--runs") => a.runs = args.parse(x)?,
             Arg::Flag(x @ "--write") => a.write = Some(args.path(x)?),
             Arg::Flag("-h" | "--help") => return say(USAGE),
-            Arg::Positional(s) => what = crate::args::utf8(s)?,
+            Arg::Positional(s) => crate::args::set_once(&mut what, s, "benchmark")?,
             Arg::Flag(s) => {
                 return Err(Error::invalid_argument(format!(
                     "unknown option '{s}'\n{USAGE}"
@@ -68,6 +68,7 @@ pub fn run(args: &[OsString]) -> Result<()> {
         }
     }
     a.runs = a.runs.max(1);
+    let what = what.map_or(Ok("all"), crate::args::utf8)?;
     let sections: Vec<(&str, Bench)> = match what {
         "frames" => vec![("frames", frames::frames)],
         "build" => vec![("build", build::build)],
