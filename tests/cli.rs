@@ -238,3 +238,34 @@ fn a_second_positional_argument_is_refused() {
     assert_refused(&out, "memory");
     assert!(out.stdout.is_empty(), "no benchmark runs");
 }
+
+/// A `--write` target that cannot take the section is refused before any benchmark runs.
+#[cfg(unix)]
+#[test]
+fn bench_checks_its_write_target_first() {
+    use std::os::unix::ffi::OsStrExt;
+    let empty = support::scratch("cli-no-models");
+    let dir = support::scratch("cli");
+    let not_text = dir.join("not-text.md");
+    std::fs::write(&not_text, b"\xff\xfe").unwrap();
+    for target in [
+        dir.join("missing-dir/x.md"),
+        dir.join(OsStr::from_bytes(b"missing-dir/caf\xe9.md")),
+        not_text,
+        dir.clone(),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_rt2"))
+            .args(["bench", "memory", "--write"])
+            .arg(&target)
+            .env("RT2_SHARED", &empty)
+            .output()
+            .expect("run the rt2 binary");
+        let named = target.file_name().unwrap().to_string_lossy();
+        assert_refused(&out, &named);
+        assert!(
+            out.stdout.is_empty(),
+            "{}: a benchmark ran",
+            target.display()
+        );
+    }
+}

@@ -68,6 +68,11 @@ pub fn run(args: &[OsString]) -> Result<()> {
         }
     }
     a.runs = a.runs.max(1);
+    // Before any benchmark: a bad --write target found only after a run of many minutes
+    // wastes the run (as `render` checks -o first).
+    if let Some(path) = &a.write {
+        check_writable(path)?;
+    }
     let what = what.map_or(Ok("all"), crate::args::utf8)?;
     let sections: Vec<(&str, Bench)> = match what {
         "frames" => vec![("frames", frames::frames)],
@@ -149,19 +154,44 @@ fn time_ms(runs: usize, mut f: impl FnMut()) -> f64 {
     )
 }
 
+/// Fails unless `path` can take a section later: it is readable text (or missing, with an
+/// existing folder) and opens for appending, which neither creates nor truncates it.
+fn check_writable(path: &Path) -> Result<()> {
+    read_benchmarks(path)?;
+    let folder = path.parent().filter(|p| !p.as_os_str().is_empty());
+    if !path.exists() {
+        return match folder {
+            Some(f) if !f.is_dir() => Err(Error::io(format!(
+                "{}: its folder does not exist",
+                path.display()
+            ))),
+            _ => Ok(()),
+        };
+    }
+    std::fs::OpenOptions::new()
+        .append(true)
+        .open(path)
+        .map(drop)
+        .map_err(|e| Error::io(format!("cannot write {}: {e}", path.display())))
+}
+
+/// The text of the benchmark file `path`; only a missing file starts empty: any other failure
+/// (not UTF-8, unreadable) must not lead to overwriting the file with one section.
+fn read_benchmarks(path: &Path) -> Result<String> {
+    match std::fs::read_to_string(path) {
+        Ok(old) => Ok(old),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok("# Benchmarks\n".into()),
+        Err(e) => Err(Error::io(format!("cannot read {}: {e}", path.display()))),
+    }
+}
+
 /// Replaces the text between `<!-- bench:NAME -->` markers in `path` (appending if absent).
 fn replace_section(path: &Path, name: &str, text: &str) -> Result<()> {
     let (open, close) = (
         format!("<!-- bench:{name} -->"),
         format!("<!-- /bench:{name} -->"),
     );
-    // Only a missing file starts empty: any other failure (not UTF-8, unreadable) must not
-    // lead to overwriting the file with one section.
-    let old = match std::fs::read_to_string(path) {
-        Ok(old) => old,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => "# Benchmarks\n".into(),
-        Err(e) => return Err(Error::io(format!("cannot read {}: {e}", path.display()))),
-    };
+    let old = read_benchmarks(path)?;
     let block = format!("{open}\n{text}\n{close}");
     let new = match (old.find(&open), old.find(&close)) {
         (Some(a), Some(b)) if b > a => format!("{}{block}{}", &old[..a], &old[b + close.len()..]),
