@@ -269,3 +269,15 @@ fn bench_checks_its_write_target_first() {
         );
     }
 }
+
+/// `bench --runs 0` is refused, not silently taken as 1.
+#[test]
+fn bench_refuses_zero_runs() {
+    let out = Command::new(env!("CARGO_BIN_EXE_rt2"))
+        .args(["bench", "memory", "--runs", "0"])
+        .env("RT2_SHARED", support::scratch("cli-no-models"))
+        .output()
+        .expect("run the rt2 binary");
+    assert_refused(&out, "--runs");
+    assert!(out.stdout.is_empty(), "a benchmark ran");
+}

@@ -67,7 +67,8 @@ pub fn run(args: &[OsString]) -> Result<()> {
             }
         }
     }
-    a.runs = a.runs.max(1);
+    // A median needs a run: 0 is refused (as render refuses --samples 0), not taken as 1.
+    rt2::error::check_range("--runs", a.runs, 1..=usize::MAX)?;
     // Before any benchmark: a bad --write target found only after a run of many minutes
     // wastes the run (as `render` checks -o first).
     if let Some(path) = &a.write {
