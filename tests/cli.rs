@@ -281,3 +281,17 @@ fn bench_refuses_zero_runs() {
     assert_refused(&out, "--runs");
     assert!(out.stdout.is_empty(), "a benchmark ran");
 }
+
+/// `render -h` and `--help` print the usage, as `bench -h` does.
+#[test]
+fn render_help_prints_the_usage() {
+    for flag in ["-h", "--help"] {
+        let out = run(&["render", flag]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(String::from_utf8_lossy(&out.stdout).contains("rt2 render [SCENE|MODEL]"));
+    }
+}

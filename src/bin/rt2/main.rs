@@ -137,6 +137,7 @@ fn render(args: &[OsString]) -> Result<()> {
             Arg::Flag(a) => a,
         };
         match a {
+            "-h" | "--help" => return say(USAGE),
             "-o" | "--output" => output = args.path(a)?,
             "-s" | "--size" => {
                 let (w, h) = args
