@@ -102,13 +102,21 @@ fn readme_render_command_draws_the_default_scene() {
 fn bad_options_fail_before_any_work() {
     let dir = support::scratch("cli");
     let png = dir.join("never.png");
-    let cases: [(&[&str], &str); 8] = [
+    let cases: [(&[&str], &str); 10] = [
         (&["render", "default", "--samples", "0"], "samples"),
         // Checked before the model is loaded: the missing file is never reached.
         (&["render", "missing.ply", "--samples", "0"], "samples"),
         (&["render", "missing.ply", "--size", "0x10"], "size"),
         (&["render", "default", "--depth", "65"], "max_depth"),
         (&["render", "default", "--size", "0x10"], "size"),
+        (
+            &["render", "--size", "10x10x10"],
+            "WIDTHxHEIGHT (e.g. 1376x768), got '10x10x10'",
+        ),
+        (
+            &["render", "--size", "10"],
+            "WIDTHxHEIGHT (e.g. 1376x768), got '10'",
+        ),
         (&["render", "default", "--frobnicate"], "--frobnicate"),
         (&["render", "no-such-scene"], "no-such-scene"),
         (&["draw"], "draw"),

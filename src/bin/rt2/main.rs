@@ -118,6 +118,18 @@ pub fn load_scene(name: impl AsRef<OsStr>) -> Result<Loaded> {
     })
 }
 
+/// `WIDTHxHEIGHT` as numbers; the message quotes the whole value (`10x10x10`), not the part
+/// that failed to parse.
+fn parse_size(flag: &str, size: &str) -> Result<(u32, u32)> {
+    size.split_once('x')
+        .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+        .ok_or_else(|| {
+            Error::invalid_argument(format!(
+                "{flag}: expected WIDTHxHEIGHT (e.g. 1376x768), got '{size}'"
+            ))
+        })
+}
+
 fn render(args: &[OsString]) -> Result<()> {
     let mut name = None;
     let mut output = PathBuf::from("rt2.png");
@@ -139,18 +151,7 @@ fn render(args: &[OsString]) -> Result<()> {
         match a {
             "-h" | "--help" => return say(USAGE),
             "-o" | "--output" => output = args.path(a)?,
-            "-s" | "--size" => {
-                let (w, h) = args
-                    .text(a)?
-                    .split_once('x')
-                    .ok_or_else(|| Error::invalid_argument("--size takes WxH"))?;
-                width = w
-                    .parse()
-                    .map_err(|_| Error::invalid_argument(format!("{a}: cannot parse '{w}'")))?;
-                height = h
-                    .parse()
-                    .map_err(|_| Error::invalid_argument(format!("{a}: cannot parse '{h}'")))?;
-            }
+            "-s" | "--size" => (width, height) = parse_size(a, args.text(a)?)?,
             "--backend" => {
                 let b = args.text(a)?;
                 backend = BackendRequest::parse(b)
