@@ -678,6 +678,11 @@ enum rt2_status rt2_camera_set_lens(rt2_camera *camera, float aperture, float fo
 /**
  * Creates a context. `desc` may be NULL for the defaults. On failure `*out` is untouched.
  *
+ * A context and its scenes belong to the process that made them: after `fork()`, the child
+ * has no copy of their worker threads, so its calls on them return INVALID_OPERATION
+ * (destroying them is allowed, and does not wait for those threads). A child makes its own
+ * context.
+ *
  * # Safety
  * `desc` is NULL or points to an `rt2_context_desc`; `out` points to writable storage.
  */

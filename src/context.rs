@@ -25,6 +25,22 @@ pub struct Context {
     last_job: Mutex<JobRecord>,
     /// Declared after `pool`, so dropped after it: waits for the workers to exit.
     _workers: Workers,
+    /// The process that made the context. A `fork` copies the context into a child without
+    /// its worker threads (or the GPU driver's): a job there would wait forever.
+    pid: u32,
+}
+
+impl Drop for Context {
+    /// In a forked child, the workers to join and the devices to release belong to the
+    /// parent: they are left alone (their memory leaks) rather than waited for.
+    fn drop(&mut self) {
+        if self.pid != std::process::id() {
+            std::mem::forget(self.gpu.take());
+            if let Ok(mut threads) = self._workers.threads.lock() {
+                std::mem::forget(std::mem::take(&mut *threads));
+            }
+        }
+    }
 }
 
 /// The pool's worker threads, spawned by the context itself so that it can join them. rayon's
@@ -117,7 +133,22 @@ impl Context {
             gpu,
             last_job: Mutex::new(JobRecord::default()),
             _workers: workers,
+            pid: std::process::id(),
         })
+    }
+
+    /// An error unless this is the process that made the context (see `pid`): after a `fork`,
+    /// the child makes its own context.
+    pub fn same_process(&self) -> Result<()> {
+        let here = std::process::id();
+        if self.pid == here {
+            return Ok(());
+        }
+        Err(Error::invalid_operation(format!(
+            "made in process {} before a fork: its worker threads do not exist in this \
+             process ({here}); create a new context (and scenes) here",
+            self.pid
+        )))
     }
 
     pub fn decision(&self) -> &Decision {

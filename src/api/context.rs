@@ -31,7 +31,9 @@ pub struct rt2_context {
     reason: CString,
 }
 
-handle_type!(rt2_context, 0x7274_325f_6374_7800);
+handle_type!(rt2_context, 0x7274_325f_6374_7800, |c: &rt2_context| c
+    .inner
+    .same_process());
 
 /// What a context decided (`rt2_context_info`).
 #[repr(C)]
@@ -66,6 +68,11 @@ pub struct rt2_context_properties {
 }
 
 /// Creates a context. `desc` may be NULL for the defaults. On failure `*out` is untouched.
+///
+/// A context and its scenes belong to the process that made them: after `fork()`, the child
+/// has no copy of their worker threads, so its calls on them return INVALID_OPERATION
+/// (destroying them is allowed, and does not wait for those threads). A child makes its own
+/// context.
 ///
 /// # Safety
 /// `desc` is NULL or points to an `rt2_context_desc`; `out` points to writable storage.

@@ -45,6 +45,9 @@ pub(crate) fn guard_ptr<T>(f: impl FnOnce() -> Result<*const T>) -> *const T {
 pub(crate) trait Handle: Sized {
     const MAGIC: u64;
     const NAME: &'static str;
+    /// Whether this live handle can serve a call in this process (a context's worker threads
+    /// do not survive a `fork`).
+    fn usable(&self) -> Result<()>;
 }
 
 /// The magic at the start of the handle `p` points to, read without making a `&T`: a handle
@@ -72,7 +75,10 @@ pub(crate) unsafe fn handle<'a, T: Handle>(p: *const T, arg: &str) -> Result<&'a
             T::NAME
         )));
     }
-    Ok(&*p)
+    let h = &*p;
+    h.usable()
+        .map_err(|e| Error::new(e.status, format!("{arg}: {}", e.message)))?;
+    Ok(h)
 }
 
 /// Mutable variant of [`handle`].
@@ -210,12 +216,18 @@ macro_rules! versioned {
 pub(crate) use versioned;
 
 /// Implements [`Handle`] for a handle type and asserts that its `magic` is at offset 0, which
-/// [`handle`] and [`destroy`] rely on.
+/// [`handle`] and [`destroy`] rely on. `usable` (a closure of the handle) defaults to always.
 macro_rules! handle_type {
     ($t:ident, $magic:expr) => {
+        $crate::api::ffi::handle_type!($t, $magic, |_: &$t| Ok(()));
+    };
+    ($t:ident, $magic:expr, $usable:expr) => {
         impl $crate::api::ffi::Handle for $t {
             const MAGIC: u64 = $magic;
             const NAME: &'static str = stringify!($t);
+            fn usable(&self) -> $crate::error::Result<()> {
+                ($usable)(self)
+            }
         }
         const _: () = assert!(std::mem::offset_of!($t, magic) == 0);
     };

@@ -25,7 +25,10 @@ pub struct rt2_scene {
     scene: RwLock<Scene>,
 }
 
-handle_type!(rt2_scene, 0x7274_325f_7363_6e00);
+// A scene commits on its context's worker threads.
+handle_type!(rt2_scene, 0x7274_325f_7363_6e00, |s: &rt2_scene| s
+    .context
+    .same_process());
 
 impl rt2_scene {
     /// A panic while holding the lock leaves the scene as it was before the failed edit (all
