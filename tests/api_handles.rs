@@ -44,6 +44,80 @@ fn null_handles_and_outputs_are_errors_and_destroy_null_is_a_no_op() {
     }
 }
 
+/// A C caller may pass any address, e.g. a pointer into a packed byte buffer. Rust may not
+/// read a float, a ray or a handle from a misaligned one (undefined behaviour; an abort in a
+/// build with debug assertions): every such argument is an error naming it, and nothing is
+/// written or changed.
+#[test]
+fn misaligned_pointers_are_errors() {
+    unsafe {
+        let mut desc = rt2_context_desc_default();
+        desc.backend = 1;
+        let (mut ctx, mut scene) = (null_mut(), null_mut());
+        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let c = [0.0f32; 3];
+        assert_eq!(
+            rt2_scene_add_sphere(scene, c.as_ptr(), 1.0, 0, null_mut()),
+            Rt2Status::Ok
+        );
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        // 64-byte aligned storage, used one byte in.
+        let mut buffer = vec![0u64; 64];
+        let odd = buffer.as_mut_ptr().cast::<u8>().add(1);
+        let expect_misaligned = |status: Rt2Status, arg: &str| {
+            assert_eq!(status, Rt2Status::InvalidArgument, "{arg}");
+            let e = last_error();
+            assert!(e.contains(arg) && e.contains("not aligned"), "{arg}: {e}");
+        };
+        expect_misaligned(
+            rt2_scene_add_sphere(scene, odd.cast(), 1.0, 0, null_mut()),
+            "center",
+        );
+        let mut id = 7;
+        expect_misaligned(
+            rt2_scene_add_sphere(scene, c.as_ptr(), 1.0, 0, odd.cast()),
+            "out_object",
+        );
+        assert_eq!(id, 7);
+        id = 0;
+        let ray = rt2_ray {
+            org: [0.0, 0.0, 5.0],
+            tmin: 0.0,
+            dir: [0.0, 0.0, -1.0],
+            tmax: f32::INFINITY,
+        };
+        let mut hit: rt2_hit = std::mem::zeroed();
+        expect_misaligned(
+            rt2_intersect(ctx, scene, odd.cast(), 1, &mut hit, null(), null_mut()),
+            "rays",
+        );
+        expect_misaligned(
+            rt2_intersect(ctx, scene, &ray, 1, odd.cast(), null(), null_mut()),
+            "hits",
+        );
+        expect_misaligned(
+            rt2_intersect(ctx, odd.cast(), &ray, 1, &mut hit, null(), null_mut()),
+            "scene",
+        );
+        let mut misaligned_ctx = null_mut();
+        expect_misaligned(
+            rt2_context_create(odd.cast(), &mut misaligned_ctx),
+            "rt2_context_desc",
+        );
+        assert!(misaligned_ctx.is_null());
+        rt2_scene_destroy(odd.cast()); // ignored, like any pointer that is not a live handle
+                                       // The scene is unchanged: one sphere, hit at t = 4.
+        assert_eq!(
+            rt2_intersect(ctx, scene, &ray, 1, &mut hit, null(), null_mut()),
+            Rt2Status::Ok
+        );
+        assert_eq!((hit.object, hit.t), (id, 4.0));
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
 #[test]
 fn failed_edits_leave_the_scene_as_it_was() {
     unsafe {

@@ -69,6 +69,7 @@ pub(crate) unsafe fn handle<'a, T: Handle>(p: *const T, arg: &str) -> Result<&'a
     if p.is_null() {
         return Err(Error::invalid_argument(format!("{arg} is NULL")));
     }
+    check_aligned(p, arg)?;
     if magic_of(p) != T::MAGIC {
         return Err(Error::invalid_argument(format!(
             "{arg} is not a live {} (destroyed, or a different kind of handle)",
@@ -97,11 +98,24 @@ pub(crate) unsafe fn handle_mut<'a, T: Handle>(p: *mut T, arg: &str) -> Result<&
 /// # Safety
 /// `p` must be NULL or point to a live RT2 handle (of any kind).
 pub(crate) unsafe fn destroy<T: Handle>(p: *mut T) {
-    if p.is_null() || magic_of(p) != T::MAGIC {
+    if p.is_null() || !p.is_aligned() || magic_of(p) != T::MAGIC {
         return;
     }
     p.cast::<u64>().write(0);
     drop(Box::from_raw(p));
+}
+
+/// An error unless the non-NULL `p` is aligned for `T`: C can hand over any address (a
+/// pointer into a packed buffer), and Rust may not read a `T` from a misaligned one.
+fn check_aligned<T>(p: *const T, arg: &str) -> Result<()> {
+    if p.is_aligned() {
+        Ok(())
+    } else {
+        Err(Error::invalid_argument(format!(
+            "{arg} ({p:p}) is not aligned to {} bytes",
+            std::mem::align_of::<T>()
+        )))
+    }
 }
 
 /// A slice of `count` elements at `p`; NULL is allowed only for `count == 0`.
@@ -117,6 +131,7 @@ pub(crate) unsafe fn slice<'a, T>(p: *const T, count: usize, arg: &str) -> Resul
             "{arg} is NULL but its count is {count}"
         )));
     }
+    check_aligned(p, arg)?;
     if count
         .checked_mul(std::mem::size_of::<T>())
         .is_none_or(|b| b > isize::MAX as usize)
@@ -156,9 +171,7 @@ pub(crate) unsafe fn array<T: Copy, const N: usize>(p: *const T, arg: &str) -> R
 /// # Safety
 /// A non-NULL `p` must be writable.
 pub(crate) unsafe fn write_out<T>(p: *mut T, arg: &str, value: T) -> Result<()> {
-    if p.is_null() {
-        return Err(Error::invalid_argument(format!("{arg} is NULL")));
-    }
+    check_out(p, arg)?;
     p.write(value);
     Ok(())
 }
@@ -166,10 +179,9 @@ pub(crate) unsafe fn write_out<T>(p: *mut T, arg: &str, value: T) -> Result<()> 
 /// Checks an output pointer before any work is done, so that failures leave no side effects.
 pub(crate) fn check_out<T>(p: *mut T, arg: &str) -> Result<()> {
     if p.is_null() {
-        Err(Error::invalid_argument(format!("{arg} is NULL")))
-    } else {
-        Ok(())
+        return Err(Error::invalid_argument(format!("{arg} is NULL")));
     }
+    check_aligned(p, arg)
 }
 
 /// A NUL-terminated path argument.
@@ -242,6 +254,7 @@ pub(crate) use handle_type;
 /// `p` must point to at least a readable `u32`, and to a whole `T` when that `u32` is
 /// `size_of::<T>()`.
 pub(crate) unsafe fn read_versioned<T: Versioned>(p: *const T) -> Result<T> {
+    check_aligned(p, T::NAME)?;
     check_struct_size::<T>(p.cast::<u32>().read(), T::NAME)?;
     Ok(p.read())
 }

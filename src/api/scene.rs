@@ -111,10 +111,15 @@ unsafe fn prepare_and_edit<P>(
 ) -> Rt2Status {
     guard(|| {
         let s = handle(scene, "scene")?;
+        // Optional: NULL when the caller does not want the id.
+        let out_id = (!out_id.is_null()).then_some(out_id);
+        if let Some(out) = out_id {
+            check_out(out, "out_object")?;
+        }
         let prepared = prepare()?;
         let id = f(&mut s.write(), prepared)?;
-        if !out_id.is_null() {
-            out_id.write(id);
+        if let Some(out) = out_id {
+            write_out(out, "out_object", id)?;
         }
         Ok(())
     })
