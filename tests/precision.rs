@@ -5,11 +5,11 @@
 //! the triangle test and the secondary-ray offsets. Where a method is allowed to fail, the test
 //! counts how often and asserts the documented bound.
 
-use glam::Vec3;
+use glam::{DMat3, DVec3, Mat3, Vec3};
 use rt2::cpu::query::{self, QueryMode};
 use rt2::cpu::simd::Width;
 use rt2::cpu::traverse::{intersect, Traversal, TraverseOptions};
-use rt2::geometry::{Hit, Ray, RayTest, Sphere, TraversalStats, Triangle, INVALID};
+use rt2::geometry::{Ellipsoid, Hit, Ray, RayTest, Sphere, TraversalStats, Triangle, INVALID};
 use rt2::precision::{offset_ray_origin, Intersector};
 use rt2::scene::tessellate::{self, Mesh};
 use rt2::scene::{Committed, Scene, Shape};
@@ -362,6 +362,151 @@ fn grazing_sphere_hits_and_origins_inside_spheres() {
     }
 }
 
+/// The f64 reference for `e` as stored (its centre and f32 `M⁻¹` taken exactly): both roots
+/// of the line `org + t dir`, ascending. Solved in the ellipsoid's unit space, where the
+/// origin of a ray seen from afar is huge for a thin ellipsoid (5e20 for one 1e-20 thick):
+/// there even f64 loses the centre-to-line distance from `o_u - (b/a) d_u`, so that distance
+/// comes from `o_u × d_u = det(M⁻¹) Mᵀ (o × d)` with `o × d` taken in world space.
+fn ellipsoid_reference(e: &Ellipsoid, ray: &Ray) -> Option<(f64, f64)> {
+    let inv = DMat3::from_cols_array(&e.inv.map(f64::from));
+    let o = ray.org.as_dvec3() - Vec3::from(e.center).as_dvec3();
+    let d = ray.dir.as_dvec3();
+    let (ou, du) = (inv * o, inv * d);
+    let w: DVec3 = inv.determinant() * (inv.inverse().transpose() * o.cross(d));
+    let a = du.length_squared();
+    let disc = a - w.length_squared();
+    if disc < 0.0 {
+        return None;
+    }
+    let (b, c) = (ou.dot(du), ou.length_squared() - 1.0);
+    let q = -(b + b.signum() * disc.sqrt());
+    let (t0, t1) = (q / a, c / q);
+    Some((t0.min(t1), t0.max(t1)))
+}
+
+/// Thin ellipsoids (radii `(1, h, 1)`, turned) seen obliquely from about 5 units: every ray
+/// aimed inside the disc (radius <= 0.7) hits, at the f64 reference's `t`. Solved in the
+/// ellipsoid's unit space, the origin is about `5 / h` long there, and the centre-to-line
+/// distance taken as `o - (b/a) d` was off by ulp(5 / h), far more than the radius 1: from
+/// (3, 3.5, 1.3), 18% to 35% of 2000 such rays missed for `h` from 1e-7 to 1e-20 (an
+/// axis-aligned box as thin: none).
+///
+/// Tolerance: the hit lies at `t` ≈ 1 (the direction reaches the aimed point). The query
+/// rounds `org - centre` and the rows of `M⁻¹ (org - centre)` and `M⁻¹ dir` (three products
+/// each) to f32: relative errors of a few ε in the distance of the origin from the disc's
+/// plane and in the direction's speed towards it, each divided by the cosine of the angle
+/// they make with the plane's normal (>= 0.3 here), hence `t` within 16 ε / 0.3 ≈ 6e-6.
+#[test]
+fn thin_ellipsoids_are_hit_across_their_disc() {
+    let mut rng = Rng(11);
+    let center = Vec3::new(0.25, -0.5, 0.75);
+    let turns = [
+        Mat3::IDENTITY,
+        Mat3::from_axis_angle(Vec3::new(1.0, 2.0, 3.0).normalize(), 0.7),
+        Mat3::from_axis_angle(Vec3::X, 1.2),
+    ];
+    // In the disc's frame (normal +y), both sides of it.
+    let eyes = [Vec3::new(3.0, 3.5, 1.3), Vec3::new(-1.5, -4.0, 2.5)];
+    let mut report = Vec::new();
+    let mut worst = 0.0f64;
+    for h in [1e-6f32, 1e-7, 1e-8, 1e-10, 1e-14, 1e-20] {
+        for (k, turn) in turns.iter().enumerate() {
+            let m = *turn * Mat3::from_diagonal(Vec3::new(1.0, h, 1.0));
+            let e = Ellipsoid::new(center, m).expect("a thin ellipsoid is accepted");
+            let mut misses = 0;
+            for eye in eyes {
+                let eye = center + *turn * eye;
+                for _ in 0..500 {
+                    let p = loop {
+                        let (x, z) = (2.0 * rng.unit() - 1.0, 2.0 * rng.unit() - 1.0);
+                        if x * x + z * z <= 1.0 {
+                            break center + *turn * Vec3::new(0.7 * x, 0.0, 0.7 * z);
+                        }
+                    };
+                    let dir = (p - eye).normalize();
+                    let ray = Ray::new(eye, dir, 0.0, f32::INFINITY);
+                    let (want, _) = ellipsoid_reference(&e, &ray).expect("the reference hits");
+                    // The reference itself: its hit lies on the disc, within h of its plane.
+                    let normal = (*turn * Vec3::Y).as_dvec3();
+                    let off_plane = (ray.org.as_dvec3() + want * ray.dir.as_dvec3()
+                        - center.as_dvec3())
+                    .dot(normal);
+                    assert!(off_plane.abs() <= h as f64 + 1e-6, "h {h:e}: {off_plane:e}");
+                    let Some(t) = e.intersect(&ray, f32::INFINITY) else {
+                        misses += 1;
+                        continue;
+                    };
+                    worst = worst.max((t as f64 - want).abs() / want);
+                    // A window that ends before the hit misses; one that holds it hits.
+                    let (lo, hi) = ((want * 0.999) as f32, (want * 1.001) as f32);
+                    assert_eq!(e.intersect(&Ray::new(eye, dir, 0.0, lo), lo), None);
+                    assert!(e.intersect(&Ray::new(eye, dir, lo, hi), hi).is_some());
+                }
+            }
+            if misses > 0 {
+                report.push(format!("h {h:e}, turn {k}: {misses} of 1000 missed"));
+            }
+        }
+    }
+    assert!(report.is_empty(), "{report:#?}");
+    assert!(
+        worst <= 6e-6,
+        "t off the f64 reference by {worst:e} (relative)"
+    );
+    eprintln!("thin ellipsoids: t within {worst:e} of the f64 reference");
+}
+
+/// Ordinary ellipsoids (radii 0.3 to 2, turned, 4 to 6 units away) against the f64 reference:
+/// the near root from outside, the far root from inside and from outside with a window that
+/// starts past the near root. Relative error in `t` within 2e-6 (f32 rounding of the origin
+/// and the unit-space products, a few ε at moderate conditioning).
+#[test]
+fn ordinary_ellipsoids_match_the_f64_reference() {
+    let mut rng = Rng(12);
+    let mut worst = [0.0f64; 3];
+    let mut hits = 0;
+    for _ in 0..200 {
+        let center = rng.ball();
+        let radii = Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 1.7 + 0.3;
+        let turn = Mat3::from_axis_angle(rng.ball().normalize(), 3.0 * rng.unit());
+        let m = turn * Mat3::from_diagonal(radii);
+        let e = Ellipsoid::new(center, m).unwrap();
+        for _ in 0..20 {
+            let eye = center + (4.0 + 2.0 * rng.unit()) * rng.ball().normalize();
+            let aim = center + m * rng.ball();
+            let inside = center + m * (0.9 * rng.ball());
+            let outward = rng.ball();
+            let rays = [
+                Ray::new(eye, aim - eye, 0.0, f32::INFINITY),
+                Ray::new(inside, outward, 0.0, f32::INFINITY),
+            ];
+            for (k, ray) in rays.iter().enumerate() {
+                let (near, far) = ellipsoid_reference(&e, ray).expect("aimed inside");
+                let mut check = |slot: usize, ray: &Ray, want: f64| {
+                    let t = e.intersect(ray, f32::INFINITY).expect("hit");
+                    let err = (t as f64 - want).abs() / want;
+                    worst[slot] = worst[slot].max(err);
+                };
+                if k == 0 {
+                    check(0, ray, near);
+                    // Starting past the near root (by 1% of the chord): the far root.
+                    let tmin = (near + 0.01 * (far - near)) as f32;
+                    check(2, &Ray::new(ray.org, ray.dir, tmin, f32::INFINITY), far);
+                } else {
+                    assert!(near < 0.0);
+                    check(1, ray, far);
+                }
+                hits += 1;
+            }
+        }
+    }
+    eprintln!(
+        "ordinary ellipsoids, {hits} rays: near {:e}, from inside {:e}, window {:e}",
+        worst[0], worst[1], worst[2]
+    );
+    assert!(worst.iter().all(|&w| w <= 2e-6), "{worst:?}");
+}
+
 /// The f64 reference: t of the closest of `tris` along the ray, with exact vertices.
 fn reference_t(tris: &[Triangle], ray: &Ray) -> Option<f64> {
     let (o, d) = (ray.org.as_dvec3(), ray.dir.as_dvec3());
@@ -602,7 +747,7 @@ fn robust_offsets_on_every_kind_of_primitive_seen_from_far_away() {
 /// Traces `shape` alone along -z from `origin` with directions from 1e-25 to 1e30 long, with
 /// both intersectors in every query mode, and checks that each is hit `distance` away (`t |d|`,
 /// within 1e-5) wherever that `t` is a normal f32 (`distance / |d|` above 1e-36: below, `t`
-/// itself has lost bits). Each length also gets a window that ends before the hit (a miss)
+/// itself has lost bits; and below 1e38, past which it overflows). Each length also gets a window that ends before the hit (a miss)
 /// and one that just holds it (the same hit), and `occluded` must agree with every answer:
 /// the windows are scaled with the direction.
 fn hit_at_every_direction_length(what: &str, shape: Shape, origin: Vec3, distance: f64) {
@@ -614,7 +759,7 @@ fn hit_at_every_direction_length(what: &str, shape: Shape, origin: Vec3, distanc
         1e-25f32, 1e-22, 1e-18, 1e-16, 1e-15, 1e-3, 1.0, 1e3, 1e14, 1e15, 1e16, 1e18, 1e20, 1e30,
     ]
     .into_iter()
-    .filter(|&s| distance / s as f64 > 1e-36)
+    .filter(|&s| (1e-36..1e38).contains(&(distance / s as f64)))
     .collect();
     // (length, window, hit expected) for each ray.
     let cases: Vec<(f32, [f32; 2], bool)> = lengths
@@ -755,5 +900,30 @@ fn large_and_tiny_spheres_are_hit_whatever_the_direction_length() {
         let what = format!("radius {radius:e}");
         let origin = Vec3::new(0.0, 0.0, away);
         hit_at_every_direction_length(&what, sphere, origin, away as f64 - radius as f64);
+    }
+}
+
+/// Large, tiny and needle-thin ellipsoids along every direction length, each hit at the point
+/// where the ray from `(0.1, 0.1, 5)` in its own radii enters it. Their centre-to-line
+/// distance is taken through the cofactors of `M⁻¹` (products of two entries), which are
+/// subnormal for radii near the largest accepted (about 1e19: `Ellipsoid::new` squares
+/// them) and overflow for two radii of 1e-20, unless `M⁻¹` is scaled first
+/// (`Ellipsoid::line_distance2`).
+#[test]
+fn large_tiny_and_needle_ellipsoids_are_hit_whatever_the_direction_length() {
+    let sphere_z = (1.0f64 - 0.02).sqrt();
+    for radii in [
+        Vec3::new(1.0, 1.0, 2.0) * 8e18,
+        Vec3::new(1.0, 1.0, 2.0) * 1e-19,
+        Vec3::new(1e-20, 1e-20, 1.0),
+    ] {
+        let ellipsoid = Shape::Ellipsoid {
+            center: Vec3::ZERO,
+            radii,
+        };
+        let what = format!("ellipsoid radii {radii:?}");
+        let origin = Vec3::new(0.1, 0.1, 5.0) * radii;
+        let distance = (5.0 - sphere_z) * radii.z as f64;
+        hit_at_every_direction_length(&what, ellipsoid, origin, distance);
     }
 }

@@ -8,8 +8,9 @@ use glam::{Mat3, Vec3};
 /// the sphere of squared radius `r2`. The discriminant is taken from the distance of the
 /// centre to the line, `r² - |o - (o·d/d·d) d|²` (Haines et al., "Precision improvements for
 /// ray/sphere intersection", Ray Tracing Gems ch. 7), not from `b² - a c`, which cancels
-/// catastrophically far from the sphere or for a thin ellipsoid's stretched unit space; the
-/// roots use Numerical Recipes' `q` form.
+/// catastrophically far from the sphere; the roots use Numerical Recipes' `q` form. That
+/// distance still has an error of about ulp(|o|), too much in a thin ellipsoid's stretched
+/// unit space: `line` lets the ellipsoid supply it ([`Line`]).
 ///
 /// Directions need not be unit length, but the test squares them: `d·d` overflows for `|d|`
 /// past about 1e19 and underflows below about 1e-19, and `d·d · r²` overflows sooner for a
@@ -21,36 +22,49 @@ use glam::{Mat3, Vec3};
 /// spheres1 render 15% slower (1 thread), the range check costs it about 5%. Inlined: called
 /// across a function boundary, the origin went through memory and the render took 60% longer.
 #[inline(always)]
-fn sphere_root(o: Vec3, d: Vec3, r2: f32, tmin: f32, tmax: f32) -> Option<f32> {
+fn sphere_root(o: Vec3, d: Vec3, line: Line, r2: f32, tmin: f32, tmax: f32) -> Option<f32> {
     let a = d.length_squared();
     let (t0, t1) = if a.is_normal() && (a * r2).is_normal() {
-        sphere_roots(o, d, a, r2)?
+        sphere_roots(o, d, line, a, r2)?
     } else {
-        scaled_sphere_roots(o, d, r2)?
+        scaled_sphere_roots(o, d, line, r2)?
     };
     [t0, t1].into_iter().find(|&t| t >= tmin && t < tmax)
+}
+
+/// Where [`sphere_roots`] takes the squared distance of the centre from the ray's line.
+#[derive(Clone, Copy)]
+enum Line {
+    /// `|o - (o·d / d·d) d|²`, from the origin and direction themselves (spheres).
+    Projected,
+    /// Computed by the caller, which has a better conditioned way than `o` and `d` allow (an
+    /// ellipsoid's unit space, [`Ellipsoid::line_distance2`]). Unchanged by scaling `d`.
+    Distance2(f32),
 }
 
 /// [`sphere_roots`] for a direction far from unit length: solved for `d` scaled by a power of
 /// two, roots scaled back.
 #[cold]
-fn scaled_sphere_roots(o: Vec3, d: Vec3, r2: f32) -> Option<(f32, f32)> {
+fn scaled_sphere_roots(o: Vec3, d: Vec3, line: Line, r2: f32) -> Option<(f32, f32)> {
     let s = power_of_two_scale(d.abs().max_element())?;
     let d = d * s;
-    let (t0, t1) = sphere_roots(o, d, d.length_squared(), r2)?;
+    let (t0, t1) = sphere_roots(o, d, line, d.length_squared(), r2)?;
     Some((t0 * s, t1 * s))
 }
 
 /// Both roots of the ray `o + t d` with the sphere of squared radius `r2`, ascending (`a` is
 /// `d·d`).
 #[inline(always)]
-fn sphere_roots(o: Vec3, d: Vec3, a: f32, r2: f32) -> Option<(f32, f32)> {
+fn sphere_roots(o: Vec3, d: Vec3, line: Line, a: f32, r2: f32) -> Option<(f32, f32)> {
     if a == 0.0 {
         return None;
     }
     let b = o.dot(d);
-    let l = o - (b / a) * d;
-    let disc = a * (r2 - l.length_squared());
+    let l2 = match line {
+        Line::Projected => (o - (b / a) * d).length_squared(),
+        Line::Distance2(l2) => l2,
+    };
+    let disc = a * (r2 - l2);
     if disc < 0.0 {
         return None;
     }
@@ -91,7 +105,8 @@ impl Sphere {
 
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<f32> {
         let oc = ray.org - Vec3::from(self.center);
-        sphere_root(oc, ray.dir, self.radius * self.radius, ray.tmin, tmax)
+        let r2 = self.radius * self.radius;
+        sphere_root(oc, ray.dir, Line::Projected, r2, ray.tmin, tmax)
     }
 
     pub fn normal(&self, p: Vec3) -> Vec3 {
@@ -156,11 +171,55 @@ impl Ellipsoid {
         Aabb::new(c - h, c + h)
     }
 
+    /// The ray against the unit sphere in the ellipsoid's unit space (`M⁻¹ (x - center)`),
+    /// except for the centre-to-line distance, which comes from [`Self::line_distance2`].
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<f32> {
         let inv = Mat3::from_cols_array(&self.inv);
-        let o = inv * (ray.org - Vec3::from(self.center));
-        let d = inv * ray.dir;
-        sphere_root(o, d, 1.0, ray.tmin, tmax)
+        let o = ray.org - Vec3::from(self.center);
+        let line = Line::Distance2(Self::line_distance2(inv, o, ray.dir));
+        sphere_root(inv * o, inv * ray.dir, line, 1.0, ray.tmin, tmax)
+    }
+
+    /// Squared distance of the centre from the line `o + t d` (`o` relative to the centre) in
+    /// unit space: `|o_u × d_u|² / |d_u|²` for `o_u = M⁻¹ o`, `d_u = M⁻¹ d`.
+    ///
+    /// Not `|o_u - (o_u·d_u / d_u·d_u) d_u|²`, as for spheres: unit space stretches a thin
+    /// ellipsoid's short axis, so seen from a few units `o_u` is about distance / thickness
+    /// long (5e8 for radii (1, 1e-8, 1)) and that difference cancels to an error of about
+    /// ulp(5e8) = 32 against the radius 1: a third of the rays aimed inside the disc missed.
+    /// Here the cross product is taken in world space, where it is well conditioned, and
+    /// carried over by the cofactor matrix: `(A o) × (A d) = cof(A) (o × d)` for any `A`, and
+    /// row `i` of `cof(A)` is the cross product of `A`'s other two rows (in cyclic order).
+    ///
+    /// Range: `A = M⁻¹` is first scaled by the power of two `σ` that brings its largest entry
+    /// into [1, 2), and `o` by `1/σ`, which leaves the ratio unchanged: unscaled, the
+    /// cofactors (products of two entries of `M⁻¹`) overflow for a needle (two radii of
+    /// 1e-20: 1e40, every ray missed) and turn subnormal for radii near the largest accepted
+    /// (about 1e19). The numerator and denominator are scaled by the largest component of
+    /// `σ d_u` before they are squared, as in [`sphere_root`]. A degenerate direction gives
+    /// NaN: no hit.
+    #[inline(always)]
+    fn line_distance2(inv: Mat3, o: Vec3, d: Vec3) -> f32 {
+        let largest = inv
+            .to_cols_array()
+            .iter()
+            .fold(0.0f32, |m, e| m.max(e.abs()));
+        let Some(sigma) = power_of_two_scale(largest) else {
+            return f32::NAN;
+        };
+        let a = inv * sigma;
+        let [r0, r1, r2] = [a.row(0), a.row(1), a.row(2)];
+        let n = (o / sigma).cross(d);
+        let w = Vec3::new(
+            r1.cross(r2).dot(n),
+            r2.cross(r0).dot(n),
+            r0.cross(r1).dot(n),
+        );
+        let du = a * d;
+        let Some(k) = power_of_two_scale(du.abs().max_element()) else {
+            return f32::NAN;
+        };
+        (w * k).length_squared() / (du * k).length_squared()
     }
 
     pub fn normal(&self, p: Vec3) -> Vec3 {
