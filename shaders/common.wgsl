@@ -144,27 +144,38 @@ fn hit_triangle(tri: Triangle, r: Ray, tmax: f32) -> Tuv {
     return no;
 }
 
+// The power of two that brings m into [1, 2) (`power_of_two_scale`), but 2^-126 rather than the
+// subnormal 2^-127 for m past 2^127 (GPUs may flush subnormals): [2, 4) there instead, as
+// exact. 0 for a zero, negative, infinite or NaN m.
+fn pow2_scale(m: f32) -> f32 {
+    let exponent = (bitcast<u32>(m) >> 23u) & 0xffu;
+    if (!(m > 0.0) || exponent == 255u) { return 0.0; }
+    return bitcast<f32>((254u - min(exponent, 253u)) << 23u);
+}
+
 // `sphere_root` of src/geometry/analytic.rs: the nearest root in [tmin, tmax) of the ray
 // o + t d (relative to the centre) with the sphere of squared radius r2. The discriminant comes
-// from the centre-to-line distance (Ray Tracing Gems ch. 7), not from b² - ac, which cancels.
-// The direction is solved scaled by a power of two for its largest component (d·d and d·d r²
-// would over- or underflow for long or short directions), its roots scaled back; exact, so the
-// roots are those of the unscaled direction wherever that one is finite. The scale is the
-// CPU's `power_of_two_scale`, but 2^-126 rather than the subnormal 2^-127 for components
-// past 2^127 (GPUs may flush subnormals): [2, 4) there instead of [1, 2), as exact. (The CPU
-// skips the scaling where d·d and d·d r² are normal, which gives the same roots.)
-fn sphere_root(o: vec3<f32>, d_in: vec3<f32>, r2: f32, tmin: f32, tmax: f32) -> Tuv {
+// from the centre-to-line distance (Ray Tracing Gems ch. 7), not from b² - ac, which cancels:
+// its square is l2 where l2 >= 0 (the ellipsoid's `Line::Distance2`), else taken from o and d
+// (`Line::Projected`; pass -1). The direction is solved scaled by a power of two for its
+// largest component (d·d and d·d r² would over- or underflow for long or short directions),
+// its roots scaled back; exact, so the roots are those of the unscaled direction wherever that
+// one is finite (l2 does not depend on the direction's length). (The CPU skips the scaling
+// where d·d and d·d r² are normal, which gives the same roots.)
+fn sphere_root(o: vec3<f32>, d_in: vec3<f32>, l2: f32, r2: f32, tmin: f32, tmax: f32) -> Tuv {
     let no = Tuv(false, 0.0, 0.0, 0.0);
-    let m = max(abs(d_in.x), max(abs(d_in.y), abs(d_in.z)));
-    let exponent = (bitcast<u32>(m) >> 23u) & 0xffu;
-    if (!(m > 0.0) || exponent == 255u) { return no; }
-    let s = bitcast<f32>((254u - min(exponent, 253u)) << 23u);
+    let s = pow2_scale(max(abs(d_in.x), max(abs(d_in.y), abs(d_in.z))));
+    if (s == 0.0) { return no; }
     let d = d_in * s;
     let a = dot(d, d);
     if (a == 0.0) { return no; }
     let b = dot(o, d);
-    let l = o - (b / a) * d;
-    let disc = a * (r2 - dot(l, l));
+    var dist2 = l2;
+    if (!(l2 >= 0.0)) {
+        let l = o - (b / a) * d;
+        dist2 = dot(l, l);
+    }
+    let disc = a * (r2 - dist2);
     if (disc < 0.0 || is_nan(disc)) { return no; }
     let c = dot(o, o) - r2;
     let sgn = select(1.0, -1.0, negative(b));
@@ -181,18 +192,42 @@ fn sphere_root(o: vec3<f32>, d_in: vec3<f32>, r2: f32, tmin: f32, tmax: f32) -> 
 }
 
 fn hit_sphere(s: Sphere, r: Ray, tmax: f32) -> Tuv {
-    return sphere_root(r.org - v3(s.center), r.dir, s.radius * s.radius, r.tmin, tmax);
+    return sphere_root(r.org - v3(s.center), r.dir, -1.0, s.radius * s.radius, r.tmin, tmax);
 }
 
 fn ell_inv(e: Ellipsoid) -> mat3x3<f32> {
     return mat3x3<f32>(e.inv[0], e.inv[1], e.inv[2], e.inv[3], e.inv[4], e.inv[5], e.inv[6], e.inv[7], e.inv[8]);
 }
 
+fn max3(v: vec3<f32>) -> f32 { return max(v.x, max(v.y, v.z)); }
+
+// `Ellipsoid::line_distance2`: the squared distance of the centre from the line o + t d (o
+// relative to the centre) in unit space, |o_u × d_u|² / |d_u|², with o_u × d_u = cof(A) (o × d)
+// for A = M⁻¹: the cross product taken in world space, where it is well conditioned (o_u of a
+// thin ellipsoid seen from afar is ~distance/thickness long, and o_u - (b/a) d_u cancels to
+// an error far past the radius 1). A scaled by the power of two for its largest entry and o
+// by its inverse (cofactors neither overflow nor turn subnormal); both sides scaled by the
+// largest component of σ d_u before squaring. inf (no hit) for a degenerate input.
+fn ell_line_distance2(inv: mat3x3<f32>, o: vec3<f32>, d: vec3<f32>) -> f32 {
+    let sigma = pow2_scale(max(max3(abs(inv[0])), max(max3(abs(inv[1])), max3(abs(inv[2])))));
+    if (sigma == 0.0) { return inf(); }
+    let a = inv * sigma;
+    let rows = transpose(a);
+    let n = cross(o / sigma, d);
+    let w = vec3<f32>(dot(cross(rows[1], rows[2]), n), dot(cross(rows[2], rows[0]), n), dot(cross(rows[0], rows[1]), n));
+    let du = a * d;
+    let k = pow2_scale(max3(abs(du)));
+    if (k == 0.0) { return inf(); }
+    let wk = w * k;
+    let dk = du * k;
+    return dot(wk, wk) / dot(dk, dk);
+}
+
 fn hit_ellipsoid(e: Ellipsoid, r: Ray, tmax: f32) -> Tuv {
     let m = ell_inv(e);
-    let o = m * (r.org - v3(e.center));
-    let d = m * r.dir;
-    return sphere_root(o, d, 1.0, r.tmin, tmax);
+    let o = r.org - v3(e.center);
+    let l2 = ell_line_distance2(m, o, r.dir);
+    return sphere_root(m * o, m * r.dir, l2, 1.0, r.tmin, tmax);
 }
 
 // `Aabb::clip_ray` over the whole line, then the first end inside [tmin, tmax) (`box_intersect`).

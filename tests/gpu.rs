@@ -1281,6 +1281,59 @@ fn spheres_and_ellipsoids_are_hit_whatever_the_direction_length() {
     compare_queries("long and short directions", &g, &scene, &rays);
 }
 
+/// Thin ellipsoids (radii `(1, h, 1)` for `h` from 1e-7 to 1e-20, turned) seen obliquely from
+/// about 5 units: every ray aimed inside the disc hits, on the GPU as on the CPU. The kernels'
+/// test took the centre-to-line distance in unit space, where the origin is ~5 / h long, and
+/// missed a quarter to a third of these rays as the CPU did (`tests/precision.rs` checks the
+/// CPU against an f64 reference).
+#[test]
+fn thin_ellipsoids_are_hit_on_the_gpu() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let turns = [
+        Mat3::IDENTITY,
+        Mat3::from_axis_angle(Vec3::new(1.0, 2.0, 3.0).normalize(), 0.7),
+    ];
+    let mut scene = Scene::new();
+    let mut rays = Vec::new();
+    for (i, h) in [1e-7f32, 1e-10, 1e-20].into_iter().enumerate() {
+        for (j, turn) in turns.iter().enumerate() {
+            // 20 units apart: no other disc lies between an eye and its own.
+            let center = Vec3::new(20.0 * i as f32, 0.0, 20.0 * j as f32);
+            let shape = Shape::Ellipsoid {
+                center: Vec3::ZERO,
+                radii: Vec3::new(1.0, h, 1.0),
+            };
+            let id = scene.add_object(shape, 0).unwrap();
+            let placed = glam::Affine3A::from_mat3_translation(*turn, center);
+            scene.set_transform(id, placed).unwrap();
+            // Both sides of the disc (normal +y in its own frame), aimed at a polar grid of
+            // radius 0.7.
+            for eye in [Vec3::new(3.0, 3.5, 1.3), Vec3::new(-1.5, -4.0, 2.5)] {
+                let eye = center + *turn * eye;
+                for r in 1..=7 {
+                    for k in 0..24 {
+                        let u = std::f32::consts::TAU * (k as f32 + 0.5 * r as f32) / 24.0;
+                        let aim = Vec3::new(u.cos(), 0.0, u.sin()) * (0.1 * r as f32);
+                        let dir = (center + *turn * aim - eye).normalize();
+                        rays.push(Ray::new(eye, dir, 0.0, f32::INFINITY));
+                    }
+                }
+            }
+        }
+    }
+    scene.commit().unwrap();
+    let c = scene.committed().unwrap();
+    let mut on_cpu = vec![Hit::MISS; rays.len()];
+    cpu()
+        .intersect(c, &rays, &mut on_cpu, &QueryOptions::default())
+        .unwrap();
+    let missed = on_cpu.iter().filter(|h| !h.is_hit()).count();
+    assert_eq!(missed, 0, "the CPU missed {missed} of {} rays", rays.len());
+    compare_queries("thin ellipsoids", &g, &scene, &rays);
+}
+
 /// Queries with excluded primitives run on the GPU, which ignores each ray's primitive: a
 /// sphere, or a plane (tested outside the tree), as the CPU does.
 #[test]
