@@ -176,12 +176,13 @@ impl Ellipsoid {
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<f32> {
         let inv = Mat3::from_cols_array(&self.inv);
         let o = ray.org - Vec3::from(self.center);
-        let line = Line::Distance2(Self::line_distance2(inv, o, ray.dir));
-        sphere_root(inv * o, inv * ray.dir, line, 1.0, ray.tmin, tmax)
+        let d = inv * ray.dir;
+        let line = Line::Distance2(Self::line_distance2(inv, o, ray.dir, d));
+        sphere_root(inv * o, d, line, 1.0, ray.tmin, tmax)
     }
 
     /// Squared distance of the centre from the line `o + t d` (`o` relative to the centre) in
-    /// unit space: `|o_u × d_u|² / |d_u|²` for `o_u = M⁻¹ o`, `d_u = M⁻¹ d`.
+    /// unit space: `|o_u × d_u|² / |d_u|²` for `o_u = M⁻¹ o`, `d_u = M⁻¹ d` (`du`).
     ///
     /// Not `|o_u - (o_u·d_u / d_u·d_u) d_u|²`, as for spheres: unit space stretches a thin
     /// ellipsoid's short axis, so seen from a few units `o_u` is about distance / thickness
@@ -199,11 +200,10 @@ impl Ellipsoid {
     /// `σ d_u` before they are squared, as in [`sphere_root`]. A degenerate direction gives
     /// NaN: no hit.
     #[inline(always)]
-    fn line_distance2(inv: Mat3, o: Vec3, d: Vec3) -> f32 {
-        let largest = inv
-            .to_cols_array()
-            .iter()
-            .fold(0.0f32, |m, e| m.max(e.abs()));
+    fn line_distance2(inv: Mat3, o: Vec3, d: Vec3, du: Vec3) -> f32 {
+        let largest = (inv.x_axis.abs().max(inv.y_axis.abs()))
+            .max(inv.z_axis.abs())
+            .max_element();
         let Some(sigma) = power_of_two_scale(largest) else {
             return f32::NAN;
         };
@@ -215,7 +215,7 @@ impl Ellipsoid {
             r2.cross(r0).dot(n),
             r0.cross(r1).dot(n),
         );
-        let du = a * d;
+        let du = du * sigma;
         let Some(k) = power_of_two_scale(du.abs().max_element()) else {
             return f32::NAN;
         };
