@@ -210,12 +210,15 @@ fn max3(v: vec3<f32>) -> f32 { return max(v.x, max(v.y, v.z)); }
 // largest component of σ d_u before squaring. inf (no hit) for a degenerate input.
 fn ell_line_distance2(inv: mat3x3<f32>, o: vec3<f32>, d: vec3<f32>) -> f32 {
     let sigma = pow2_scale(max(max3(abs(inv[0])), max(max3(abs(inv[1])), max3(abs(inv[2])))));
-    if (sigma == 0.0) { return inf(); }
+    let kd = pow2_scale(max3(abs(d)));
+    if (sigma == 0.0 || kd == 0.0) { return inf(); }
     let a = inv * sigma;
     let rows = transpose(a);
-    let n = cross(o / sigma, d);
+    // The direction scaled too (the ratio is unchanged): a long one overflows the cross product.
+    let dd = d * kd;
+    let n = cross(o / sigma, dd);
     let w = vec3<f32>(dot(cross(rows[1], rows[2]), n), dot(cross(rows[2], rows[0]), n), dot(cross(rows[0], rows[1]), n));
-    let du = a * d;
+    let du = a * dd;
     let k = pow2_scale(max3(abs(du)));
     if (k == 0.0) { return inf(); }
     let wk = w * k;

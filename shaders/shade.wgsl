@@ -124,9 +124,14 @@ fn offset_ray_origin(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
     return out;
 }
 
+// Rust's Vec3::is_finite: no component infinite or NaN.
+fn finite3(v: vec3<f32>) -> bool {
+    return all((bitcast<vec3<u32>>(v) & vec3<u32>(0x7fffffffu)) < vec3<u32>(0x7f800000u));
+}
+
 // `PrimitiveSet::hit_point`: the hit recomputed on the surface, from the barycentrics for
 // triangles; `org + t·dir` projected onto a plane, snapped onto a box face, moved along the
-// line from the centre onto a sphere or an ellipsoid.
+// line from the centre onto a sphere, along the ray onto an ellipsoid.
 fn hit_point(h: Hit, r: Ray) -> vec3<f32> {
     let p = ray_at(r, h.t);
     let nb = n_bounded();
@@ -148,14 +153,27 @@ fn hit_point(h: Hit, r: Ray) -> vec3<f32> {
     }
     k -= params.n_sph;
     if (k < params.n_ell) {
+        // `Ellipsoid::on_surface`: the ray re-solved from p, the root nearest p.
         let e = ellipsoids[k];
-        let c = v3(e.center);
-        let u = ell_inv(e) * (p - c);
-        let len = sqrt(dot(u, u));
-        // Rust's is_normal for a length (never negative): not zero, subnormal, inf or NaN.
-        let bits = bitcast<u32>(len) & 0x7fffffffu;
-        if (bits < 0x00800000u || bits >= 0x7f800000u) { return p; }
-        return c + (p - c) / len;
+        let m = ell_inv(e);
+        let u = m * (p - v3(e.center));
+        let s = pow2_scale(max3(abs(m * r.dir)));
+        if (s == 0.0) { return p; }
+        let d = r.dir * s;
+        let du = m * r.dir * s;
+        let a = dot(du, du);
+        let b = dot(u, du);
+        let c = dot(u, u) - 1.0;
+        let disc = b * b - a * c;
+        if (!(disc >= 0.0)) { return p; }
+        let q = -(b + select(1.0, -1.0, negative(b)) * sqrt(disc));
+        let t1 = q / a;
+        let t2 = c / q;
+        var t = t1;
+        if (abs(t2) < abs(t1)) { t = t2; }
+        let moved = p + t * d;
+        if (!finite3(moved)) { return p; }
+        return moved;
     }
     return box_on_surface(boxes[k - params.n_ell], p);
 }

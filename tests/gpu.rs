@@ -510,7 +510,7 @@ fn offset_modes_match_the_cpu() {
 }
 
 /// The robust offset's hit points on planes, boxes (one of zero thickness), spheres and
-/// ellipsoids seen from 1e4 away (`tests/precision.rs` checks the CPU's against acne): the
+/// ellipsoids (one a thin disc) seen from 1e4 away (`tests/precision.rs` checks the CPU's against acne): the
 /// GPU's `hit_point` and `box_normal` must agree, or the acne shows as dark pixels.
 #[test]
 fn robust_offsets_seen_from_far_away_match_the_cpu() {
@@ -538,6 +538,10 @@ fn robust_offsets_seen_from_far_away_match_the_cpu() {
         Shape::Ellipsoid {
             center: Vec3::new(0.0, 0.0, 1.5),
             radii: Vec3::new(0.8, 0.3, 0.5),
+        },
+        Shape::Ellipsoid {
+            center: Vec3::new(0.0, 0.5, -1.5),
+            radii: Vec3::new(0.8, 1e-6, 0.5),
         },
     ];
     for shape in shapes {

@@ -417,12 +417,14 @@ fn thin_ellipsoids_are_hit_across_their_disc() {
             for eye in eyes {
                 let eye = center + *turn * eye;
                 for _ in 0..500 {
-                    let p = loop {
+                    // A point of the disc's plane in its own frame, within 0.7 of the centre.
+                    let local = loop {
                         let (x, z) = (2.0 * rng.unit() - 1.0, 2.0 * rng.unit() - 1.0);
-                        if x * x + z * z <= 1.0 {
-                            break center + *turn * Vec3::new(0.7 * x, 0.0, 0.7 * z);
+                        if x * x + z * z <= 1.0 && x * x + z * z > 1e-4 {
+                            break Vec3::new(0.7 * x, 0.0, 0.7 * z);
                         }
                     };
+                    let p = center + *turn * local;
                     let dir = (p - eye).normalize();
                     let ray = Ray::new(eye, dir, 0.0, f32::INFINITY);
                     let (want, _) = ellipsoid_reference(&e, &ray).expect("the reference hits");
@@ -441,6 +443,15 @@ fn thin_ellipsoids_are_hit_across_their_disc() {
                     let (lo, hi) = ((want * 0.999) as f32, (want * 1.001) as f32);
                     assert_eq!(e.intersect(&Ray::new(eye, dir, 0.0, lo), lo), None);
                     assert!(e.intersect(&Ray::new(eye, dir, lo, hi), hi).is_some());
+                    // Aimed past the rim, in the disc's plane: both miss.
+                    let rim = center + *turn * (local.normalize() * (1.1 + rng.unit()));
+                    let past = Ray::new(eye, (rim - eye).normalize(), 0.0, f32::INFINITY);
+                    assert_eq!(ellipsoid_reference(&e, &past), None, "h {h:e}: reference");
+                    assert_eq!(
+                        e.intersect(&past, f32::INFINITY),
+                        None,
+                        "h {h:e}: past the rim"
+                    );
                 }
             }
             if misses > 0 {
@@ -454,6 +465,38 @@ fn thin_ellipsoids_are_hit_across_their_disc() {
         "t off the f64 reference by {worst:e} (relative)"
     );
     eprintln!("thin ellipsoids: t within {worst:e} of the f64 reference");
+}
+
+/// Ellipsoids along very long and very short directions, off their axes: the hit is where
+/// the f64 reference puts it. The centre-to-line distance crosses the origin with the
+/// direction, which overflowed for a long one (|d| = 1e37 from (100, 100, 100): every ray
+/// missed) until the direction was scaled by its power of two first.
+#[test]
+fn ellipsoids_are_hit_along_very_long_and_short_directions() {
+    let e = Ellipsoid::new(
+        Vec3::ZERO,
+        Mat3::from_axis_angle(Vec3::new(1.0, -2.0, 0.5).normalize(), 0.6)
+            * Mat3::from_diagonal(Vec3::new(1.0, 1.0, 2.0)),
+    )
+    .unwrap();
+    let mut rng = Rng(21);
+    for origin in [Vec3::splat(100.0), Vec3::new(1e4, -1e4, 3e3)] {
+        for length in [1e37f32, 1e35, 1e-30] {
+            for _ in 0..200 {
+                let aim = (Vec3::new(rng.unit(), rng.unit(), rng.unit()) - 0.5) * 1.2;
+                let dir = (aim - origin).normalize() * length;
+                let ray = Ray::new(origin, dir, 0.0, f32::INFINITY);
+                let (want, _) = ellipsoid_reference(&e, &ray).expect("the reference hits");
+                let t = e.intersect(&ray, f32::INFINITY);
+                let t = t.unwrap_or_else(|| panic!("from {origin}, |d| {length:e}: missed"));
+                let error = (t as f64 - want).abs() / want;
+                assert!(
+                    error < 1e-5,
+                    "from {origin}, |d| {length:e}: t {t:e}, f64 {want:e}"
+                );
+            }
+        }
+    }
 }
 
 /// Ordinary ellipsoids (radii 0.3 to 2, turned, 4 to 6 units away) against the f64 reference:
@@ -741,6 +784,44 @@ fn robust_offsets_on_every_kind_of_primitive_seen_from_far_away() {
                 "{name} from {distance}: {wrong_normals} normals not +y"
             );
         }
+    }
+}
+
+/// The robust offset's hit point on thin ellipsoids stays where the ray hit. It is moved
+/// onto the surface along the normal (Newton steps); moved along the line from the centre,
+/// as for spheres, the unit-space length was all rounding error across the short axis, and
+/// points slid 6e-4 (thickness 1e-4) to 0.64 (1e-8) across the disc.
+#[test]
+fn robust_hit_points_on_thin_ellipsoids_stay_where_the_ray_hit() {
+    use rt2::cpu::whitted::Tracer;
+    use rt2::precision::OffsetMode;
+    use rt2::render::RenderOptions;
+    let opts = RenderOptions {
+        offset_mode: OffsetMode::Robust,
+        ..RenderOptions::default()
+    };
+    let eye = Vec3::new(3.0, 3.5, 1.3);
+    for h in [1e-4f32, 1e-6, 1e-8, 1e-20] {
+        let mut scene = Scene::new();
+        let radii = Vec3::new(1.0, h, 1.0);
+        let shape = Shape::Ellipsoid {
+            center: Vec3::ZERO,
+            radii,
+        };
+        scene.add_object(shape, 0).unwrap();
+        scene.commit().unwrap();
+        let tracer = Tracer::new(scene.committed().unwrap(), &opts, Traversal::Standard);
+        let mut rng = Rng(4);
+        let mut worst = 0.0f32;
+        for _ in 0..500 {
+            let aim = Vec3::new(rng.unit() - 0.5, 0.0, rng.unit() - 0.5);
+            let ray = Ray::new(eye, aim - eye, 0.0, f32::INFINITY);
+            let hit = tracer.intersect(&ray, INVALID);
+            assert!(hit.is_hit(), "h {h:e}: miss");
+            let moved = tracer.surface(&ray, &hit).p.distance(ray.at(hit.t));
+            worst = worst.max(moved);
+        }
+        assert!(worst <= 1e-5, "h {h:e}: hit point moved {worst:e}");
     }
 }
 

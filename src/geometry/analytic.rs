@@ -197,27 +197,33 @@ impl Ellipsoid {
     /// cofactors (products of two entries of `M⁻¹`) overflow for a needle (two radii of
     /// 1e-20: 1e40, every ray missed) and turn subnormal for radii near the largest accepted
     /// (about 1e19). The numerator and denominator are scaled by the largest component of
-    /// `σ d_u` before they are squared, as in [`sphere_root`]. A degenerate direction gives
-    /// NaN: no hit.
+    /// `σ d_u` before they are squared, as in [`sphere_root`]. The direction is
+    /// scaled by its own power of two first, which leaves the ratio unchanged too. A
+    /// degenerate input gives infinity: no hit.
     #[inline(always)]
     fn line_distance2(inv: Mat3, o: Vec3, d: Vec3, du: Vec3) -> f32 {
         let largest = (inv.x_axis.abs().max(inv.y_axis.abs()))
             .max(inv.z_axis.abs())
             .max_element();
-        let Some(sigma) = power_of_two_scale(largest) else {
-            return f32::NAN;
+        // The direction scaled too (by `kd`, which leaves the ratio unchanged): a long one
+        // would overflow the cross product.
+        let (Some(sigma), Some(kd)) = (
+            power_of_two_scale(largest),
+            power_of_two_scale(d.abs().max_element()),
+        ) else {
+            return f32::INFINITY;
         };
         let a = inv * sigma;
         let [r0, r1, r2] = [a.row(0), a.row(1), a.row(2)];
-        let n = (o / sigma).cross(d);
+        let n = (o / sigma).cross(d * kd);
         let w = Vec3::new(
             r1.cross(r2).dot(n),
             r2.cross(r0).dot(n),
             r0.cross(r1).dot(n),
         );
-        let du = du * sigma;
+        let du = du * sigma * kd;
         let Some(k) = power_of_two_scale(du.abs().max_element()) else {
-            return f32::NAN;
+            return f32::INFINITY;
         };
         (w * k).length_squared() / (du * k).length_squared()
     }
@@ -228,14 +234,35 @@ impl Ellipsoid {
         (inv.transpose() * s).normalize_or_zero()
     }
 
-    /// `p`, a point near the surface, moved onto it along the line from the centre: in the
-    /// unit sphere's space the point `M⁻¹(p − c)` is scaled to length 1, which in world space
-    /// divides `p − c` by that length (no `M` needed).
-    pub fn on_surface(&self, p: Vec3) -> Vec3 {
-        let c = Vec3::from(self.center);
-        let length = (Mat3::from_cols_array(&self.inv) * (p - c)).length();
-        if length.is_normal() {
-            c + (p - c) / length
+    /// `p`, a point near the surface on a ray of direction `d`, moved along that ray onto
+    /// the surface: the ray re-solved from `p` itself, whose unit-space position is about 1
+    /// long, so the solve is well conditioned (from the ray's far origin it is not, which is
+    /// `p`'s error), and the root nearest `p` taken. Neither a move along the line from the
+    /// centre (exact for spheres) nor Newton steps along the gradient serve a thin
+    /// ellipsoid: inside its mid-plane the unit-space length and the gradient across the
+    /// short axis are all rounding, and both slid points up to the rim. `d` is scaled by a
+    /// power of two first (the point `p + t d` does not change), so that `M⁻¹ d` is about 1.
+    /// A ray that does not meet the surface from `p` (a grazing one) keeps `p`.
+    pub fn on_surface(&self, p: Vec3, d: Vec3) -> Vec3 {
+        let inv = Mat3::from_cols_array(&self.inv);
+        let u = inv * (p - Vec3::from(self.center));
+        let du = inv * d;
+        let Some(k) = power_of_two_scale(du.abs().max_element()) else {
+            return p;
+        };
+        let (d, du) = (d * k, du * k);
+        let (a, b, c) = (du.length_squared(), u.dot(du), u.length_squared() - 1.0);
+        let disc = b * b - a * c;
+        if disc.is_nan() || disc < 0.0 {
+            return p;
+        }
+        // Numerical Recipes' roots: `q / a` and `c / q`, without cancellation.
+        let q = -(b + b.signum() * disc.sqrt());
+        let (t1, t2) = (q / a, c / q);
+        let t = if t2.abs() < t1.abs() { t2 } else { t1 };
+        let moved = p + t * d;
+        if moved.is_finite() {
+            moved
         } else {
             p
         }

@@ -208,8 +208,8 @@ impl PrimitiveSet {
     /// carries the error of `t` times the ray's length, which from far away exceeds the
     /// offset. From the barycentrics for triangles (exact up to one rounding per
     /// coordinate); `org + t·dir` moved onto the surface for the other primitives (projected
-    /// onto a plane, snapped onto a box's face, along the line from the centre of a sphere
-    /// or an ellipsoid), which leaves an error across the surface only.
+    /// onto a plane, snapped onto a box's face, along the line from a sphere's centre, along
+    /// the ray onto an ellipsoid), which leaves an error across the surface only.
     pub fn hit_point(&self, hit: &Hit, ray: &Ray) -> Vec3 {
         let p = ray.at(hit.t);
         let i = hit.prim as usize;
@@ -222,7 +222,7 @@ impl PrimitiveSet {
                 Vec3::from(t.v0) + hit.u * Vec3::from(t.e1) + hit.v * Vec3::from(t.e2)
             }
             (PrimKind::Sphere, k) => self.spheres[k].on_surface(p),
-            (PrimKind::Ellipsoid, k) => self.ellipsoids[k].on_surface(p),
+            (PrimKind::Ellipsoid, k) => self.ellipsoids[k].on_surface(p, ray.dir),
             (PrimKind::Box, k) => box_on_surface(&self.boxes[k], p),
         }
     }
