@@ -344,7 +344,9 @@ typedef struct rt2_context_properties {
    * intersector). NULL when that job ran on `backend`, when no job
    * ran yet, and always on a CPU context. With several threads using the context, it is
    * the job that chose its backend last. A copy, valid until the next `rt2_context_info`
-   * on this thread.
+   * on this thread; during thread exit (an `atexit` handler, a thread-local destructor),
+   * where this thread's copies are gone, a static "(not available: the thread is
+   * exiting)" instead.
    */
   const char *fallback;
   /**

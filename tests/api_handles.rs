@@ -74,20 +74,31 @@ fn misaligned_pointers_are_errors() {
             rt2_scene_add_sphere(scene, odd.cast(), 1.0, 0, null_mut()),
             "center",
         );
-        let mut id = 7;
         expect_misaligned(
             rt2_scene_add_sphere(scene, c.as_ptr(), 1.0, 0, odd.cast()),
             "out_object",
         );
-        assert_eq!(id, 7);
-        id = 0;
+        let mut material_id = 7u32;
+        let material = rt2_material_default();
+        expect_misaligned(
+            rt2_scene_add_material(scene, &material, odd.cast()),
+            "out_id",
+        );
         let ray = rt2_ray {
             org: [0.0, 0.0, 5.0],
             tmin: 0.0,
             dir: [0.0, 0.0, -1.0],
             tmax: f32::INFINITY,
         };
-        let mut hit: rt2_hit = std::mem::zeroed();
+        // A sentinel hit: no failed query may write it.
+        let sentinel = rt2_hit {
+            t: -1.0,
+            u: 0.0,
+            v: 0.0,
+            object: 99,
+            prim: 99,
+        };
+        let mut hit = sentinel;
         expect_misaligned(
             rt2_intersect(ctx, scene, odd.cast(), 1, &mut hit, null(), null_mut()),
             "rays",
@@ -100,19 +111,38 @@ fn misaligned_pointers_are_errors() {
             rt2_intersect(ctx, odd.cast(), &ray, 1, &mut hit, null(), null_mut()),
             "scene",
         );
+        // The statistics are checked before any hit is written.
+        expect_misaligned(
+            rt2_intersect(ctx, scene, &ray, 1, &mut hit, null(), odd.cast()),
+            "stats",
+        );
+        let mut opt = rt2_query_options_default();
+        opt.exclude = odd.cast();
+        expect_misaligned(
+            rt2_intersect(ctx, scene, &ray, 1, &mut hit, &opt, null_mut()),
+            "opt.exclude",
+        );
+        assert_eq!(hit.t, sentinel.t, "a refused query wrote its hit");
         let mut misaligned_ctx = null_mut();
         expect_misaligned(
             rt2_context_create(odd.cast(), &mut misaligned_ctx),
             "rt2_context_desc",
         );
         assert!(misaligned_ctx.is_null());
-        rt2_scene_destroy(odd.cast()); // ignored, like any pointer that is not a live handle
-                                       // The scene is unchanged: one sphere, hit at t = 4.
+        // Ignored, like any pointer that is not a live handle.
+        rt2_scene_destroy(odd.cast());
+        // The scene is unchanged: one sphere (object 0, no material added), hit at t = 4.
+        assert_eq!(
+            rt2_scene_add_material(scene, &material, &mut material_id),
+            Rt2Status::Ok
+        );
+        assert_eq!(material_id, 1, "the refused material was not added");
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
         assert_eq!(
             rt2_intersect(ctx, scene, &ray, 1, &mut hit, null(), null_mut()),
             Rt2Status::Ok
         );
-        assert_eq!((hit.object, hit.t), (id, 4.0));
+        assert_eq!((hit.object, hit.t), (0, 4.0));
         rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);
     }

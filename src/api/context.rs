@@ -55,7 +55,9 @@ pub struct rt2_context_properties {
     /// intersector). NULL when that job ran on `backend`, when no job
     /// ran yet, and always on a CPU context. With several threads using the context, it is
     /// the job that chose its backend last. A copy, valid until the next `rt2_context_info`
-    /// on this thread.
+    /// on this thread; during thread exit (an `atexit` handler, a thread-local destructor),
+    /// where this thread's copies are gone, a static "(not available: the thread is
+    /// exiting)" instead.
     pub fallback: *const c_char,
     /// What the library chose for the context's last render or ray query where the caller
     /// left the choice to it (`RT2_TRAVERSAL_AUTO`, `RT2_GPU_PATH_AUTO`), and why, on the

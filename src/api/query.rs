@@ -2,7 +2,9 @@
 //! `../shared/raysets` (like Embree's rtcIntersect1M), run by the context's thread pool.
 
 use super::context::rt2_context;
-use super::ffi::{guard, handle, read_versioned, slice, slice_mut, versioned, write_out};
+use super::ffi::{
+    check_out, guard, handle, read_versioned, slice, slice_mut, versioned, write_out,
+};
 use super::options::{
     intersector_from, intersector_to, query_mode_from, traversal_from, Rt2QueryMode,
 };
@@ -197,8 +199,12 @@ unsafe fn run_query<T>(
         let s = handle(scene, "scene")?;
         let (q, exclude) = query_options(opt)?;
         let rays = slice(rays, count, "rays")?;
-        // The output checked now (NULL, size), borrowed below once the exclusions are read.
+        // The outputs checked now (NULL, size, alignment), the hits borrowed below once the
+        // exclusions are read.
         slice_mut(out, count, out_name)?;
+        if !stats.is_null() {
+            check_out(stats, "stats")?;
+        }
         // A job the backend refuses is refused before anything is built for it.
         c.inner.check_query(&q)?;
         // The exclusions, read whole before the output is borrowed: `exclude` may be the very

@@ -95,17 +95,17 @@ const PREPARE_ROUNDS: usize = 8;
 /// Runs an edit that yields an id, writing the id only on success.
 unsafe fn edit_with_id(
     scene: *mut rt2_scene,
-    out_id: *mut u32,
+    out: (*mut u32, &str),
     f: impl FnOnce(&mut Scene) -> Result<u32>,
 ) -> Rt2Status {
-    prepare_and_edit(scene, out_id, || Ok(()), |s, ()| f(s))
+    prepare_and_edit(scene, out, || Ok(()), |s, ()| f(s))
 }
 
 /// [`edit_with_id`] with a `prepare` step run before the scene is locked (reading a file can
 /// take any time, and renders and edits of the scene must not wait for it).
 unsafe fn prepare_and_edit<P>(
     scene: *mut rt2_scene,
-    out_id: *mut u32,
+    (out_id, out_name): (*mut u32, &str),
     prepare: impl FnOnce() -> Result<P>,
     f: impl FnOnce(&mut Scene, P) -> Result<u32>,
 ) -> Rt2Status {
@@ -114,12 +114,12 @@ unsafe fn prepare_and_edit<P>(
         // Optional: NULL when the caller does not want the id.
         let out_id = (!out_id.is_null()).then_some(out_id);
         if let Some(out) = out_id {
-            check_out(out, "out_object")?;
+            check_out(out, out_name)?;
         }
         let prepared = prepare()?;
         let id = f(&mut s.write(), prepared)?;
         if let Some(out) = out_id {
-            write_out(out, "out_object", id)?;
+            write_out(out, out_name, id)?;
         }
         Ok(())
     })
@@ -168,7 +168,7 @@ pub unsafe extern "C" fn rt2_scene_add_material(
     material: *const rt2_material,
     out_id: *mut u32,
 ) -> Rt2Status {
-    edit_with_id(scene, out_id, |s| {
+    edit_with_id(scene, (out_id, "out_id"), |s| {
         if material.is_null() {
             return Err(Error::invalid_argument("material is NULL"));
         }
@@ -188,7 +188,7 @@ pub unsafe extern "C" fn rt2_scene_add_point_light(
     intensity: f32,
     out_id: *mut u32,
 ) -> Rt2Status {
-    edit_with_id(scene, out_id, |s| {
+    edit_with_id(scene, (out_id, "out_id"), |s| {
         let position = Vec3::from(array::<f32, 3>(position, "position")?);
         let color = Vec3::from(array::<f32, 3>(rgb, "rgb")?);
         s.add_light(PointLight {
@@ -218,7 +218,7 @@ pub unsafe extern "C" fn rt2_scene_add_mesh(
     material: u32,
     out_object: *mut u32,
 ) -> Rt2Status {
-    edit_with_id(scene, out_object, |s| {
+    edit_with_id(scene, (out_object, "out_object"), |s| {
         let n3 = |n: usize, what: &str| {
             n.checked_mul(3)
                 .ok_or_else(|| Error::invalid_argument(format!("{what} overflows")))
@@ -248,7 +248,7 @@ pub unsafe extern "C" fn rt2_scene_add_sphere(
     material: u32,
     out_object: *mut u32,
 ) -> Rt2Status {
-    edit_with_id(scene, out_object, |s| {
+    edit_with_id(scene, (out_object, "out_object"), |s| {
         let center = Vec3::from(array::<f32, 3>(center, "center")?);
         s.add_object(Shape::Sphere { center, radius }, material)
     })
@@ -266,7 +266,7 @@ pub unsafe extern "C" fn rt2_scene_add_ellipsoid(
     material: u32,
     out_object: *mut u32,
 ) -> Rt2Status {
-    edit_with_id(scene, out_object, |s| {
+    edit_with_id(scene, (out_object, "out_object"), |s| {
         let center = Vec3::from(array::<f32, 3>(center, "center")?);
         let radii = Vec3::from(array::<f32, 3>(radii, "radii")?);
         s.add_object(Shape::Ellipsoid { center, radii }, material)
@@ -285,7 +285,7 @@ pub unsafe extern "C" fn rt2_scene_add_box(
     material: u32,
     out_object: *mut u32,
 ) -> Rt2Status {
-    edit_with_id(scene, out_object, |s| {
+    edit_with_id(scene, (out_object, "out_object"), |s| {
         let min = Vec3::from(array::<f32, 3>(min, "min")?);
         let max = Vec3::from(array::<f32, 3>(max, "max")?);
         s.add_object(Shape::Box { min, max }, material)
@@ -304,7 +304,7 @@ pub unsafe extern "C" fn rt2_scene_add_plane(
     material: u32,
     out_object: *mut u32,
 ) -> Rt2Status {
-    edit_with_id(scene, out_object, |s| {
+    edit_with_id(scene, (out_object, "out_object"), |s| {
         let normal = Vec3::from(array::<f32, 3>(normal, "normal")?);
         s.add_object(Shape::Plane { normal, offset }, material)
     })
@@ -328,7 +328,7 @@ pub unsafe extern "C" fn rt2_scene_load_file(
 ) -> Rt2Status {
     prepare_and_edit(
         scene,
-        out_object,
+        (out_object, "out_object"),
         || loaders::load_mesh(&path_arg(path, "path")?),
         |s, mesh| {
             let shape = Shape::Mesh {

@@ -77,7 +77,10 @@ pub type PrimIndex = u32;
 pub const INVALID: u32 = u32::MAX;
 
 /// The closest hit found so far: `t`, barycentrics (`u` weighs vertex 1, `v` vertex 2, as in
-/// `../shared/raysets`) and the primitive index (`INVALID` while none).
+/// `../shared/raysets`) and the primitive index (`INVALID` while none). Both refer to the
+/// committed primitive set: the vertices are those of the stored triangle, which for a
+/// mirrored mesh has the mesh's corners 1 and 2 swapped (`Object::mirrors`). `rt2_intersect`
+/// reports the object, its own primitive index and the mesh's own barycentrics.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
     pub t: f32,

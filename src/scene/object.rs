@@ -71,8 +71,14 @@ impl Object {
     /// the normal `e1 × e2` the renderer takes for outward (refraction enters and leaves by
     /// it), stays that of the mesh as given; hits report `u` and `v` swapped back.
     pub fn mirrors(&self) -> bool {
-        self.transform.matrix3.determinant() < 0.0
+        mirrors(&self.transform)
     }
+}
+
+/// Whether `t` mirrors (see [`Object::mirrors`]); one test for the placement of the
+/// triangles, their exact corners and the hits' barycentrics.
+fn mirrors(t: &Affine3A) -> bool {
+    Mat3::from(t.matrix3).determinant() < 0.0
 }
 
 /// Where a global primitive index came from, for hits reported to the caller.
@@ -178,9 +184,9 @@ fn place_shape(
             positions,
             triangles,
         } => {
-            let mirrors = lin.determinant() < 0.0;
+            let mirrored = mirrors(t);
             for (k, tri) in triangles.iter().enumerate() {
-                let [a, b, c] = world_corners(positions, tri, t, mirrors);
+                let [a, b, c] = world_corners(positions, tri, t, mirrored);
                 let triangle = Triangle::from_vertices(a, b, c);
                 if !triangle_fits(&triangle) {
                     return Err(Error::invalid_argument(format!(

@@ -155,19 +155,25 @@ fn time_ms(runs: usize, mut f: impl FnMut()) -> f64 {
     )
 }
 
-/// Fails unless `path` can take a section later: it is readable text (or missing, with an
-/// existing folder) and opens for appending, which neither creates nor truncates it.
+/// Fails unless `path` can take a section later: it is readable text and opens for
+/// appending, which does not truncate it; or it is missing and can be created (it is, and
+/// removed again: a folder may exist and still refuse new files).
 fn check_writable(path: &Path) -> Result<()> {
     read_benchmarks(path)?;
     let folder = path.parent().filter(|p| !p.as_os_str().is_empty());
     if !path.exists() {
-        return match folder {
-            Some(f) if !f.is_dir() => Err(Error::io(format!(
+        if folder.is_some_and(|f| !f.is_dir()) {
+            return Err(Error::io(format!(
                 "{}: its folder does not exist",
                 path.display()
-            ))),
-            _ => Ok(()),
-        };
+            )));
+        }
+        return std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(path)
+            .and_then(|_| std::fs::remove_file(path))
+            .map_err(|e| Error::io(format!("cannot create {}: {e}", path.display())));
     }
     std::fs::OpenOptions::new()
         .append(true)
