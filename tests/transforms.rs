@@ -363,7 +363,7 @@ fn a_mirrored_glass_mesh_renders_as_the_mesh_itself() {
 fn a_mirrored_mesh_reports_the_barycentrics_of_its_own_corners() {
     use rt2::api::*;
     use rt2::error::Rt2Status;
-    use std::ptr::{null, null_mut};
+    use std::ptr::null_mut;
     let corners = [[0.0f32, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
     let t = Affine3A::from_cols(
         Vec3::X.into(),
@@ -400,7 +400,15 @@ fn a_mirrored_mesh_reports_the_barycentrics_of_its_own_corners() {
             Rt2Status::Ok
         );
         assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
-        for (u, v) in [(0.2f32, 0.3f32), (0.6, 0.1), (0.05, 0.8)] {
+        // Both intersectors: the watertight test reads the exact corners, which must be
+        // placed in the same swapped order as the triangles.
+        let intersectors = [Rt2Intersector::MollerTrumbore, Rt2Intersector::Watertight];
+        let cases = intersectors
+            .into_iter()
+            .flat_map(|i| [(0.2f32, 0.3f32), (0.6, 0.1), (0.05, 0.8)].map(|uv| (i, uv)));
+        for (intersector, (u, v)) in cases {
+            let mut opt = rt2_query_options_default();
+            opt.intersector = intersector as u32;
             let p = (1.0 - u - v) * world[0] + u * world[1] + v * world[2];
             let org = p + Vec3::new(0.3, 0.7, 2.0);
             let ray = rt2_ray {
@@ -410,17 +418,82 @@ fn a_mirrored_mesh_reports_the_barycentrics_of_its_own_corners() {
                 tmax: f32::INFINITY,
             };
             let mut hit = std::mem::zeroed::<rt2_hit>();
-            let status = rt2_intersect(ctx, scene, &ray, 1, &mut hit, null(), null_mut());
+            let status = rt2_intersect(ctx, scene, &ray, 1, &mut hit, &opt, null_mut());
             assert_eq!(status, Rt2Status::Ok);
             assert_eq!(hit.object, id);
             assert!(
                 (hit.u - u).abs() < 1e-5 && (hit.v - v).abs() < 1e-5,
-                "aimed at (u, v) = ({u}, {v}), hit ({}, {})",
+                "{intersector:?}: aimed at (u, v) = ({u}, {v}), hit ({}, {})",
                 hit.u,
                 hit.v
             );
         }
         rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);
+    }
+}
+
+/// A mirrored closed mesh stays closed for the watertight test: its exact corners are placed
+/// in the swapped order of its triangles, so rays from inside aimed at its vertices and edges
+/// all hit it, at the distances of the unmirrored mesh (the mirror maps the cube onto itself).
+#[test]
+fn a_mirrored_closed_mesh_stays_watertight() {
+    use rt2::cpu::query::QueryMode;
+    use rt2::precision::Intersector;
+    use rt2::scene::tessellate;
+    let cube = tessellate::cube();
+    // Rays from inside at every vertex and edge midpoint, from several inner points.
+    let mut targets = cube.positions.clone();
+    targets.extend(cube.edge_midpoints());
+    let rays: Vec<Ray> = [
+        Vec3::splat(0.5),
+        Vec3::new(0.3, 0.6, 0.45),
+        Vec3::splat(0.2),
+    ]
+    .iter()
+    .flat_map(|&o| {
+        targets
+            .iter()
+            .map(move |&t| Ray::new(o, t - o, 0.0, f32::INFINITY))
+    })
+    .collect();
+    let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
+    let hits = |t: Affine3A| {
+        let mut scene = Scene::new();
+        let shape = Shape::Mesh {
+            positions: cube.positions.clone(),
+            triangles: cube.triangles.clone(),
+        };
+        let id = scene.add_object(shape, 0).unwrap();
+        scene.set_transform(id, t).unwrap();
+        scene.commit().unwrap();
+        scene.ensure_exact_vertices().unwrap();
+        let q = QueryOptions {
+            intersector: Intersector::Watertight,
+            mode: QueryMode::Single,
+            ..QueryOptions::default()
+        };
+        let mut hits = vec![Hit::MISS; rays.len()];
+        ctx.intersect(scene.committed().unwrap(), &rays, &mut hits, &q)
+            .unwrap();
+        hits.iter().map(|h| h.t).collect::<Vec<f32>>()
+    };
+    let plain = hits(Affine3A::IDENTITY);
+    let mirrored = hits(Affine3A::from_cols(
+        (-Vec3::X).into(),
+        Vec3::Y.into(),
+        Vec3::Z.into(),
+        Vec3::X.into(),
+    ));
+    assert!(plain.iter().all(|t| t.is_finite()), "the plain cube leaks");
+    let leaks = mirrored.iter().filter(|t| !t.is_finite()).count();
+    assert_eq!(
+        leaks,
+        0,
+        "{leaks} of {} rays leave the mirrored cube",
+        rays.len()
+    );
+    for (a, b) in plain.iter().zip(&mirrored) {
+        assert!((a - b).abs() <= 1e-6 * a, "t {a} against {b}");
     }
 }
