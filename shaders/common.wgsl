@@ -164,6 +164,19 @@ fn pow2_scale(m: f32) -> f32 {
 // where d·d and d·d r² are normal, which gives the same roots.)
 fn sphere_root(o: vec3<f32>, d_in: vec3<f32>, l2: f32, r2: f32, tmin: f32, tmax: f32) -> Tuv {
     let no = Tuv(false, 0.0, 0.0, 0.0);
+    let r = sphere_roots(o, d_in, l2, r2);
+    if (!r.hit) { return no; }
+    if (r.t0 >= tmin && r.t0 < tmax) { return Tuv(true, r.t0, 0.0, 0.0); }
+    if (r.t1 >= tmin && r.t1 < tmax) { return Tuv(true, r.t1, 0.0, 0.0); }
+    return no;
+}
+
+// Both roots of `sphere_root`, ascending (`sphere_roots` and `scaled_sphere_roots`): the
+// direction scaled by a power of two for the solve, the roots scaled back.
+struct Roots { hit: bool, t0: f32, t1: f32 }
+
+fn sphere_roots(o: vec3<f32>, d_in: vec3<f32>, l2: f32, r2: f32) -> Roots {
+    let no = Roots(false, 0.0, 0.0);
     let s = pow2_scale(max(abs(d_in.x), max(abs(d_in.y), abs(d_in.z))));
     if (s == 0.0) { return no; }
     let d = d_in * s;
@@ -184,11 +197,7 @@ fn sphere_root(o: vec3<f32>, d_in: vec3<f32>, l2: f32, r2: f32, tmin: f32, tmax:
     var t1 = q / a;
     if (q != 0.0) { t1 = c / q; }
     if (t0 > t1) { let x = t0; t0 = t1; t1 = x; }
-    t0 = t0 * s;
-    t1 = t1 * s;
-    if (t0 >= tmin && t0 < tmax) { return Tuv(true, t0, 0.0, 0.0); }
-    if (t1 >= tmin && t1 < tmax) { return Tuv(true, t1, 0.0, 0.0); }
-    return no;
+    return Roots(true, t0 * s, t1 * s);
 }
 
 fn hit_sphere(s: Sphere, r: Ray, tmax: f32) -> Tuv {

@@ -156,22 +156,11 @@ fn hit_point(h: Hit, r: Ray) -> vec3<f32> {
         // `Ellipsoid::on_surface`: the ray re-solved from p, the root nearest p.
         let e = ellipsoids[k];
         let m = ell_inv(e);
-        let u = m * (p - v3(e.center));
-        let s = pow2_scale(max3(abs(m * r.dir)));
-        if (s == 0.0) { return p; }
-        let d = r.dir * s;
-        let du = m * r.dir * s;
-        let a = dot(du, du);
-        let b = dot(u, du);
-        let c = dot(u, u) - 1.0;
-        let disc = b * b - a * c;
-        if (!(disc >= 0.0)) { return p; }
-        let q = -(b + select(1.0, -1.0, negative(b)) * sqrt(disc));
-        let t1 = q / a;
-        let t2 = c / q;
-        var t = t1;
-        if (abs(t2) < abs(t1)) { t = t2; }
-        let moved = p + t * d;
+        let roots = sphere_roots(m * (p - v3(e.center)), m * r.dir, -1.0, 1.0);
+        if (!roots.hit) { return p; }
+        var t = roots.t0;
+        if (abs(roots.t1) < abs(roots.t0)) { t = roots.t1; }
+        let moved = p + t * r.dir;
         if (!finite3(moved)) { return p; }
         return moved;
     }

@@ -197,16 +197,14 @@ impl Ellipsoid {
     /// cofactors (products of two entries of `M⁻¹`) overflow for a needle (two radii of
     /// 1e-20: 1e40, every ray missed) and turn subnormal for radii near the largest accepted
     /// (about 1e19). The numerator and denominator are scaled by the largest component of
-    /// `σ d_u` before they are squared, as in [`sphere_root`]. The direction is
-    /// scaled by its own power of two first, which leaves the ratio unchanged too. A
-    /// degenerate input gives infinity: no hit.
+    /// `σ d_u` before they are squared, as in [`sphere_root`]. The direction is scaled by its
+    /// own power of two first (a long one would overflow the cross product), which leaves the
+    /// ratio unchanged too. A degenerate input gives infinity: no hit.
     #[inline(always)]
     fn line_distance2(inv: Mat3, o: Vec3, d: Vec3, du: Vec3) -> f32 {
         let largest = (inv.x_axis.abs().max(inv.y_axis.abs()))
             .max(inv.z_axis.abs())
             .max_element();
-        // The direction scaled too (by `kd`, which leaves the ratio unchanged): a long one
-        // would overflow the cross product.
         let (Some(sigma), Some(kd)) = (
             power_of_two_scale(largest),
             power_of_two_scale(d.abs().max_element()),
@@ -251,16 +249,10 @@ impl Ellipsoid {
             return p;
         };
         let (d, du) = (d * k, du * k);
-        let (a, b, c) = (du.length_squared(), u.dot(du), u.length_squared() - 1.0);
-        let disc = b * b - a * c;
-        if disc.is_nan() || disc < 0.0 {
+        let Some((t0, t1)) = sphere_roots(u, du, Line::Projected, du.length_squared(), 1.0) else {
             return p;
-        }
-        // Numerical Recipes' roots: `q / a` and `c / q`, without cancellation.
-        let q = -(b + b.signum() * disc.sqrt());
-        let (t1, t2) = (q / a, c / q);
-        let t = if t2.abs() < t1.abs() { t2 } else { t1 };
-        let moved = p + t * d;
+        };
+        let moved = p + if t1.abs() < t0.abs() { t1 } else { t0 } * d;
         if moved.is_finite() {
             moved
         } else {

@@ -20,10 +20,10 @@ use crate::fallible::TryGrow;
 /// `(v0, v(k), v(k+1))`.
 ///
 /// Ignored statements: `vt`, `vn`, `vp`, `g`, `o`, `s`, `usemtl`, `mtllib`, comments and
-/// blank lines; CRLF line endings and a UTF-8 byte-order mark are accepted, and bytes that are
-/// not UTF-8 are only an error where a number is expected. Any other statement is an error, so that a
-/// file that is not OBJ (or uses features this loader would silently drop, like curves) is
-/// reported rather than half-loaded. A file without faces is an error too.
+/// blank lines; CRLF line endings and a UTF-8 byte-order mark are accepted, and bytes that
+/// are not UTF-8 are only an error where a number is expected. Any other statement is an
+/// error, so that a file that is not OBJ (or uses features this loader would silently drop,
+/// like curves) is reported rather than half-loaded. A file without faces is an error too.
 pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
     let mut mesh = Mesh::default();
     let mut saw_statement = false;
