@@ -47,10 +47,9 @@ const KIND_SHIFT: u32 = PRIM_BITS + 1;
 pub(super) const MAX_PRIMS: usize = PRIM_MASK as usize;
 
 /// One event packed in a `u64` whose integer order is the sweep order: position (the `f32`
-/// bits mapped to an order-preserving `u32`), then kind, then the padded flag and the primitive.
-/// Eight bytes instead of
-/// a 12-byte struct, and sorts and merges compare one integer: the event lists are most of the
-/// builder's memory traffic.
+/// bits mapped to an order-preserving `u32`), then kind, then the padded flag and the
+/// primitive. Eight bytes instead of a 12-byte struct, and sorts and merges compare one
+/// integer: the event lists are most of the builder's memory traffic.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 struct Event(u64);
 
