@@ -357,7 +357,7 @@ impl Context {
         q: &QueryOptions,
     ) -> Result<TraversalStats> {
         q.validate()?;
-        check_exclusions(rays, exclude)?;
+        check_lengths(rays, exclude, out)?;
         // Rays whose direction is far from unit length go to either backend scaled by a power
         // of two (`Ray::direction_scale`), on a copy made only when the batch holds one.
         let scaled: Option<(Vec<Option<f32>>, Vec<Ray>)> =
@@ -476,13 +476,18 @@ fn gpu_lacks(intersector: Intersector) -> Option<&'static str> {
 }
 
 /// One excluded primitive per ray, when there are any.
-fn check_exclusions(rays: &[Ray], exclude: Option<&[PrimIndex]>) -> Result<()> {
-    match exclude {
-        Some(e) if e.len() != rays.len() => Err(Error::invalid_argument(format!(
-            "{} excluded primitives for {} rays: give one per ray",
-            e.len(),
+/// Refuses a batch whose exclusions or answers are not one per ray: the backends index all
+/// three by ray, and a shorter slice would leave rays untraced on the CPU and panic on the GPU.
+fn check_lengths<T>(rays: &[Ray], exclude: Option<&[PrimIndex]>, out: &[T]) -> Result<()> {
+    let per_ray = |what: &str, n: usize| {
+        Err(Error::invalid_argument(format!(
+            "{n} {what} for {} rays: give one per ray",
             rays.len()
-        ))),
+        )))
+    };
+    match exclude {
+        Some(e) if e.len() != rays.len() => per_ray("excluded primitives", e.len()),
+        _ if out.len() != rays.len() => per_ray("answers", out.len()),
         _ => Ok(()),
     }
 }

@@ -1399,6 +1399,58 @@ fn queries_with_exclusions_run_on_the_gpu() {
     }
 }
 
+/// A batch whose answers are not one per ray is refused with INVALID_ARGUMENT on every
+/// backend, its answers untouched, and the context keeps working. Before, the CPU traced as
+/// many rays as it had answers for and left the rest untraced without a word, and the GPU
+/// panicked holding its scene cache's lock, which failed every later GPU job of the context,
+/// under AUTO too.
+#[test]
+fn answers_not_one_per_ray_are_refused() {
+    let mut s = Scene::new();
+    let sphere = Shape::Sphere {
+        center: Vec3::ZERO,
+        radius: 1.0,
+    };
+    s.add_object(sphere, 0).unwrap();
+    s.commit().unwrap();
+    let c = s.committed().unwrap();
+    let rays = vec![Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z, 0.0, f32::INFINITY); 10];
+    let q = QueryOptions::default();
+    let mut contexts = vec![("CPU", cpu())];
+    contexts.extend(gpu(GpuOptions::default()).map(|g| ("GPU", g)));
+    contexts.extend(auto_on_gpu(None).map(|(a, _)| ("AUTO", a)));
+    for (name, ctx) in &contexts {
+        for n in [0, 5, 11] {
+            let mut hits = vec![Hit::MISS; n];
+            let e = ctx.intersect(c, &rays, &mut hits, &q).unwrap_err();
+            assert_eq!(
+                e.status,
+                Rt2Status::InvalidArgument,
+                "{name}: {}",
+                e.message
+            );
+            assert!(
+                e.message.contains(&format!("{n} answers for 10 rays")),
+                "{}",
+                e.message
+            );
+            assert!(hits.iter().all(|h| !h.is_hit()), "{name}: answers written");
+            let mut occ = vec![false; n];
+            let e = ctx.occluded(c, &rays, &mut occ, &q).unwrap_err();
+            assert_eq!(
+                e.status,
+                Rt2Status::InvalidArgument,
+                "{name}: {}",
+                e.message
+            );
+            assert!(occ.iter().all(|o| !o), "{name}: answers written");
+        }
+        let mut hits = vec![Hit::MISS; 10];
+        ctx.intersect(c, &rays, &mut hits, &q).unwrap();
+        assert!(hits.iter().all(|h| h.t == 4.0), "{name}: {hits:?}");
+    }
+}
+
 /// Through the C API, a query or render a GPU context refuses (the watertight test) is refused
 /// before the scene builds anything for it: no exact corners, no ropes. A query with
 /// exclusions runs.
