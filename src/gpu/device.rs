@@ -12,7 +12,7 @@ use super::{GpuError, GpuResult};
 use crate::cpu::traverse::Traversal;
 use crate::error::{Error, Result, Rt2Status};
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
 /// How the GPU backend picks and uses adapters.
 #[derive(Clone, Debug, Default)]
@@ -355,7 +355,7 @@ impl Device {
     /// The pipelines of a traversal's program, compiled on first use. Render: megakernel
     /// first, then [`WAVE_ENTRIES`].
     pub(crate) fn pipelines(&self, t: Traversal, p: Program) -> Result<Pipelines> {
-        let mut cache = self.pipelines.lock().map_err(|_| poisoned())?;
+        let mut cache = lock_cache(&self.pipelines);
         if let Some(v) = cache.get(&(t, p)) {
             return Ok(v.clone());
         }
@@ -395,15 +395,12 @@ impl Device {
     /// Scene arrays re-sent by the last job (names as in common.wgsl): how the upload cache
     /// is observed.
     pub fn last_uploads(&self) -> Vec<&'static str> {
-        self.scene
-            .lock()
-            .map(|s| s.last_uploads.clone())
-            .unwrap_or_default()
+        lock_cache(&self.scene).last_uploads.clone()
     }
 
     /// `scan_local`, `scan_add`.
     pub(crate) fn scan_pipelines(&self) -> Result<Pipelines> {
-        let mut cache = self.scan.lock().map_err(|_| poisoned())?;
+        let mut cache = lock_cache(&self.scan);
         if let Some(v) = &*cache {
             return Ok(v.clone());
         }
@@ -575,7 +572,7 @@ impl Device {
     /// a job: a bug) an internal error.
     pub(crate) fn check(&self) -> GpuResult<()> {
         let pending = {
-            let f = self.faults.lock().map_err(|_| poisoned())?;
+            let f = lock_faults(&self.faults);
             f.errors.iter().any(Faults::checked_here)
         };
         if pending {
@@ -583,7 +580,7 @@ impl Device {
             // and a call on the lost device before that is an error like any other.
             let _ = self.device.poll(wgpu::PollType::Poll);
         }
-        let mut f = self.faults.lock().map_err(|_| poisoned())?;
+        let mut f = lock_faults(&self.faults);
         let mine = f.take(Faults::checked_here);
         let out_of_memory = mine.iter().any(|e| e.out_of_memory);
         let errors = mine
@@ -614,7 +611,7 @@ impl Device {
     /// Errors of this thread still pending belong to an earlier job that failed before its
     /// check, and are dropped; so are the job's own when the returned guard is.
     pub(crate) fn begin_job(&self) -> GpuResult<JobFaults<'_>> {
-        let mut f = self.faults.lock().map_err(|_| poisoned())?;
+        let mut f = lock_faults(&self.faults);
         f.drop_thread_errors();
         match &f.lost {
             Some(why) => Err(GpuError::Lost(format!(
@@ -633,9 +630,7 @@ impl Device {
         match fault {
             InjectedFault::OutOfMemory => {
                 let source = "injected by a test: the allocation failed".into();
-                if let Ok(mut f) = self.faults.lock() {
-                    f.record(wgpu::Error::OutOfMemory { source }, None);
-                }
+                lock_faults(&self.faults).record(wgpu::Error::OutOfMemory { source }, None);
             }
             InjectedFault::Lost => self.device.destroy(),
         }
@@ -646,11 +641,23 @@ fn gpu_error(m: String) -> Error {
     Error::new(Rt2Status::Internal, format!("GPU error: {m}"))
 }
 
-fn poisoned() -> Error {
-    Error::new(
-        Rt2Status::Internal,
-        "a GPU lock was poisoned by an earlier panic",
-    )
+/// Locks one of a device's caches (compiled kernels, the uploaded scene) whatever a panic left
+/// in it. A panic is a bug, caught at the C boundary, and may leave a cache half updated: a
+/// poisoned cache is emptied and rebuilt by its next user, where failing on the poisoned lock
+/// would fail every later GPU job of the context, under AUTO too (no CPU fallback for a bug).
+pub(crate) fn lock_cache<T: Default>(cache: &Mutex<T>) -> MutexGuard<'_, T> {
+    cache.lock().unwrap_or_else(|poisoned| {
+        let mut guard = poisoned.into_inner();
+        *guard = T::default();
+        cache.clear_poison();
+        guard
+    })
+}
+
+/// Locks a device's fault record whatever a panic left in it: the record is only appended to
+/// and taken from, and a lost device must stay known as lost, so it is kept as it is.
+pub(super) fn lock_faults(faults: &Mutex<Faults>) -> MutexGuard<'_, Faults> {
+    faults.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// The GPU of the unit tests (any adapter, software ones included), or `None`, said aloud,
@@ -728,6 +735,65 @@ mod tests {
         let other = std::thread::scope(|s| s.spawn(|| dev.check().is_err()).join().unwrap());
         assert!(other, "an injected fault goes to any thread");
         assert!(dev.check().is_ok());
+    }
+
+    /// A panic while a device's lock was held (a bug, caught at the C boundary) leaves the
+    /// device usable: the next job finds every lock poisoned and still answers, with the
+    /// caches rebuilt. Failing on the poisoned locks instead failed every later GPU job of the
+    /// context for good.
+    #[test]
+    fn a_panic_under_a_lock_does_not_break_the_device() {
+        use crate::cpu::traverse::Traversal;
+        use crate::geometry::{Hit, Ray};
+        use crate::scene::{Scene, Shape};
+        use glam::Vec3;
+        let Some(gpu) = super::open_for_tests() else {
+            return;
+        };
+        let dev = &gpu.devices[0];
+        let mut scene = Scene::new();
+        let sphere = Shape::Sphere {
+            center: Vec3::ZERO,
+            radius: 1.0,
+        };
+        scene.add_object(sphere, 0).unwrap();
+        scene.commit().unwrap();
+        let c = scene.committed().unwrap();
+        let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z, 0.0, f32::INFINITY);
+        let query = |hits: &mut [Hit]| {
+            let how = Traversal::Standard;
+            crate::gpu::query::run(dev, c, (&[ray], None), how, 8, Some(hits), None)
+        };
+        let mut hits = [Hit::MISS];
+        query(&mut hits).unwrap();
+        assert_eq!(
+            hits[0].t, 4.0,
+            "the sphere is hit before the locks are poisoned"
+        );
+
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                let _locks = (
+                    dev.scene.lock(),
+                    dev.pipelines.lock(),
+                    dev.scan.lock(),
+                    dev.faults.lock(),
+                );
+                panic!("a bug while the device's locks are held");
+            })
+            .join()
+            .expect_err("the thread panicked");
+        });
+        assert!(dev.scene.is_poisoned() && dev.faults.is_poisoned());
+        let mut hits = [Hit::MISS];
+        query(&mut hits).expect("the device answers after the panic");
+        assert_eq!(hits[0].t, 4.0);
+        assert!(!dev.scene.is_poisoned(), "the scene cache was rebuilt");
+        assert!(
+            dev.last_uploads().contains(&"nodes"),
+            "{:?}",
+            dev.last_uploads()
+        );
     }
 
     /// Adapters that refuse a device are skipped with their reasons; only when none opens

@@ -2,6 +2,7 @@
 //! default) and its lost-device callback record here instead, per thread, and every job checks
 //! the record ([`super::Device::check`]).
 
+use super::device::lock_faults;
 use std::sync::{Arc, Mutex};
 use std::thread::ThreadId;
 
@@ -35,20 +36,16 @@ impl Faults {
         let faults = Arc::new(Mutex::new(Faults::default()));
         let sink = faults.clone();
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
-            if let Ok(mut f) = sink.lock() {
-                f.record(e, Some(std::thread::current().id()));
-            }
+            lock_faults(&sink).record(e, Some(std::thread::current().id()));
         }));
         // wgpu reports a lost device only here, never to the error handler.
         let sink = faults.clone();
         device.set_device_lost_callback(move |reason, msg| {
-            if let Ok(mut f) = sink.lock() {
-                f.lost = Some(match reason {
-                    wgpu::DeviceLostReason::Destroyed => "destroyed".to_string(),
-                    wgpu::DeviceLostReason::Unknown if msg.is_empty() => "no reason given".into(),
-                    wgpu::DeviceLostReason::Unknown => msg,
-                });
-            }
+            lock_faults(&sink).lost = Some(match reason {
+                wgpu::DeviceLostReason::Destroyed => "destroyed".to_string(),
+                wgpu::DeviceLostReason::Unknown if msg.is_empty() => "no reason given".into(),
+                wgpu::DeviceLostReason::Unknown => msg,
+            });
         });
         faults
     }
@@ -96,9 +93,7 @@ pub(crate) struct JobFaults<'a>(pub(super) &'a Mutex<Faults>);
 
 impl Drop for JobFaults<'_> {
     fn drop(&mut self) {
-        if let Ok(mut f) = self.0.lock() {
-            f.drop_thread_errors();
-        }
+        lock_faults(self.0).drop_thread_errors();
     }
 }
 

@@ -1,7 +1,7 @@
 //! Batch ray queries on the GPU: one thread per ray, the batch cut into pieces that fit the
 //! device's storage bindings. Runs on the context's first device.
 
-use super::device::Device;
+use super::device::{lock_cache, Device};
 use super::kernels::Program;
 use super::layout::{GpuHit, GpuParams, GpuRay, GpuStats};
 use super::GpuResult;
@@ -24,9 +24,8 @@ pub(crate) fn run(
     let _job = dev.begin_job()?;
     let pipelines = dev.pipelines(traversal, Program::Query)?;
     let pipeline = &pipelines[if hits.is_some() { 0 } else { 1 }];
-    let mut cache = dev.scene.lock().map_err(|_| poisoned())?;
-    cache.sync(dev, scene)?;
-    let scene_group = cache.bind_group.as_ref().ok_or_else(poisoned)?;
+    let mut cache = lock_cache(&dev.scene);
+    let scene_group = &cache.sync(dev, scene)?;
     // Hits and statistics are 16 bytes per ray, rays 32: the ray buffer sets the piece.
     let align = dev.limits.min_storage_buffer_offset_alignment as u64;
     let per = (dev.max_binding().saturating_sub(align) / std::mem::size_of::<GpuRay>() as u64)
@@ -147,11 +146,4 @@ fn gpu_ray(r: &Ray) -> GpuRay {
         dir: r.dir.to_array(),
         tmax: r.tmax,
     }
-}
-
-fn poisoned() -> super::GpuError {
-    super::GpuError::Other(crate::error::Error::new(
-        crate::error::Rt2Status::Internal,
-        "a GPU lock was poisoned by an earlier panic",
-    ))
 }

@@ -9,7 +9,7 @@
 //! With several devices each renders a band of rows and the bands are gathered (the
 //! thesis' dual-GPU set-up). A device renders its band in chunks that fit its bindings.
 
-use super::device::{Device, Gpu};
+use super::device::{lock_cache, Device, Gpu};
 use super::kernels::Program;
 use super::layout::{GpuItem, GpuParams, GpuScanParams};
 use super::{GpuError, GpuResult};
@@ -145,12 +145,8 @@ impl Job<'_> {
         let dev = self.dev;
         let _job = dev.begin_job()?;
         let pipelines = dev.pipelines(self.traversal, Program::Render)?;
-        let mut cache = dev.scene.lock().map_err(|_| GpuError::Other(panicked()))?;
-        cache.sync(dev, self.scene)?;
-        let scene_group = cache
-            .bind_group
-            .clone()
-            .ok_or_else(|| GpuError::Other(panicked()))?;
+        let mut cache = lock_cache(&dev.scene);
+        let scene_group = cache.sync(dev, self.scene)?;
         let base = cache.job(self.base);
         // The bind group keeps the scene's buffers alive: other jobs may use the device now.
         drop(cache);
@@ -276,7 +272,10 @@ impl Job<'_> {
             )
         };
         let [generate, trace, accumulate, compact, finalize] = pipes else {
-            return Err(GpuError::Other(panicked()));
+            return Err(GpuError::Other(crate::error::Error::new(
+                crate::error::Rt2Status::Internal,
+                format!("the wavefront program has {} kernels, not 5", pipes.len()),
+            )));
         };
         for s in 0..params.samples {
             let p = GpuParams {

@@ -119,12 +119,13 @@ impl SceneCache {
         }
     }
 
-    /// Makes the device's copy match `c`. `Limits` when an array exceeds a storage binding.
-    pub fn sync(&mut self, dev: &Device, c: &Committed) -> GpuResult<()> {
+    /// Makes the device's copy match `c`, and returns the bind group of its arrays. `Limits`
+    /// when an array exceeds a storage binding.
+    pub fn sync(&mut self, dev: &Device, c: &Committed) -> GpuResult<wgpu::BindGroup> {
         let key = (c.id, c.tree.ropes.is_some());
-        if self.key == Some(key) && self.bind_group.is_some() {
+        if let (true, Some(group)) = (self.key == Some(key), &self.bind_group) {
             self.last_uploads.clear();
-            return Ok(());
+            return Ok(group.clone());
         }
         let data = arrays(c).map_err(|_| {
             GpuError::OutOfMemory("no host memory to convert the scene for the device".into())
@@ -156,7 +157,8 @@ impl SceneCache {
             }
         }
         let buffers: Vec<&wgpu::Buffer> = self.arrays.iter().flatten().map(|u| &u.buffer).collect();
-        self.bind_group = Some(dev.bind(&dev.layouts.scene, &buffers));
+        let group = dev.bind(&dev.layouts.scene, &buffers);
+        self.bind_group = Some(group.clone());
         self.params = scene_params(c);
         self.key = Some(key);
         if let Err(e) = dev.check() {
@@ -164,7 +166,7 @@ impl SceneCache {
             *self = SceneCache::default();
             return Err(e);
         }
-        Ok(())
+        Ok(group)
     }
 }
 
