@@ -564,7 +564,11 @@ typedef struct rt2_ray {
 } rt2_ray;
 
 /**
- * Work done by a query (the thesis' table 1 counters), summed over the batch.
+ * Work done by a query (the thesis' table 1 counters), summed over the batch. A closest-hit
+ * query (`rt2_intersect`) counts the same in every mode and on the GPU. An any-hit query
+ * (`rt2_occluded`) counts the same nodes and leaves, but its `prim_tests` may differ by about
+ * 1% between modes and backends: the CPU tests a leaf's triangles in groups (SIMD) and counts
+ * a whole group when one of its triangles ends the search.
  */
 typedef struct rt2_query_stats {
   uint64_t nodes_visited;

@@ -68,7 +68,11 @@ pub struct rt2_query_options {
 
 versioned!(rt2_query_options);
 
-/// Work done by a query (the thesis' table 1 counters), summed over the batch.
+/// Work done by a query (the thesis' table 1 counters), summed over the batch. A closest-hit
+/// query (`rt2_intersect`) counts the same in every mode and on the GPU. An any-hit query
+/// (`rt2_occluded`) counts the same nodes and leaves, but its `prim_tests` may differ by about
+/// 1% between modes and backends: the CPU tests a leaf's triangles in groups (SIMD) and counts
+/// a whole group when one of its triangles ends the search.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct rt2_query_stats {
