@@ -14,7 +14,7 @@ struct KdNode { split: u32, bits: u32 }
 struct RankWord { leaf_bits: u32, before: u32 }
 struct Triangle { v0: array<f32, 3>, e1: array<f32, 3>, e2: array<f32, 3> }
 struct Sphere { center: array<f32, 3>, radius: f32 }
-struct Ellipsoid { center: array<f32, 3>, inv: array<f32, 9>, half: array<f32, 3> }
+struct Ellipsoid { center: array<f32, 3>, inv: array<f32, 9>, half: array<f32, 3>, sigma: f32, cof: array<f32, 9> }
 struct Aabb { min: array<f32, 3>, max: array<f32, 3> }
 struct Plane { normal: array<f32, 3>, offset: f32 }
 struct Material {
@@ -45,7 +45,7 @@ struct Params {
 @group(0) @binding(2) var<storage, read> prim_indices: array<u32>;      // leaf primitive lists
 @group(0) @binding(3) var<storage, read> triangles: array<Triangle>;    // v0, e1, e2
 @group(0) @binding(4) var<storage, read> spheres: array<Sphere>;        // centre, radius
-@group(0) @binding(5) var<storage, read> ellipsoids: array<Ellipsoid>;  // centre, M^-1, half box
+@group(0) @binding(5) var<storage, read> ellipsoids: array<Ellipsoid>;  // centre, M^-1, half box, σ, cof(σ M^-1)
 @group(0) @binding(6) var<storage, read> boxes: array<Aabb>;            // solid boxes
 @group(0) @binding(7) var<storage, read> planes: array<Plane>;          // unbounded, outside the tree
 @group(0) @binding(8) var<storage, read> ropes: array<u32>;             // packed, 6 per leaf (rope traversals)
@@ -65,6 +65,8 @@ fn is_nan(x: f32) -> bool { return (bitcast<u32>(x) & 0x7fffffffu) > 0x7f800000u
 fn negative(x: f32) -> bool { return (bitcast<u32>(x) & 0x80000000u) != 0u; }
 fn v3(a: array<f32, 3>) -> vec3<f32> { return vec3<f32>(a[0], a[1], a[2]); }
 fn a3(v: vec3<f32>) -> array<f32, 3> { return array<f32, 3>(v.x, v.y, v.z); }
+// A column-major 3x3 matrix (the ellipsoid's `inv` and `cof`).
+fn m3(a: array<f32, 9>) -> mat3x3<f32> { return mat3x3<f32>(a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8]); }
 
 // Rust's f32::next_up for finite x: the smallest float above x.
 fn next_up(x: f32) -> f32 {
@@ -204,42 +206,34 @@ fn hit_sphere(s: Sphere, r: Ray, tmax: f32) -> Tuv {
     return sphere_root(r.org - v3(s.center), r.dir, -1.0, s.radius * s.radius, r.tmin, tmax);
 }
 
-fn ell_inv(e: Ellipsoid) -> mat3x3<f32> {
-    return mat3x3<f32>(e.inv[0], e.inv[1], e.inv[2], e.inv[3], e.inv[4], e.inv[5], e.inv[6], e.inv[7], e.inv[8]);
-}
-
 fn max3(v: vec3<f32>) -> f32 { return max(v.x, max(v.y, v.z)); }
 
 // `Ellipsoid::line_distance2`: the squared distance of the centre from the line o + t d (o
 // relative to the centre) in unit space, |o_u × d_u|² / |d_u|², with o_u × d_u = cof(A) (o × d)
-// for A = M⁻¹: the cross product taken in world space, where it is well conditioned (o_u of a
-// thin ellipsoid seen from afar is ~distance/thickness long, and o_u - (b/a) d_u cancels to
-// an error far past the radius 1). A scaled by the power of two for its largest entry and o
-// by its inverse (cofactors neither overflow nor turn subnormal); both sides scaled by the
-// largest component of σ d_u before squaring. inf (no hit) for a degenerate input.
-fn ell_line_distance2(inv: mat3x3<f32>, o: vec3<f32>, d: vec3<f32>) -> f32 {
-    let sigma = pow2_scale(max(max3(abs(inv[0])), max(max3(abs(inv[1])), max3(abs(inv[2])))));
+// for A = σ M⁻¹ and o scaled by 1/σ: the cross product taken in world space, where it is well
+// conditioned (o_u of a thin ellipsoid seen from afar is ~distance/thickness long, and
+// o_u - (b/a) d_u cancels to an error far past the radius 1). σ and cof(A) come with the
+// ellipsoid (made once by `Ellipsoid::new`); both sides scaled by the largest component of
+// σ d_u before squaring. inf (no hit) for a degenerate input.
+fn ell_line_distance2(e: Ellipsoid, o: vec3<f32>, d: vec3<f32>, du: vec3<f32>) -> f32 {
     let kd = pow2_scale(max3(abs(d)));
-    if (sigma == 0.0 || kd == 0.0) { return inf(); }
-    let a = inv * sigma;
-    let rows = transpose(a);
+    if (kd == 0.0) { return inf(); }
     // The direction scaled too (the ratio is unchanged): a long one overflows the cross product.
-    let dd = d * kd;
-    let n = cross(o / sigma, dd);
-    let w = vec3<f32>(dot(cross(rows[1], rows[2]), n), dot(cross(rows[2], rows[0]), n), dot(cross(rows[0], rows[1]), n));
-    let du = a * dd;
-    let k = pow2_scale(max3(abs(du)));
+    let w = m3(e.cof) * cross(o / e.sigma, d * kd);
+    let dus = du * e.sigma * kd;
+    let k = pow2_scale(max3(abs(dus)));
     if (k == 0.0) { return inf(); }
     let wk = w * k;
-    let dk = du * k;
+    let dk = dus * k;
     return dot(wk, wk) / dot(dk, dk);
 }
 
 fn hit_ellipsoid(e: Ellipsoid, r: Ray, tmax: f32) -> Tuv {
-    let m = ell_inv(e);
+    let m = m3(e.inv);
     let o = r.org - v3(e.center);
-    let l2 = ell_line_distance2(m, o, r.dir);
-    return sphere_root(m * o, m * r.dir, l2, 1.0, r.tmin, tmax);
+    let du = m * r.dir;
+    let l2 = ell_line_distance2(e, o, r.dir, du);
+    return sphere_root(m * o, du, l2, 1.0, r.tmin, tmax);
 }
 
 // `Aabb::clip_ray` over the whole line, then the first end inside [tmin, tmax) (`box_intersect`).

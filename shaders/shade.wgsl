@@ -85,7 +85,7 @@ fn prim_normal(i: u32, p: vec3<f32>) -> vec3<f32> {
     k -= params.n_sph;
     if (k < params.n_ell) {
         let e = ellipsoids[k];
-        let m = ell_inv(e);
+        let m = m3(e.inv);
         return normalize_or_zero(transpose(m) * (m * (p - v3(e.center))));
     }
     return box_normal(boxes[k - params.n_ell], p);
@@ -155,7 +155,7 @@ fn hit_point(h: Hit, r: Ray) -> vec3<f32> {
     if (k < params.n_ell) {
         // `Ellipsoid::on_surface`: the ray re-solved from p, the root nearest p.
         let e = ellipsoids[k];
-        let m = ell_inv(e);
+        let m = m3(e.inv);
         let roots = sphere_roots(m * (p - v3(e.center)), m * r.dir, -1.0, 1.0);
         if (!roots.hit) { return p; }
         var t = roots.t0;

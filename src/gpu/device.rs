@@ -67,6 +67,12 @@ fn logical_devices(value: Option<&str>) -> Result<usize> {
 /// The pipelines of one module, in the order of its entry-point list.
 pub(crate) type Pipelines = Arc<Vec<wgpu::ComputePipeline>>;
 
+/// The least bytes a buffer holds: wgpu rejects empty bindings and binds an array only where
+/// one element fits, so an empty scene array is uploaded as one zeroed element (never read, the
+/// counts are in the parameters). The largest element is an `Ellipsoid` (100 bytes); a layout
+/// test checks every storage array of the kernels against this.
+pub(crate) const MIN_BUFFER_BYTES: u64 = 128;
+
 /// Storage buffers one kernel binds at most: 13 scene arrays + 7 wavefront buffers (a query
 /// binds 4).
 const STORAGE_BUFFERS_NEEDED: u32 = 20;
@@ -415,8 +421,7 @@ impl Device {
         Ok(v)
     }
 
-    /// A storage buffer holding `bytes` (at least 64 bytes: wgpu rejects empty bindings and
-    /// one element of any struct fits).
+    /// A storage buffer holding `bytes` (at least [`MIN_BUFFER_BYTES`]).
     pub(crate) fn upload(
         &self,
         label: &str,
@@ -434,7 +439,9 @@ impl Device {
     /// `create_buffer_init`: its mapping panics on a lost device, where this write is an
     /// error the next check reports.
     fn buffer_with(&self, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
-        let size = (bytes.len() as u64).max(64).next_multiple_of(4);
+        let size = (bytes.len() as u64)
+            .max(MIN_BUFFER_BYTES)
+            .next_multiple_of(4);
         let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size,

@@ -248,7 +248,7 @@ mod tests {
         layout!("RankWord", RankWord, [leaf_bits, before]);
         layout!("Triangle", Triangle, [v0, e1, e2]);
         layout!("Sphere", Sphere, [center, radius]);
-        layout!("Ellipsoid", Ellipsoid, [center, inv, half]);
+        layout!("Ellipsoid", Ellipsoid, [center, inv, half, sigma, cof]);
         layout!("Aabb", GpuAabb, [min, max]);
         layout!("Plane", Plane, [normal, offset]);
         layout!(
@@ -311,6 +311,32 @@ mod tests {
                 pad3
             ]
         );
+    }
+
+    /// One element of every storage array the kernels bind fits in the smallest buffer
+    /// (`MIN_BUFFER_BYTES`): an empty array is uploaded as that, and wgpu refuses to bind a
+    /// buffer shorter than one element.
+    #[test]
+    fn one_element_of_every_storage_array_fits_the_smallest_buffer() {
+        use super::super::device::MIN_BUFFER_BYTES;
+        use super::super::kernels::{source, Program, SCAN};
+        use crate::cpu::traverse::Traversal;
+        let query = source(Traversal::Standard, Program::Query);
+        let render = source(Traversal::Standard, Program::Render);
+        for src in [query.as_str(), render.as_str(), SCAN] {
+            let module = naga::front::wgsl::parse_str(src).expect("WGSL parses");
+            for (_, var) in module.global_variables.iter() {
+                if let (naga::AddressSpace::Storage { .. }, naga::TypeInner::Array { stride, .. }) =
+                    (var.space, &module.types[var.ty].inner)
+                {
+                    assert!(
+                        u64::from(*stride) <= MIN_BUFFER_BYTES,
+                        "{:?}: {stride} bytes an element",
+                        var.name
+                    );
+                }
+            }
+        }
     }
 
     #[test]
