@@ -79,8 +79,11 @@ impl PrimitiveSet {
         (PrimKind::Box, i)
     }
 
+    /// Bounds of primitive `i`, which the tree holds it by: empty for a triangle of no area
+    /// ([`Triangle::is_degenerate`]), which is then left out of the tree and never hit.
     pub fn bounds(&self, i: usize) -> Aabb {
         match self.locate(i) {
+            (PrimKind::Triangle, k) if self.triangles[k].is_degenerate() => Aabb::EMPTY,
             (PrimKind::Triangle, k) => self.triangles[k].bounds(),
             (PrimKind::Sphere, k) => self.spheres[k].bounds(),
             (PrimKind::Ellipsoid, k) => self.ellipsoids[k].bounds(),
