@@ -243,10 +243,11 @@ fn tolerance(voxel: &Aabb) -> f64 {
 }
 
 /// Whether primitive `p` reaches into the open interior of `voxel` by more than rounding: it
-/// must then be listed in the leaf. (One that only touches a face may be in a neighbour.)
+/// must then be listed in the leaf. (One that only touches a face may be in a neighbour; a
+/// triangle of no area, which has empty bounds, is in no leaf.)
 fn must_be_listed(set: &PrimitiveSet, p: usize, voxel: &Aabb) -> bool {
     let flat = (0..3).any(|a| voxel.min[a] == voxel.max[a]);
-    !flat && gap(set, p, voxel) < -tolerance(voxel)
+    !flat && !set.bounds(p).is_empty() && gap(set, p, voxel) < -tolerance(voxel)
 }
 
 /// Structure, then brute-force leaf contents, then ropes (checks (a)–(d) and (f)).
@@ -625,6 +626,33 @@ fn scenes_wider_than_the_f32_area_range_still_split() {
             tree.leaf_count(),
             alone.leaf_count()
         );
+        check_tree(&set, &tree, &what);
+    }
+}
+
+/// The midpoint builder splits a scene near the top of the f32 range as it splits the same
+/// scene near the origin: a voxel's centre is taken without overflowing. Before, `min + max`
+/// overflowed beyond about 1.7e38, the centre was infinite, and 512 boxes at 2e38 stayed one
+/// leaf that every ray tested whole.
+#[test]
+fn midpoint_trees_of_scenes_near_the_f32_limit_still_split() {
+    let grid = |base: f32| {
+        let mut set = PrimitiveSet::default();
+        let step = 0.02 * base;
+        for k in 0..512 {
+            let corner = Vec3::new((k % 8) as f32, (k / 8 % 8) as f32, (k / 64) as f32);
+            let min = Vec3::splat(base) + corner * step;
+            set.boxes.push(Aabb::new(min, min + 0.5 * step));
+        }
+        set
+    };
+    let opts = options(Builder::Midpoint, Layout::DepthFirst);
+    let near = build(&grid(1.0), &opts);
+    for base in [1e37, 2e38] {
+        let set = grid(base);
+        let tree = build(&set, &opts);
+        let what = format!("boxes at {base:e}");
+        assert_eq!(tree.leaf_count(), near.leaf_count(), "{what}");
         check_tree(&set, &tree, &what);
     }
 }

@@ -56,8 +56,10 @@ impl Aabb {
         (self.max - self.min).max(Vec3::ZERO)
     }
 
+    /// Halves before adding: `min + max` overflows for boxes beyond about 1.7e38, and the
+    /// midpoint builder, splitting at an infinite centre, made such a scene one leaf.
     pub fn center(&self) -> Vec3 {
-        0.5 * (self.min + self.max)
+        0.5 * self.min + 0.5 * self.max
     }
 
     pub fn diagonal(&self) -> f32 {
