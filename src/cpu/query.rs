@@ -13,8 +13,10 @@ use crate::kdtree::KdTree;
 use crate::scene::Committed;
 use rayon::prelude::*;
 
-/// Rays per parallel task: the granularity Embree's peer harness uses too.
-const CHUNK: usize = 4096;
+/// Rays per parallel task: the granularity Embree's peer harness uses too. A batch of at most
+/// this many rays is traced in one piece on the calling thread, touching no pool: it would run
+/// on one thread anyway (see `Context`, which then does not hand it to its pool either).
+pub const CHUNK: usize = 4096;
 
 /// Fewest rays per stream when a batch is cut to keep every thread busy.
 pub const STREAM_CHUNK: usize = 16384;
@@ -103,7 +105,8 @@ impl RayAnswer for bool {
 /// ignores primitive `exclude[i]` (`INVALID` for none) when `exclude` is given, else
 /// `opts.exclude`. Packets and streams (of `width` lanes) use the standard traversal's order
 /// whatever `how` says; every mode honours `opts.intersector` and the exclusions, with the
-/// same answers.
+/// same answers. Larger batches run on the current rayon pool; one of at most [`CHUNK`] rays
+/// on the calling thread alone.
 ///
 /// Rays are traced as given: `Context` scales a direction far from unit length first
 /// ([`Ray::direction_scale`], [`RayAnswer::scaled_back`]).
@@ -138,6 +141,10 @@ pub fn trace<T: RayAnswer>(
         QueryMode::Packet => chunked(rays, out, CHUNK, |r, e, o| {
             T::PACKETS(tree, prims, r, RayTests::new(intersector, e), o, width)
         }),
+        QueryMode::Stream if rays.0.len() <= CHUNK => {
+            let (r, e) = rays;
+            T::STREAM(tree, prims, r, RayTests::new(intersector, e), out, width).0
+        }
         QueryMode::Stream => streamed(rays, out, |r, e, o| {
             T::STREAM(tree, prims, r, RayTests::new(intersector, e), o, width).0
         }),
@@ -155,6 +162,9 @@ fn chunked<T: Send>(
     chunk: usize,
     trace: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
+    if rays.len() <= chunk {
+        return trace(rays, exclude, out);
+    }
     rays.par_chunks(chunk)
         .zip(out.par_chunks_mut(chunk))
         .enumerate()
