@@ -78,6 +78,26 @@ pub(super) fn rays(a: &Args) -> Result<String> {
                 )
                 .ok();
             }
+            // One call per ray, as Embree's `intersect1` rows are and as a user porting a loop
+            // of `rtcIntersect1` would call it: the dispatch layer's cost per call on top.
+            let ctx = Context::new(BackendRequest::Cpu, 1)?;
+            let q = QueryOptions {
+                traversal: Some(Traversal::Standard),
+                ..QueryOptions::default()
+            };
+            let mut hits = vec![Hit::MISS; rays.len()];
+            let ms = time_ms(a.runs, || {
+                for (r, h) in rays.iter().zip(&mut hits) {
+                    let (r, h) = (std::slice::from_ref(r), std::slice::from_mut(h));
+                    ctx.intersect(c, r, h, &q).ok();
+                }
+            });
+            writeln!(
+                out,
+                "| {model} {stem} | RT2 standard, a call per ray | {:.2} | | | | | |",
+                rays.len() as f64 / ms / 1e3
+            )
+            .ok();
             for r in embree
                 .iter()
                 .filter(|r| r.get(2).is_some_and(|s| *s == stem))
