@@ -606,7 +606,8 @@ typedef struct rt2_scene_statistics {
    */
   float build_ms;
   /**
-   * Time of the whole commit (world-space placement + build).
+   * Time of the last commit: world-space placement and build, or only the new material and
+   * light arrays when nothing else changed (`build_ms` is then the tree's, as built).
    */
   float commit_ms;
   /**
@@ -976,7 +977,10 @@ enum rt2_status rt2_scene_set_build_options(rt2_scene *scene,
                                             const struct rt2_build_options *options);
 
 /**
- * Builds the acceleration structure. Rendering needs a commit after the last edit.
+ * Builds the acceleration structure. Rendering needs a commit after the last edit. A commit
+ * after objects, transforms or build options changed places every object and builds the
+ * kd-tree again; one after only materials or lights were added keeps the tree; one after no
+ * edit does nothing.
  * `RT2_STATUS_OUT_OF_MEMORY` when the placed primitives or the kd-tree cannot be allocated:
  * the scene then keeps its last commit (or none) and its edits, and can be committed again.
  *

@@ -374,8 +374,8 @@ mod tests {
     use std::ffi::CStr;
     use std::ptr::null_mut;
 
-    /// A commit by another thread after the exclusions were read (here while a watertight
-    /// query builds its exact corners) may renumber the primitives: the query fails with
+    /// A rebuilding commit by another thread after the exclusions were read (here while a
+    /// watertight query builds its exact corners) may renumber the primitives: the query fails with
     /// INVALID_OPERATION and writes nothing, rather than exclude by the old numbering.
     #[test]
     fn a_commit_after_the_exclusions_were_read_fails_the_query() {
@@ -415,7 +415,7 @@ mod tests {
                 |_, _, _, _, _| Ok(TraversalStats::default()),
                 || {
                     if !committed.replace(true) {
-                        s.write().commit().unwrap();
+                        s.write().rebuild().unwrap();
                     }
                 },
             );

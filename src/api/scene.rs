@@ -381,7 +381,10 @@ pub unsafe extern "C" fn rt2_scene_set_build_options(
     })
 }
 
-/// Builds the acceleration structure. Rendering needs a commit after the last edit.
+/// Builds the acceleration structure. Rendering needs a commit after the last edit. A commit
+/// after objects, transforms or build options changed places every object and builds the
+/// kd-tree again; one after only materials or lights were added keeps the tree; one after no
+/// edit does nothing.
 /// `RT2_STATUS_OUT_OF_MEMORY` when the placed primitives or the kd-tree cannot be allocated:
 /// the scene then keeps its last commit (or none) and its edits, and can be committed again.
 ///
@@ -421,7 +424,8 @@ pub struct rt2_scene_statistics {
     pub sah_cost: f32,
     /// Time of the tree build alone.
     pub build_ms: f32,
-    /// Time of the whole commit (world-space placement + build).
+    /// Time of the last commit: world-space placement and build, or only the new material and
+    /// light arrays when nothing else changed (`build_ms` is then the tree's, as built).
     pub commit_ms: f32,
     /// 8 bytes per node; a leaf node holds its primitive range.
     pub bytes_nodes: u64,
@@ -527,8 +531,9 @@ pub(crate) mod tests {
         }
     }
 
-    /// Another thread's commit right after the corners and ropes were built (which drops
-    /// them): the scene handed out still has both, built again.
+    /// Another thread's commit that rebuilds the tree (after an edit of its geometry) right
+    /// after the corners and ropes were built, which drops them: the scene handed out still
+    /// has both, built again.
     #[test]
     fn what_a_commit_drops_before_the_job_reads_is_built_again() {
         let made = triangle_scene();
@@ -536,7 +541,7 @@ pub(crate) mod tests {
         let commits = Cell::new(0);
         let commit_twice = || {
             if commits.get() < 2 {
-                s.write().commit().unwrap();
+                s.write().rebuild().unwrap();
                 commits.set(commits.get() + 1);
             }
         };
@@ -553,13 +558,14 @@ pub(crate) mod tests {
         destroy(made);
     }
 
-    /// Commits after every build: the job gives up with INVALID_OPERATION, and the scene works.
+    /// Rebuilding commits after every build: the job gives up with INVALID_OPERATION, and the
+    /// scene works.
     #[test]
     fn endless_commits_make_the_job_give_up() {
         let made = triangle_scene();
         let s = unsafe { &*made.1 };
         let e = s
-            .prepared_with(false, true, || s.write().commit().unwrap())
+            .prepared_with(false, true, || s.write().rebuild().unwrap())
             .map(|_| ())
             .unwrap_err();
         assert_eq!(e.status, Rt2Status::InvalidOperation, "{}", e.message);

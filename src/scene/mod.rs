@@ -1,8 +1,9 @@
 //! The scene model: objects, materials and lights as the user described them, and the
 //! committed form (world-space primitive set + kd-tree) that the backends trace.
 //!
-//! Every edit validates first and changes nothing on error. Edits mark the scene dirty;
-//! `commit` rebuilds the tree (the RT² per-frame rebuild when objects move).
+//! Every edit validates first and changes nothing on error. Edits mark what they made stale;
+//! `commit` rebuilds the tree after objects, transforms or build options changed (the RT²
+//! per-frame rebuild when objects move), and only what changed otherwise.
 
 pub mod builtin;
 pub mod loaders;
@@ -34,7 +35,19 @@ pub struct Scene {
     prim_count: usize,
     build: BuildOptions,
     committed: Option<Committed>,
-    dirty: bool,
+    stale: Stale,
+}
+
+/// What the edits since the last commit made stale: what the next commit redoes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Stale {
+    /// Nothing: a commit keeps the committed scene as it is.
+    Nothing,
+    /// Materials or lights were added: a commit replaces their arrays and keeps the placed
+    /// primitives, the tree and what was built on it (ropes, exact corners, the lookup).
+    Shading,
+    /// Objects, transforms or build options: a commit places and builds everything again.
+    Geometry,
 }
 
 /// What the backends trace; read-only while renders run.
@@ -88,7 +101,7 @@ impl Default for Scene {
             prim_count: 0,
             build: BuildOptions::default(),
             committed: None,
-            dirty: true,
+            stale: Stale::Geometry,
         }
     }
 }
@@ -249,7 +262,7 @@ impl Scene {
     pub fn add_material(&mut self, m: Material) -> Result<u32> {
         m.validate()?;
         self.materials.push(m);
-        self.dirty = true;
+        self.stale = self.stale.max(Stale::Shading);
         Ok(self.materials.len() as u32 - 1)
     }
 
@@ -263,7 +276,7 @@ impl Scene {
             )));
         }
         self.lights.push(l);
-        self.dirty = true;
+        self.stale = self.stale.max(Stale::Shading);
         Ok(self.lights.len() as u32 - 1)
     }
 
@@ -287,7 +300,7 @@ impl Scene {
             material,
             transform: Affine3A::IDENTITY,
         });
-        self.dirty = true;
+        self.stale = Stale::Geometry;
         Ok(self.objects.len() as u32 - 1)
     }
 
@@ -311,19 +324,42 @@ impl Scene {
         obj.shape.accepts(&t)?;
         object::check(&obj.shape, &t)?;
         self.objects[object as usize].transform = t;
-        self.dirty = true;
+        self.stale = Stale::Geometry;
         Ok(())
     }
 
     pub fn set_build_options(&mut self, opts: BuildOptions) {
         self.build = opts;
-        self.dirty = true;
+        self.stale = Stale::Geometry;
     }
 
-    /// Places every object in world space and builds the kd-tree. A commit that cannot have
-    /// the memory it needs fails with `OutOfMemory` and leaves the last commit in place (see
+    /// Makes the committed scene match the edits: nothing to do when there were none; new
+    /// material and light arrays when only those were added (a rebuild of the dragon for a
+    /// light took 3.8 s); else [`Self::rebuild`]. A commit that cannot have the memory it
+    /// needs fails with `OutOfMemory` and leaves the last commit in place (see
     /// [`crate::fallible`]).
     pub fn commit(&mut self) -> Result<()> {
+        match (&mut self.committed, self.stale) {
+            (Some(_), Stale::Nothing) => {}
+            (Some(c), Stale::Shading) => {
+                let start = Instant::now();
+                let materials = fallible::collect(self.materials.iter().cloned())?;
+                let lights = fallible::collect(self.lights.iter().cloned())?;
+                c.materials = materials;
+                c.lights = lights;
+                c.commit_ms = start.elapsed().as_secs_f32() * 1e3;
+                c.id = NEXT_COMMIT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            }
+            _ => return self.rebuild(),
+        }
+        self.stale = Stale::Nothing;
+        Ok(())
+    }
+
+    /// Places every object in world space and builds the kd-tree, whatever changed: what a
+    /// commit does after objects, transforms or build options changed, and what the
+    /// benchmarks time as a build. Fails as [`Self::commit`] does.
+    pub fn rebuild(&mut self) -> Result<()> {
         let start = Instant::now();
         // Room for the triangles, known exactly, taken before placing (growing by doubling
         // could take twice as much); the other kinds grow as they are placed.
@@ -364,7 +400,7 @@ impl Scene {
             commit_ms: start.elapsed().as_secs_f32() * 1e3,
             id: NEXT_COMMIT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         });
-        self.dirty = false;
+        self.stale = Stale::Nothing;
         Ok(())
     }
 
@@ -429,9 +465,9 @@ impl Scene {
 
     /// The committed scene, or an error if there is none or it is older than the last edit.
     pub fn committed(&self) -> Result<&Committed> {
-        match (&self.committed, self.dirty) {
-            (Some(c), false) => Ok(c),
-            (Some(_), true) => Err(Error::invalid_operation(
+        match (&self.committed, self.stale) {
+            (Some(c), Stale::Nothing) => Ok(c),
+            (Some(_), _) => Err(Error::invalid_operation(
                 "the scene was modified after its last commit: call rt2_scene_commit first",
             )),
             (None, _) => Err(Error::invalid_operation(

@@ -125,7 +125,7 @@ fn median_build_ms(ctx: &Context, scene: &mut Scene, runs: usize) -> f64 {
     median(
         (0..runs)
             .map(|_| {
-                let _ = ctx.install(|| scene.commit());
+                let _ = ctx.install(|| scene.rebuild());
                 scene
                     .committed()
                     .map_or(f64::NAN, |c| c.tree.stats.build_ms as f64)

@@ -36,7 +36,7 @@ pub(super) fn frames(a: &Args) -> Result<String> {
             ..RenderOptions::default()
         };
         let commit_ms = time_ms(a.runs, || {
-            let _ = ctx.install(|| l.scene.commit());
+            let _ = ctx.install(|| l.scene.rebuild());
         });
         let c = l.scene.committed()?;
         let mut frame = Frame::new(1376, 768)?;
