@@ -257,7 +257,7 @@ impl Context {
                     traversal.name(),
                     why,
                 );
-                let (path, why) = dispatch::choose_gpu_path(scene, opts);
+                let (path, why) = dispatch::choose_gpu_path(scene, opts, g.software);
                 let auto = opts.gpu_path == GpuPathRequest::Auto;
                 choices.note(auto, "GPU render path", path.name(), &why);
                 gpu::render(g, scene, camera, opts, traversal, path, frame)

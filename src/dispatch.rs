@@ -133,11 +133,35 @@ pub fn choose_gpu_traversal(
     }
 }
 
-/// The render path AUTO picks on the GPU (thesis §3.3), and why.
-pub fn choose_gpu_path(scene: &Committed, opts: &RenderOptions) -> (GpuPath, String) {
+/// The loop iterations Mesa's llvmpipe (lavapipe) allows one shader invocation, counted over
+/// all its loops and per SIMD group of invocations (8 under AVX2): gallivm's
+/// `LP_MAX_TGSI_LOOP_ITERATIONS`. Beyond it every loop exits early and the job still succeeds,
+/// with wrong answers. Hardware drivers have no such budget.
+pub const SOFTWARE_LOOP_BUDGET: u32 = 65_535;
+
+/// The render path AUTO picks on the GPU (thesis §3.3), and why. `software`: the adapter is a
+/// CPU implementation ([`crate::gpu::Gpu::software`]), where a megakernel invocation that
+/// loops over several samples of a pixel may exhaust [`SOFTWARE_LOOP_BUDGET`] (on lavapipe
+/// 128 samples of a 400-sphere leaf came out dark with status OK: `tests/gpu.rs`); the wavefront path
+/// dispatches each sample and bounce on its own, so one invocation traces one ray.
+pub fn choose_gpu_path(
+    scene: &Committed,
+    opts: &RenderOptions,
+    software: bool,
+) -> (GpuPath, String) {
     match opts.gpu_path {
         GpuPathRequest::Megakernel => (GpuPath::Megakernel, "requested by the caller".into()),
         GpuPathRequest::Wavefront => (GpuPath::Wavefront, "requested by the caller".into()),
+        GpuPathRequest::Auto if software && opts.samples > 1 => (
+            GpuPath::Wavefront,
+            format!(
+                "the adapter is a software one, whose driver (llvmpipe) ends every loop of a \
+                 shader invocation after {SOFTWARE_LOOP_BUDGET} iterations in all, and the \
+                 megakernel would loop over {} samples per pixel in one invocation; the \
+                 wavefront path dispatches each sample and bounce apart",
+                opts.samples
+            ),
+        ),
         GpuPathRequest::Auto => {
             // Thesis: the megakernel for primary rays with few reflections; one kernel per
             // bounce, with compaction, pays off when most objects spawn secondary rays.
@@ -226,9 +250,10 @@ mod tests {
     fn auto_gpu_path_is_wavefront_when_most_primitives_spawn_rays() {
         let opts = RenderOptions::default();
         assert!(opts.max_depth > 1);
-        let path = |s: &Scene, o: &RenderOptions| choose_gpu_path(s.committed().unwrap(), o).0;
+        let path =
+            |s: &Scene, o: &RenderOptions| choose_gpu_path(s.committed().unwrap(), o, false).0;
         assert_eq!(path(&spheres(4, 2), &opts), GpuPath::Wavefront);
-        let why = choose_gpu_path(spheres(4, 1).committed().unwrap(), &opts).1;
+        let why = choose_gpu_path(spheres(4, 1).committed().unwrap(), &opts, false).1;
         assert!(why.starts_with("1 of 4 primitives reflect"), "{why}");
         assert_eq!(path(&spheres(4, 1), &opts), GpuPath::Megakernel);
         let casting = RenderOptions {
@@ -241,6 +266,31 @@ mod tests {
             ..opts
         };
         assert_eq!(path(&spheres(4, 4), &asked), GpuPath::Megakernel);
+    }
+
+    /// On a software adapter AUTO takes the wavefront path for several samples per pixel
+    /// (llvmpipe's loop budget would cut the megakernel's pixels short), whatever the scene
+    /// and depth; one sample, a hardware adapter or a path the caller chose are unchanged.
+    #[test]
+    fn auto_gpu_path_is_wavefront_for_samples_on_a_software_adapter() {
+        let s = spheres(4, 0);
+        let c = s.committed().unwrap();
+        let many = RenderOptions {
+            samples: 2,
+            max_depth: 1,
+            ..RenderOptions::default()
+        };
+        let (path, why) = choose_gpu_path(c, &many, true);
+        assert_eq!(path, GpuPath::Wavefront);
+        assert!(why.contains("software") && why.contains("65535"), "{why}");
+        assert_eq!(choose_gpu_path(c, &many, false).0, GpuPath::Megakernel);
+        let one = RenderOptions { samples: 1, ..many };
+        assert_eq!(choose_gpu_path(c, &one, true).0, GpuPath::Megakernel);
+        let asked = RenderOptions {
+            gpu_path: GpuPathRequest::Megakernel,
+            ..many
+        };
+        assert_eq!(choose_gpu_path(c, &asked, true).0, GpuPath::Megakernel);
     }
 
     #[test]
