@@ -43,8 +43,25 @@ enum rt2_backend
   : uint32_t
 #endif // __cplusplus
  {
+  /**
+   * A hardware GPU if there is one, else the CPU. AUTO never picks a software adapter
+   * (lavapipe, SwiftShader, WARP): with only such an adapter it traces on the CPU.
+   */
   RT2_BACKEND_AUTO = 0,
   RT2_BACKEND_CPU = 1,
+  /**
+   * The GPU, a software adapter included. On Mesa's lavapipe (llvmpipe) results may be
+   * wrong with `RT2_STATUS_OK`: the driver ends every loop of a shader invocation once the
+   * invocation has run 65535 loop iterations in all (its `LP_MAX_TGSI_LOOP_ITERATIONS`),
+   * counted per SIMD group of invocations that run in lockstep (8 consecutive rays or
+   * pixels with llvmpipe's usual 256-bit vectors). A ray whose traversal (node steps plus
+   * primitive tests, roughly) needs about 65k iterations, e.g. through a leaf of 70,000
+   * overlapping primitives, gets a wrong hit or a miss, and so do the other rays of its
+   * group that were not done yet; a megakernel
+   * pixel counts all its samples and bounces (with `RT2_GPU_PATH_AUTO` and more than one
+   * sample, a software adapter takes the wavefront path, which traces one ray per
+   * invocation). Nothing detects the cut. Hardware drivers have no such budget.
+   */
   RT2_BACKEND_GPU = 2,
 };
 #ifndef __cplusplus
@@ -81,7 +98,10 @@ enum rt2_gpu_path
 #endif // __cplusplus
  {
   /**
-   * The library picks by the share of reflective and transparent primitives.
+   * The library picks by the share of reflective and transparent primitives; on a
+   * software adapter (lavapipe) it takes WAVEFRONT for more than one sample per pixel, as
+   * a megakernel pixel of many samples may exceed the driver's loop budget
+   * (`RT2_BACKEND_GPU`).
    */
   RT2_GPU_PATH_AUTO = 0,
   /**
