@@ -53,8 +53,8 @@ enum rt2_backend
    * The GPU, a software adapter included. On Mesa's lavapipe (llvmpipe) results may be
    * wrong with `RT2_STATUS_OK`: the driver ends every loop of a shader invocation once the
    * invocation has run 65535 loop iterations in all (its `LP_MAX_TGSI_LOOP_ITERATIONS`),
-   * counted per SIMD group of invocations that run in lockstep (8 consecutive rays or
-   * pixels with llvmpipe's usual 256-bit vectors). A ray whose traversal (node steps plus
+   * counted per SIMD group of invocations that run in lockstep (aligned groups of 8 rays
+   * or pixels with llvmpipe's usual 256-bit vectors). A ray whose traversal (node steps plus
    * primitive tests, roughly) needs about 65k iterations, e.g. through a leaf of 70,000
    * overlapping primitives, gets a wrong hit or a miss, and so do the other rays of its
    * group that were not done yet; a megakernel
