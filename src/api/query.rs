@@ -16,8 +16,12 @@ use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
 use crate::scene::PrimLookup;
 use glam::Vec3;
 
-/// One ray: `org + t * dir` for `t` in `[tmin, tmax)` (32 bytes, the `.rays` record). Rays with
-/// NaN/inf components, a zero direction or `tmin > tmax` are misses, not errors.
+/// One ray: `org + t * dir` for `t` in `[tmin, tmax)` (32 bytes, the `.rays` record). The
+/// interval is half-open: a hit at exactly `tmax` does not count (Embree's `[tnear, tfar]` is
+/// closed). `tmax = +inf` and `tmin = -inf` are accepted, and a negative `tmin` returns hits
+/// behind the origin (the closest hit is the one of smallest `t`, not nearest the origin). A
+/// ray with a NaN or infinite component of `org` or `dir`, a zero `dir`, a NaN `tmin` or
+/// `tmax`, or `tmin > tmax` is a miss, not an error.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct rt2_ray {
