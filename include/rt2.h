@@ -773,6 +773,9 @@ enum rt2_status rt2_frame_set_mask(rt2_frame *frame, const uint8_t *mask);
 
 /**
  * The pixels, `4 × width × height` bytes (RGBA8); valid until the frame is destroyed.
+ * Row-major, row 0 at the top. A rendered pixel is the linear colour clamped to [0, 1],
+ * times 255, rounded: no sRGB encoding is applied. Its alpha is 255; pixels no render wrote
+ * (a new frame, masked pixels) keep their bytes, 0 in a new frame.
  * NULL (with the error message set) if `frame` is not a live frame.
  *
  * # Safety
@@ -781,7 +784,10 @@ enum rt2_status rt2_frame_set_mask(rt2_frame *frame, const uint8_t *mask);
 const uint8_t *rt2_frame_pixels(const rt2_frame *frame);
 
 /**
- * Saves the frame as a PNG file.
+ * Saves the frame as an 8-bit RGBA PNG file, replacing any file at `path`. The bytes are
+ * written as they are, with no gamma or colour-space chunk (`rt2_frame_pixels`). The file name
+ * must have the extension `.png` (any case; a bare `.png` has none), else INVALID_ARGUMENT;
+ * a directory at `path`, a missing folder or a failed write is an IO error.
  *
  * # Safety
  * `frame` is a live frame; `path` is a NUL-terminated string.
@@ -967,11 +973,14 @@ enum rt2_status rt2_scene_add_plane(rt2_scene *scene,
 
 /**
  * Loads a triangle mesh from a `.ply` (ASCII or binary) or `.obj` file as one object.
- * Errors name the file and the line or byte offset at fault. Triangles keep the file's face
- * order (polygons are fan-triangulated); a file without faces is a PARSE error, whatever
- * its format. Only regular files are read: a FIFO, device or directory is an IO error. The
- * file is read and parsed before the scene is locked, so other calls on the scene do not
- * wait for a slow file.
+ * The extension alone picks the format (`.ply` or `.obj`, any case; the contents are not
+ * sniffed) and is checked first: any other extension, or none, is UNSUPPORTED before the
+ * path is looked at, even for a missing file or a directory. Then only regular files are
+ * read: a missing file, a FIFO, device or directory is an IO error. Parse errors name the
+ * file and the line or byte offset at fault. Triangles keep the file's face order
+ * (polygons are fan-triangulated); a file without faces is a PARSE error, whatever its
+ * format. The file is read and parsed before the scene is locked, so other calls on the
+ * scene do not wait for a slow file.
  *
  * # Safety
  * `scene` is a live scene; `path` is a NUL-terminated string.

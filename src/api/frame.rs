@@ -88,6 +88,9 @@ pub unsafe extern "C" fn rt2_frame_set_mask(frame: *mut rt2_frame, mask: *const 
 }
 
 /// The pixels, `4 × width × height` bytes (RGBA8); valid until the frame is destroyed.
+/// Row-major, row 0 at the top. A rendered pixel is the linear colour clamped to [0, 1],
+/// times 255, rounded: no sRGB encoding is applied. Its alpha is 255; pixels no render wrote
+/// (a new frame, masked pixels) keep their bytes, 0 in a new frame.
 /// NULL (with the error message set) if `frame` is not a live frame.
 ///
 /// # Safety
@@ -97,7 +100,10 @@ pub unsafe extern "C" fn rt2_frame_pixels(frame: *const rt2_frame) -> *const u8 
     guard_ptr(|| Ok(handle(frame, "frame")?.frame.pixels().as_ptr()))
 }
 
-/// Saves the frame as a PNG file.
+/// Saves the frame as an 8-bit RGBA PNG file, replacing any file at `path`. The bytes are
+/// written as they are, with no gamma or colour-space chunk (`rt2_frame_pixels`). The file name
+/// must have the extension `.png` (any case; a bare `.png` has none), else INVALID_ARGUMENT;
+/// a directory at `path`, a missing folder or a failed write is an IO error.
 ///
 /// # Safety
 /// `frame` is a live frame; `path` is a NUL-terminated string.

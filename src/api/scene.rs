@@ -311,11 +311,14 @@ pub unsafe extern "C" fn rt2_scene_add_plane(
 }
 
 /// Loads a triangle mesh from a `.ply` (ASCII or binary) or `.obj` file as one object.
-/// Errors name the file and the line or byte offset at fault. Triangles keep the file's face
-/// order (polygons are fan-triangulated); a file without faces is a PARSE error, whatever
-/// its format. Only regular files are read: a FIFO, device or directory is an IO error. The
-/// file is read and parsed before the scene is locked, so other calls on the scene do not
-/// wait for a slow file.
+/// The extension alone picks the format (`.ply` or `.obj`, any case; the contents are not
+/// sniffed) and is checked first: any other extension, or none, is UNSUPPORTED before the
+/// path is looked at, even for a missing file or a directory. Then only regular files are
+/// read: a missing file, a FIFO, device or directory is an IO error. Parse errors name the
+/// file and the line or byte offset at fault. Triangles keep the file's face order
+/// (polygons are fan-triangulated); a file without faces is a PARSE error, whatever its
+/// format. The file is read and parsed before the scene is locked, so other calls on the
+/// scene do not wait for a slow file.
 ///
 /// # Safety
 /// `scene` is a live scene; `path` is a NUL-terminated string.
