@@ -293,7 +293,9 @@ typedef uint32_t rt2_transparency;
 #endif // __cplusplus
 
 /**
- * kd-tree traversal algorithm (`rt2_render_options.traversal`); RT² thesis §2.4.
+ * kd-tree traversal algorithm (`rt2_render_options.traversal`, `rt2_query_options.traversal`);
+ * RT² thesis §2.4. On the CPU it applies to single rays: the PACKET and STREAM query modes
+ * and the BREADTH_FIRST render schedule (streams) always take the standard order.
  */
 enum rt2_traversal
 #ifdef __cplusplus
@@ -554,7 +556,8 @@ typedef struct rt2_query_options {
   uint32_t short_stack_size;
   /**
    * An `rt2_query_mode` value (default SINGLE). PACKET and STREAM follow the standard
-   * traversal's order whatever `traversal` says, and return the same hits.
+   * traversal's order whatever `traversal` says, and return the same hits. The GPU ignores
+   * `mode` and honours `traversal` (a job an AUTO context moves to the CPU takes `mode`).
    */
   uint32_t mode;
   /**
@@ -567,7 +570,10 @@ typedef struct rt2_query_options {
    * leaves (the exclude-prim offset of renders). A miss (both `RT2_INVALID_ID`) excludes
    * nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. Every mode and
    * the GPU honour it. It may be the call's own `hits` array (read whole before any hit is
-   * written). The first use builds a lookup of 4 bytes per primitive.
+   * written). The first use builds a lookup of 4 bytes per primitive. A sphere, ellipsoid or
+   * box is one primitive, excluded whole: a ray that starts on a sphere and excludes it
+   * does not find the sphere's far side (the EXCLUDE_PRIM offset of renders gives such
+   * rays the robust offset instead).
    */
   const struct rt2_hit *exclude;
 } rt2_query_options;
@@ -593,6 +599,10 @@ typedef struct rt2_ray {
  * (`rt2_occluded`) counts the same nodes and leaves, but its `prim_tests` may differ by about
  * 1% between modes and backends: the CPU tests a leaf's triangles in groups (SIMD) and counts
  * a whole group when one of its triangles ends the search.
+ *
+ * Counted per ray: a packet or stream step counts one node visit for each of its active rays,
+ * so PACKET and STREAM report what SINGLE reports with the standard traversal. Other
+ * traversals (`rt2_query_options.traversal` of a SINGLE or GPU query) visit other nodes.
  */
 typedef struct rt2_query_stats {
   uint64_t nodes_visited;

@@ -35,7 +35,9 @@ pub enum Rt2Backend {
     Gpu = 2,
 }
 
-/// kd-tree traversal algorithm (`rt2_render_options.traversal`); RT² thesis §2.4.
+/// kd-tree traversal algorithm (`rt2_render_options.traversal`, `rt2_query_options.traversal`);
+/// RT² thesis §2.4. On the CPU it applies to single rays: the PACKET and STREAM query modes
+/// and the BREADTH_FIRST render schedule (streams) always take the standard order.
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Rt2Traversal {

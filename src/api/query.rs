@@ -57,7 +57,8 @@ pub struct rt2_query_options {
     /// Entries of the short stack, 1..=32 (default 3).
     pub short_stack_size: u32,
     /// An `rt2_query_mode` value (default SINGLE). PACKET and STREAM follow the standard
-    /// traversal's order whatever `traversal` says, and return the same hits.
+    /// traversal's order whatever `traversal` says, and return the same hits. The GPU ignores
+    /// `mode` and honours `traversal` (a job an AUTO context moves to the CPU takes `mode`).
     pub mode: u32,
     /// An `rt2_intersector` value (default MOLLER_TRUMBORE).
     pub intersector: u32,
@@ -66,7 +67,10 @@ pub struct rt2_query_options {
     /// leaves (the exclude-prim offset of renders). A miss (both `RT2_INVALID_ID`) excludes
     /// nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. Every mode and
     /// the GPU honour it. It may be the call's own `hits` array (read whole before any hit is
-    /// written). The first use builds a lookup of 4 bytes per primitive.
+    /// written). The first use builds a lookup of 4 bytes per primitive. A sphere, ellipsoid or
+    /// box is one primitive, excluded whole: a ray that starts on a sphere and excludes it
+    /// does not find the sphere's far side (the EXCLUDE_PRIM offset of renders gives such
+    /// rays the robust offset instead).
     pub exclude: *const rt2_hit,
 }
 
@@ -77,6 +81,10 @@ versioned!(rt2_query_options);
 /// (`rt2_occluded`) counts the same nodes and leaves, but its `prim_tests` may differ by about
 /// 1% between modes and backends: the CPU tests a leaf's triangles in groups (SIMD) and counts
 /// a whole group when one of its triangles ends the search.
+///
+/// Counted per ray: a packet or stream step counts one node visit for each of its active rays,
+/// so PACKET and STREAM report what SINGLE reports with the standard traversal. Other
+/// traversals (`rt2_query_options.traversal` of a SINGLE or GPU query) visit other nodes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct rt2_query_stats {
