@@ -10,6 +10,13 @@
  * lock the scene and wait for running renders. A frame or a camera is used by one call at a
  * time while it is being modified. The `rays` and `hits` (or `occluded`) arrays of one query
  * must not overlap; `rt2_query_options.exclude` may be the `hits` array itself.
+ *
+ * Descriptors (structs with `struct_size`, which must equal their sizeof): start from
+ * `rt2_*_default()` and change fields. A zeroed struct is not the defaults: 0 is refused for
+ * render max_depth, samples and short_stack_size, query short_stack_size, build leaf_size
+ * and traversal_cost, and material ior; it gives STRAIGHT transparency, a black background
+ * and an empty_bonus of 0. Zero means the default for context threads and build max_depth,
+ * and the other enum fields' 0 is their default.
  */
 
 #ifndef RT2_H
@@ -444,8 +451,9 @@ typedef struct rt2_build_options {
    */
   uint32_t max_depth;
   /**
-   * Midpoint builder: stop splitting at this many primitives (>= 1), or before where a split
-   * would leave every primitive in both children.
+   * Midpoint builder: stop splitting at this many primitives, or before where a split
+   * would leave every primitive in both children (default 4). Checked (>= 1) with either
+   * builder, though SAH does not read it.
    */
   uint32_t leaf_size;
   /**
@@ -455,7 +463,8 @@ typedef struct rt2_build_options {
    */
   float traversal_cost;
   /**
-   * SAH bonus for cutting off empty space, in [0, 1).
+   * SAH factor, in [0, 1), on the cost of a split that leaves one side empty (default 0.8):
+   * the smaller, the more eagerly empty space is cut off; 0 makes such splits free.
    */
   float empty_bonus;
   /**
@@ -493,7 +502,7 @@ typedef struct rt2_render_options {
    */
   uint32_t transparency;
   /**
-   * Colour of rays that leave the scene.
+   * Colour of rays that leave the scene, linear RGB (default 0.05, 0.05, 0.08).
    */
   float background[3];
   /**

@@ -328,14 +328,16 @@ pub struct rt2_build_options {
     pub layout: u32,
     /// Maximum tree depth, at most 64; 0 (default) picks one from the primitive count.
     pub max_depth: u32,
-    /// Midpoint builder: stop splitting at this many primitives (>= 1), or before where a split
-    /// would leave every primitive in both children.
+    /// Midpoint builder: stop splitting at this many primitives, or before where a split
+    /// would leave every primitive in both children (default 4). Checked (>= 1) with either
+    /// builder, though SAH does not read it.
     pub leaf_size: u32,
     /// SAH cost of a traversal step relative to a primitive test (> 0, default 3): larger values
     /// give a smaller tree, built faster, with fewer and fuller leaves; smaller ones (down to
     /// about 1.5) trade memory for a few per cent more coherent single rays.
     pub traversal_cost: f32,
-    /// SAH bonus for cutting off empty space, in [0, 1).
+    /// SAH factor, in [0, 1), on the cost of a split that leaves one side empty (default 0.8):
+    /// the smaller, the more eagerly empty space is cut off; 0 makes such splits free.
     pub empty_bonus: f32,
     /// Non-zero: build ropes now (they are also built on demand by rope traversals).
     pub ropes: u32,
@@ -430,7 +432,7 @@ pub struct rt2_render_options {
     pub short_stack_size: u32,
     /// An `rt2_transparency` value (default REFRACT).
     pub transparency: u32,
-    /// Colour of rays that leave the scene.
+    /// Colour of rays that leave the scene, linear RGB (default 0.05, 0.05, 0.08).
     pub background: [f32; 3],
     /// An `rt2_schedule` value (default DEPTH_FIRST). BREADTH_FIRST adds each pixel's
     /// contributions in another order, so a channel may differ by 1/255 on a few pixels.
