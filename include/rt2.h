@@ -682,7 +682,8 @@ extern "C" {
 #endif // __cplusplus
 
 /**
- * Creates a camera with the defaults.
+ * Creates a camera with the defaults: eye (0, 0, 5) looking at the origin, up +y, a vertical
+ * field of view of 45 degrees, a pinhole lens (aperture 0, focus distance 1).
  *
  * # Safety
  * `out` points to writable storage.
@@ -698,7 +699,8 @@ enum rt2_status rt2_camera_create(rt2_camera **out);
 void rt2_camera_destroy(rt2_camera *camera);
 
 /**
- * Places the camera at `eye` looking at `target`; `up` must not be parallel to the view.
+ * Places the camera at `eye` looking at `target`; `up` must not be parallel to the view, and
+ * points to the top of the image (pixel row 0).
  *
  * # Safety
  * `camera` is a live camera; the arrays hold 3 floats each.
@@ -739,7 +741,8 @@ enum rt2_status rt2_camera_set_lens(rt2_camera *camera, float aperture, float fo
 enum rt2_status rt2_context_create(const struct rt2_context_desc *desc, rt2_context **out);
 
 /**
- * Releases the caller's reference; scenes created from it keep working. NULL is a no-op.
+ * Releases the caller's reference; scenes created from it keep working (they hold the
+ * context's worker threads for their commits). NULL is a no-op.
  *
  * # Safety
  * `ctx` is NULL or a context not yet destroyed.
@@ -819,7 +822,9 @@ enum rt2_status rt2_frame_save_png(const rt2_frame *frame, const char *path);
 struct rt2_context_desc rt2_context_desc_default(void);
 
 /**
- * The default material (light grey, diffuse, a little specular).
+ * The default material, also material 0 of every scene: grey (colour 0.8), ambient 0.1,
+ * diffuse 0.9, specular 0.3, shininess 32, neither reflective nor transparent, ior 1.5, no
+ * checkerboard.
  */
 struct rt2_material rt2_material_default(void);
 
@@ -886,7 +891,15 @@ enum rt2_status rt2_render(const rt2_context *ctx,
                            rt2_frame *frame);
 
 /**
- * Creates an empty scene that keeps `ctx` alive.
+ * Creates an empty scene that keeps `ctx` alive: its commits run on `ctx`'s worker threads,
+ * also after `rt2_context_destroy(ctx)`. Renders and queries of the scene may pass any live
+ * context of the process, CPU or GPU, not only `ctx`.
+ *
+ * Material 0, the default material (`rt2_material_default`), exists from the start.
+ * Objects (of every `rt2_scene_add_*` shape and `rt2_scene_load_file`), materials and lights
+ * are numbered from 0 in the order added, each kind on its own. Nothing added can be
+ * removed or disabled, and only an object's transform can change (`rt2_scene_set_transform`):
+ * materials, lights and an object's material are fixed once added.
  *
  * # Safety
  * `ctx` is a live context; `out` is writable.
@@ -902,7 +915,8 @@ enum rt2_status rt2_scene_create(const rt2_context *ctx, rt2_scene **out);
 void rt2_scene_destroy(rt2_scene *scene);
 
 /**
- * Adds a material; `*out_id` (may be NULL) receives its id.
+ * Adds a material; `*out_id` (may be NULL) receives its id (the first is 1: material 0 is
+ * the default). A material cannot be changed once added.
  *
  * # Safety
  * `scene` is a live scene; `material` points to an `rt2_material`.
@@ -912,7 +926,11 @@ enum rt2_status rt2_scene_add_material(rt2_scene *scene,
                                        uint32_t *out_id);
 
 /**
- * Adds a point light at `position` with colour `rgb` (>= 0) scaled by `intensity` (>= 0).
+ * Adds a point light at `position` with colour `rgb` (>= 0) scaled by `intensity` (>= 0);
+ * `*out_id` (may be NULL) receives its id, numbered from 0 apart from object ids (no call
+ * takes it yet: a light cannot be changed once added). Light does not fall off with
+ * distance: a surface facing the light is lit alike at any distance. Without lights a
+ * render shows the materials' ambient term only.
  *
  * # Safety
  * `scene` is a live scene; the arrays hold 3 floats.

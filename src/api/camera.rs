@@ -17,7 +17,8 @@ pub struct rt2_camera {
 
 handle_type!(rt2_camera, 0x7274_325f_6361_6d00);
 
-/// Creates a camera with the defaults.
+/// Creates a camera with the defaults: eye (0, 0, 5) looking at the origin, up +y, a vertical
+/// field of view of 45 degrees, a pinhole lens (aperture 0, focus distance 1).
 ///
 /// # Safety
 /// `out` points to writable storage.
@@ -45,7 +46,8 @@ pub unsafe extern "C" fn rt2_camera_destroy(camera: *mut rt2_camera) {
     });
 }
 
-/// Places the camera at `eye` looking at `target`; `up` must not be parallel to the view.
+/// Places the camera at `eye` looking at `target`; `up` must not be parallel to the view, and
+/// points to the top of the image (pixel row 0).
 ///
 /// # Safety
 /// `camera` is a live camera; the arrays hold 3 floats each.

@@ -108,7 +108,8 @@ impl rt2_context {
     }
 }
 
-/// Releases the caller's reference; scenes created from it keep working. NULL is a no-op.
+/// Releases the caller's reference; scenes created from it keep working (they hold the
+/// context's worker threads for their commits). NULL is a no-op.
 ///
 /// # Safety
 /// `ctx` is NULL or a context not yet destroyed.

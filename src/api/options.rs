@@ -310,7 +310,9 @@ impl rt2_material {
     }
 }
 
-/// The default material (light grey, diffuse, a little specular).
+/// The default material, also material 0 of every scene: grey (colour 0.8), ambient 0.1,
+/// diffuse 0.9, specular 0.3, shininess 32, neither reflective nor transparent, ior 1.5, no
+/// checkerboard.
 #[no_mangle]
 pub extern "C" fn rt2_material_default() -> rt2_material {
     (&Material::default()).into()

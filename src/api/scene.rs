@@ -125,7 +125,15 @@ unsafe fn prepare_and_edit<P>(
     })
 }
 
-/// Creates an empty scene that keeps `ctx` alive.
+/// Creates an empty scene that keeps `ctx` alive: its commits run on `ctx`'s worker threads,
+/// also after `rt2_context_destroy(ctx)`. Renders and queries of the scene may pass any live
+/// context of the process, CPU or GPU, not only `ctx`.
+///
+/// Material 0, the default material (`rt2_material_default`), exists from the start.
+/// Objects (of every `rt2_scene_add_*` shape and `rt2_scene_load_file`), materials and lights
+/// are numbered from 0 in the order added, each kind on its own. Nothing added can be
+/// removed or disabled, and only an object's transform can change (`rt2_scene_set_transform`):
+/// materials, lights and an object's material are fixed once added.
 ///
 /// # Safety
 /// `ctx` is a live context; `out` is writable.
@@ -158,7 +166,8 @@ pub unsafe extern "C" fn rt2_scene_destroy(scene: *mut rt2_scene) {
     });
 }
 
-/// Adds a material; `*out_id` (may be NULL) receives its id.
+/// Adds a material; `*out_id` (may be NULL) receives its id (the first is 1: material 0 is
+/// the default). A material cannot be changed once added.
 ///
 /// # Safety
 /// `scene` is a live scene; `material` points to an `rt2_material`.
@@ -176,7 +185,11 @@ pub unsafe extern "C" fn rt2_scene_add_material(
     })
 }
 
-/// Adds a point light at `position` with colour `rgb` (>= 0) scaled by `intensity` (>= 0).
+/// Adds a point light at `position` with colour `rgb` (>= 0) scaled by `intensity` (>= 0);
+/// `*out_id` (may be NULL) receives its id, numbered from 0 apart from object ids (no call
+/// takes it yet: a light cannot be changed once added). Light does not fall off with
+/// distance: a surface facing the light is lit alike at any distance. Without lights a
+/// render shows the materials' ambient term only.
 ///
 /// # Safety
 /// `scene` is a live scene; the arrays hold 3 floats.
