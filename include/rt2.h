@@ -173,7 +173,10 @@ enum rt2_offset_mode
 #endif // __cplusplus
  {
   /**
-   * A fixed offset of 1e-5 x the scene diagonal along the normal.
+   * A fixed offset of 1e-5 x the scene diagonal along the normal. The diagonal is that of
+   * the bounded primitives' box (planes excluded; 1 for a scene of planes only): a plane
+   * far from small objects gets acne (plane y = 100 with one sphere of radius 1e-3 at the
+   * origin: no pixel of the plane lit). ROBUST has no such limit.
    */
   RT2_OFFSET_MODE_EPSILON = 0,
   /**

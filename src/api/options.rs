@@ -139,7 +139,10 @@ pub enum Rt2Intersector {
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Rt2OffsetMode {
-    /// A fixed offset of 1e-5 x the scene diagonal along the normal.
+    /// A fixed offset of 1e-5 x the scene diagonal along the normal. The diagonal is that of
+    /// the bounded primitives' box (planes excluded; 1 for a scene of planes only): a plane
+    /// far from small objects gets acne (plane y = 100 with one sphere of radius 1e-3 at the
+    /// origin: no pixel of the plane lit). ROBUST has no such limit.
     Epsilon = 0,
     /// Wächter & Binder 2019: hit point recomputed on the surface, moved a few ULPs along
     /// the geometric normal (scale-aware).
