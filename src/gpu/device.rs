@@ -47,19 +47,20 @@ impl GpuOptions {
 /// arithmetic.
 const MAX_LOGICAL_DEVICES: usize = 64;
 
-/// `RT2_GPU_DEVICES`: a count up to [`MAX_LOGICAL_DEVICES`] (0 or unset: one device per
-/// adapter, the default).
+/// `RT2_GPU_DEVICES`: a count in 1..=[`MAX_LOGICAL_DEVICES`], returned as is; unset or empty
+/// gives 0, the default of one device per adapter. An explicit 0 (no device) is an error
+/// like any other bad count, not silently the default.
 fn logical_devices(value: Option<&str>) -> Result<usize> {
     let n = match value.map(str::trim) {
         None | Some("") => 0,
         Some(v) => v
             .parse()
             .ok()
-            .filter(|&n| n <= MAX_LOGICAL_DEVICES)
+            .filter(|n| (1..=MAX_LOGICAL_DEVICES).contains(n))
             .ok_or_else(|| {
                 Error::invalid_argument(format!(
-                    "RT2_GPU_DEVICES is '{v}' (expected a count of logical devices, at most \
-                 {MAX_LOGICAL_DEVICES})"
+                    "RT2_GPU_DEVICES is '{v}' (expected a count of logical devices in \
+                 1..={MAX_LOGICAL_DEVICES}; unset, one device per adapter)"
                 ))
             })?,
     };
@@ -838,7 +839,8 @@ mod tests {
         assert_eq!(super::logical_devices(Some("")).unwrap(), 0);
         assert_eq!(super::logical_devices(Some(" 2 ")).unwrap(), 2);
         assert_eq!(super::logical_devices(Some("64")).unwrap(), 64);
-        for bad in ["two", "-1", "2x", "1e3", "65", "100000"] {
+        assert_eq!(super::logical_devices(Some("1")).unwrap(), 1);
+        for bad in ["0", "two", "-1", "2x", "1e3", "65", "100000"] {
             let e = super::logical_devices(Some(bad)).unwrap_err();
             assert!(e.message.contains(bad), "{bad}: {}", e.message);
         }
