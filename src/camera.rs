@@ -49,7 +49,8 @@ impl Camera {
         for (n, v) in [("eye", eye), ("target", target), ("up", up)] {
             if !v.is_finite() {
                 return Err(Error::invalid_argument(format!(
-                    "{n} is {v} (must be finite)"
+                    "{n} is {:?} (must be finite)",
+                    v.to_array()
                 )));
             }
         }
@@ -58,7 +59,9 @@ impl Camera {
         let f = target - eye;
         if !f.is_finite() {
             return Err(Error::invalid_argument(format!(
-                "eye {eye} and target {target} are too far apart (their difference overflows)"
+                "eye {:?} and target {:?} are too far apart (their difference overflows)",
+                eye.to_array(),
+                target.to_array()
             )));
         }
         let Some(forward) = unit(f) else {
@@ -78,7 +81,7 @@ impl Camera {
     pub fn set_fov(&mut self, degrees: f32) -> Result<()> {
         if !(degrees > 0.0 && degrees < 180.0) {
             return Err(Error::invalid_argument(format!(
-                "vertical_degrees is {degrees} (must be in (0, 180))"
+                "vertical_degrees is {degrees:?} (must be in (0, 180))"
             )));
         }
         self.fov_y = degrees;
@@ -88,12 +91,12 @@ impl Camera {
     pub fn set_lens(&mut self, aperture: f32, focus_distance: f32) -> Result<()> {
         if !(aperture.is_finite() && aperture >= 0.0) {
             return Err(Error::invalid_argument(format!(
-                "aperture is {aperture} (must be finite and >= 0)"
+                "aperture is {aperture:?} (must be finite and >= 0)"
             )));
         }
         if !(focus_distance.is_finite() && focus_distance > 0.0) {
             return Err(Error::invalid_argument(format!(
-                "focus_distance is {focus_distance} (must be finite and > 0)"
+                "focus_distance is {focus_distance:?} (must be finite and > 0)"
             )));
         }
         self.aperture = aperture;

@@ -72,8 +72,8 @@ impl RenderOptions {
         )?;
         if !self.background.is_finite() || self.background.min_element() < 0.0 {
             return Err(crate::error::Error::invalid_argument(format!(
-                "background is {} (must be finite and >= 0)",
-                self.background
+                "background is {:?} (must be finite and >= 0)",
+                self.background.to_array()
             )));
         }
         Ok(())

@@ -392,13 +392,13 @@ impl rt2_build_options {
         }
         if !(self.traversal_cost.is_finite() && self.traversal_cost > 0.0) {
             return Err(bad(format!(
-                "traversal_cost is {} (must be > 0)",
+                "traversal_cost is {:?} (must be > 0)",
                 self.traversal_cost
             )));
         }
         if !(0.0..1.0).contains(&self.empty_bonus) {
             return Err(bad(format!(
-                "empty_bonus is {} (must be in [0, 1))",
+                "empty_bonus is {:?} (must be in [0, 1))",
                 self.empty_bonus
             )));
         }

@@ -109,7 +109,7 @@ impl Default for Scene {
 fn check_finite(name: &str, v: &[f32]) -> Result<()> {
     match v.iter().position(|x| !x.is_finite()) {
         Some(i) => Err(Error::invalid_argument(format!(
-            "{name}[{i}] is {} (must be finite)",
+            "{name}[{i}] is {:?} (must be finite)",
             v[i]
         ))),
         None => Ok(()),
@@ -120,7 +120,8 @@ fn check_color(name: &str, c: Vec3) -> Result<()> {
     check_finite(name, &c.to_array())?;
     if c.min_element() < 0.0 {
         return Err(Error::invalid_argument(format!(
-            "{name} has a negative component: {c}"
+            "{name} has a negative component: {:?}",
+            c.to_array()
         )));
     }
     Ok(())
@@ -129,7 +130,7 @@ fn check_color(name: &str, c: Vec3) -> Result<()> {
 fn check_unit_range(name: &str, v: f32) -> Result<()> {
     if !(0.0..=1.0).contains(&v) {
         return Err(Error::invalid_argument(format!(
-            "{name} is {v} (must be in [0, 1])"
+            "{name} is {v:?} (must be in [0, 1])"
         )));
     }
     Ok(())
@@ -149,19 +150,19 @@ impl Material {
         }
         if self.reflectivity + self.transparency > 1.0 {
             return Err(Error::invalid_argument(format!(
-                "material.reflectivity + material.transparency is {} (must be at most 1)",
+                "material.reflectivity + material.transparency is {:?} (must be at most 1)",
                 self.reflectivity + self.transparency
             )));
         }
         if !(self.shininess.is_finite() && self.shininess >= 0.0) {
             return Err(Error::invalid_argument(format!(
-                "material.shininess is {} (must be >= 0)",
+                "material.shininess is {:?} (must be >= 0)",
                 self.shininess
             )));
         }
         if !(self.ior.is_finite() && self.ior > 0.0) {
             return Err(Error::invalid_argument(format!(
-                "material.ior is {} (must be > 0)",
+                "material.ior is {:?} (must be > 0)",
                 self.ior
             )));
         }
@@ -169,7 +170,7 @@ impl Material {
             check_color("material.checker_color", c.color2)?;
             if !(c.scale.is_finite() && c.scale > 0.0) {
                 return Err(Error::invalid_argument(format!(
-                    "material.checker_scale is {} (must be > 0)",
+                    "material.checker_scale is {:?} (must be > 0)",
                     c.scale
                 )));
             }
@@ -204,7 +205,7 @@ impl Shape {
                 check_finite("center", &center.to_array())?;
                 if !(radius.is_finite() && *radius > 0.0) {
                     return Err(Error::invalid_argument(format!(
-                        "radius is {radius} (must be finite and > 0)"
+                        "radius is {radius:?} (must be finite and > 0)"
                     )));
                 }
             }
@@ -213,7 +214,8 @@ impl Shape {
                 check_finite("radii", &radii.to_array())?;
                 if radii.min_element() <= 0.0 {
                     return Err(Error::invalid_argument(format!(
-                        "radii are {radii} (each must be > 0)"
+                        "radii are {:?} (each must be > 0)",
+                        radii.to_array()
                     )));
                 }
             }
@@ -222,7 +224,9 @@ impl Shape {
                 check_finite("max", &max.to_array())?;
                 if min.cmpgt(*max).any() {
                     return Err(Error::invalid_argument(format!(
-                        "box min {min} exceeds max {max}"
+                        "box min {:?} exceeds max {:?}",
+                        min.to_array(),
+                        max.to_array()
                     )));
                 }
             }
@@ -271,7 +275,7 @@ impl Scene {
         check_color("rgb", l.color)?;
         if !(l.intensity.is_finite() && l.intensity >= 0.0) {
             return Err(Error::invalid_argument(format!(
-                "intensity is {} (must be finite and >= 0)",
+                "intensity is {:?} (must be finite and >= 0)",
                 l.intensity
             )));
         }
@@ -318,7 +322,7 @@ impl Scene {
             // An overflowing determinant makes the inverse (normals, ellipsoids) unusable too.
             return Err(Error::invalid_argument(format!(
                 "transform is singular or its scale is out of range (its 3x3 part has \
-                 determinant {det}, must be finite and non-zero)"
+                 determinant {det:?}, must be finite and non-zero)"
             )));
         }
         obj.shape.accepts(&t)?;

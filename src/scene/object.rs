@@ -199,7 +199,7 @@ fn place_shape(
                     return Err(Error::invalid_argument(format!(
                         "triangle {k} of the mesh does not fit in f32 in world space: its \
                          corners {:?}, its edges or the product of their lengths overflow",
-                        [a, b, c]
+                        [a, b, c].map(|v| v.to_array())
                     )));
                 }
                 emit(Placed::Triangle(k as u32, triangle))?;
@@ -223,8 +223,9 @@ fn place_shape(
                 let r2 = sphere.radius * sphere.radius;
                 if !(r2.is_normal() && sphere.bounds().is_finite()) {
                     return Err(Error::invalid_argument(format!(
-                        "the sphere does not fit in f32 in world space: centre {c}, radius {} \
+                        "the sphere does not fit in f32 in world space: centre {:?}, radius {:?} \
                          (its bounds and the square of its radius must be finite and non-zero)",
+                        c.to_array(),
                         sphere.radius
                     )));
                 }
@@ -246,7 +247,9 @@ fn place_shape(
             let bounds = Aabb::new(a.min(b), a.max(b));
             if !bounds.is_finite() {
                 return Err(Error::invalid_argument(format!(
-                    "the box does not fit in f32 in world space: corners {a} and {b}"
+                    "the box does not fit in f32 in world space: corners {:?} and {:?}",
+                    a.to_array(),
+                    b.to_array()
                 )));
             }
             emit(Placed::Box(bounds))?;
@@ -288,8 +291,9 @@ fn ellipsoid(center: Vec3, m: Mat3, what: &str) -> Result<Ellipsoid> {
         .filter(|e| e.bounds().is_finite())
         .ok_or_else(|| {
             Error::invalid_argument(format!(
-                "the {what} does not fit in f32 in world space: centre {center}, semi-axes \
+                "the {what} does not fit in f32 in world space: centre {:?}, semi-axes \
                  {:?} (its inverse or its bounds overflow or underflow)",
+                center.to_array(),
                 m.to_cols_array_2d()
             ))
         })
@@ -301,7 +305,8 @@ fn ellipsoid(center: Vec3, m: Mat3, what: &str) -> Result<Ellipsoid> {
 fn plane(t: &Affine3A, normal: Vec3, offset: f32) -> Result<Plane> {
     let fail = || {
         Error::invalid_argument(format!(
-            "the plane normal {normal} . x = {offset} does not fit in f32 in world space"
+            "the plane normal {:?} . x = {offset:?} does not fit in f32 in world space",
+            normal.to_array()
         ))
     };
     let m = normal.abs().max_element();
