@@ -334,7 +334,7 @@ typedef uint32_t rt2_traversal;
  */
 typedef struct rt2_context_desc {
   /**
-   * `sizeof(rt2_context_desc)`.
+   * `sizeof(rt2_context_desc)`: start from `rt2_context_desc_default()`, which sets it.
    */
   uint32_t struct_size;
   /**
@@ -399,7 +399,7 @@ typedef struct rt2_context_properties {
  */
 typedef struct rt2_material {
   /**
-   * `sizeof(rt2_material)`.
+   * `sizeof(rt2_material)`: start from `rt2_material_default()`, which sets it.
    */
   uint32_t struct_size;
   float color[3];
@@ -438,7 +438,7 @@ typedef struct rt2_material {
  */
 typedef struct rt2_build_options {
   /**
-   * `sizeof(rt2_build_options)`.
+   * `sizeof(rt2_build_options)`: start from `rt2_build_options_default()`, which sets it.
    */
   uint32_t struct_size;
   /**
@@ -481,7 +481,7 @@ typedef struct rt2_build_options {
  */
 typedef struct rt2_render_options {
   /**
-   * `sizeof(rt2_render_options)`.
+   * `sizeof(rt2_render_options)`: start from `rt2_render_options_default()`, which sets it.
    */
   uint32_t struct_size;
   /**
@@ -555,7 +555,7 @@ typedef struct rt2_hit {
  */
 typedef struct rt2_query_options {
   /**
-   * `sizeof(rt2_query_options)`.
+   * `sizeof(rt2_query_options)`: start from `rt2_query_options_default()`, which sets it.
    */
   uint32_t struct_size;
   /**

@@ -221,7 +221,7 @@ pub(crate) fn traversal_from(v: u32) -> Result<Option<Traversal>> {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct rt2_context_desc {
-    /// `sizeof(rt2_context_desc)`.
+    /// `sizeof(rt2_context_desc)`: start from `rt2_context_desc_default()`, which sets it.
     pub struct_size: u32,
     /// An `rt2_backend` value. Default AUTO; the `RT2_BACKEND` environment variable overrides.
     pub backend: u32,
@@ -246,7 +246,7 @@ pub extern "C" fn rt2_context_desc_default() -> rt2_context_desc {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct rt2_material {
-    /// `sizeof(rt2_material)`.
+    /// `sizeof(rt2_material)`: start from `rt2_material_default()`, which sets it.
     pub struct_size: u32,
     pub color: [f32; 3],
     pub ambient: f32,
@@ -325,7 +325,7 @@ pub extern "C" fn rt2_material_default() -> rt2_material {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct rt2_build_options {
-    /// `sizeof(rt2_build_options)`.
+    /// `sizeof(rt2_build_options)`: start from `rt2_build_options_default()`, which sets it.
     pub struct_size: u32,
     /// An `rt2_builder` value (default SAH).
     pub builder: u32,
@@ -425,7 +425,7 @@ pub extern "C" fn rt2_build_options_default() -> rt2_build_options {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct rt2_render_options {
-    /// `sizeof(rt2_render_options)`.
+    /// `sizeof(rt2_render_options)`: start from `rt2_render_options_default()`, which sets it.
     pub struct_size: u32,
     /// Longest chain of rays from the eye, 1..=64 (default 6; 1 = ray casting with shadows).
     pub max_depth: u32,

@@ -50,7 +50,7 @@ pub struct rt2_hit {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct rt2_query_options {
-    /// `sizeof(rt2_query_options)`.
+    /// `sizeof(rt2_query_options)`: start from `rt2_query_options_default()`, which sets it.
     pub struct_size: u32,
     /// An `rt2_traversal` value (default AUTO).
     pub traversal: u32,
