@@ -15,8 +15,8 @@
  * `rt2_*_default()` and change fields. A zeroed struct is not the defaults: 0 is refused for
  * render max_depth, samples and short_stack_size, query short_stack_size, build leaf_size
  * and traversal_cost, and material ior; it gives STRAIGHT transparency, a black background
- * and an empty_bonus of 0. Zero means the default for context threads and build max_depth,
- * and the other enum fields' 0 is their default.
+ * and an empty_bonus of 0. Zero is the default for context threads, build max_depth and
+ * ropes, query exclude, and every enum-valued field but transparency.
  */
 
 #ifndef RT2_H
@@ -799,8 +799,8 @@ enum rt2_status rt2_frame_set_mask(rt2_frame *frame, const uint8_t *mask);
 /**
  * The pixels, `4 × width × height` bytes (RGBA8); valid until the frame is destroyed.
  * Row-major, row 0 at the top. A rendered pixel is the linear colour clamped to [0, 1],
- * times 255, rounded: no sRGB encoding is applied. Its alpha is 255; pixels no render wrote
- * (a new frame, masked pixels) keep their bytes, 0 in a new frame.
+ * times 255, rounded: no sRGB encoding is applied. Its alpha is 255. Pixels no render has
+ * written (masked ones, all of a new frame) keep their bytes: 0 in a new frame.
  * NULL (with the error message set) if `frame` is not a live frame.
  *
  * # Safety
@@ -932,8 +932,8 @@ enum rt2_status rt2_scene_add_material(rt2_scene *scene,
  * Adds a point light at `position` with colour `rgb` (>= 0) scaled by `intensity` (>= 0);
  * `*out_id` (may be NULL) receives its id, numbered from 0 apart from object ids (no call
  * takes it yet: a light cannot be changed once added). Light does not fall off with
- * distance: a surface facing the light is lit alike at any distance. Without lights a
- * render shows the materials' ambient term only.
+ * distance: a surface facing the light is lit alike at any distance. Without lights,
+ * surfaces are lit by their material's ambient term only.
  *
  * # Safety
  * `scene` is a live scene; the arrays hold 3 floats.

@@ -89,8 +89,8 @@ pub unsafe extern "C" fn rt2_frame_set_mask(frame: *mut rt2_frame, mask: *const 
 
 /// The pixels, `4 × width × height` bytes (RGBA8); valid until the frame is destroyed.
 /// Row-major, row 0 at the top. A rendered pixel is the linear colour clamped to [0, 1],
-/// times 255, rounded: no sRGB encoding is applied. Its alpha is 255; pixels no render wrote
-/// (a new frame, masked pixels) keep their bytes, 0 in a new frame.
+/// times 255, rounded: no sRGB encoding is applied. Its alpha is 255. Pixels no render has
+/// written (masked ones, all of a new frame) keep their bytes: 0 in a new frame.
 /// NULL (with the error message set) if `frame` is not a live frame.
 ///
 /// # Safety

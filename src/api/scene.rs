@@ -188,8 +188,8 @@ pub unsafe extern "C" fn rt2_scene_add_material(
 /// Adds a point light at `position` with colour `rgb` (>= 0) scaled by `intensity` (>= 0);
 /// `*out_id` (may be NULL) receives its id, numbered from 0 apart from object ids (no call
 /// takes it yet: a light cannot be changed once added). Light does not fall off with
-/// distance: a surface facing the light is lit alike at any distance. Without lights a
-/// render shows the materials' ambient term only.
+/// distance: a surface facing the light is lit alike at any distance. Without lights,
+/// surfaces are lit by their material's ambient term only.
 ///
 /// # Safety
 /// `scene` is a live scene; the arrays hold 3 floats.
