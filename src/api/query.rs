@@ -76,15 +76,14 @@ pub struct rt2_query_options {
 
 versioned!(rt2_query_options);
 
-/// Work done by a query (the thesis' table 1 counters), summed over the batch. A closest-hit
-/// query (`rt2_intersect`) counts the same in every mode and on the GPU. An any-hit query
-/// (`rt2_occluded`) counts the same nodes and leaves, but its `prim_tests` may differ by about
-/// 1% between modes and backends: the CPU tests a leaf's triangles in groups (SIMD) and counts
-/// a whole group when one of its triangles ends the search.
-///
-/// Counted per ray: a packet or stream step counts one node visit for each of its active rays,
-/// so PACKET and STREAM report what SINGLE reports with the standard traversal. Other
-/// traversals (`rt2_query_options.traversal` of a SINGLE or GPU query) visit other nodes.
+/// Work done by a query (the thesis' table 1 counters), summed over the batch and counted per
+/// ray: a packet or stream step counts one node visit for each of its active rays. A
+/// closest-hit query (`rt2_intersect`) in PACKET or STREAM mode therefore reports what SINGLE
+/// reports with the standard traversal, and one on the GPU what the CPU reports with the same
+/// traversal; other traversals visit other nodes. An any-hit query (`rt2_occluded`) counts the
+/// same nodes and leaves, but its `prim_tests` may differ by about 1% between modes and
+/// backends: the CPU tests a leaf's triangles in groups (SIMD) and counts a whole group when
+/// one of its triangles ends the search.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct rt2_query_stats {
