@@ -538,20 +538,13 @@ impl Default for QueryOptions {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{Scene, Shape};
     use glam::Vec3;
 
     /// An exclusion list of another length than the rays is refused, and nothing is written.
     #[test]
     fn one_exclusion_per_ray() {
         let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
-        let mut s = Scene::new();
-        let sphere = Shape::Sphere {
-            center: Vec3::ZERO,
-            radius: 1.0,
-        };
-        s.add_object(sphere, 0).unwrap();
-        s.commit().unwrap();
+        let s = crate::scene::unit_sphere();
         let rays = [Ray::new(Vec3::Z * 5.0, -Vec3::Z, 0.0, f32::INFINITY); 2];
         let q = QueryOptions::default();
         let mut hits = [Hit::MISS; 2];

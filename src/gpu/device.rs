@@ -755,19 +755,12 @@ mod tests {
     fn a_panic_under_a_lock_does_not_break_the_device() {
         use crate::cpu::traverse::Traversal;
         use crate::geometry::{Hit, Ray};
-        use crate::scene::{Scene, Shape};
         use glam::Vec3;
         let Some(gpu) = super::open_for_tests() else {
             return;
         };
         let dev = &gpu.devices[0];
-        let mut scene = Scene::new();
-        let sphere = Shape::Sphere {
-            center: Vec3::ZERO,
-            radius: 1.0,
-        };
-        scene.add_object(sphere, 0).unwrap();
-        scene.commit().unwrap();
+        let scene = crate::scene::unit_sphere();
         let c = scene.committed().unwrap();
         let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z, 0.0, f32::INFINITY);
         let query = |hits: &mut [Hit]| {

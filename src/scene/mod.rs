@@ -480,3 +480,17 @@ impl Scene {
         }
     }
 }
+
+/// A committed scene of one sphere of radius 1 at the origin: the unit tests' smallest scene
+/// with a known hit (a ray from (0, 0, 5) along -z meets it at t = 4).
+#[cfg(test)]
+pub(crate) fn unit_sphere() -> Scene {
+    let mut s = Scene::new();
+    let sphere = Shape::Sphere {
+        center: glam::Vec3::ZERO,
+        radius: 1.0,
+    };
+    s.add_object(sphere, 0).expect("a valid sphere");
+    s.commit().expect("a one-sphere commit");
+    s
+}
