@@ -600,3 +600,49 @@ fn excluded_primitives_are_ignored_in_every_mode() {
         rt2_context_destroy(ctx);
     }
 }
+
+/// A rope traversal asked of PACKET or STREAM queries on the CPU, which follow the standard
+/// order whatever the traversal, builds no ropes (about 3x the tree); asked of SINGLE queries,
+/// it does. Before, every such query built them. A GPU context builds them for any mode: its
+/// kernels take the traversal.
+#[test]
+fn packets_and_streams_build_no_ropes_on_the_cpu() {
+    unsafe {
+        let spheres = (0..64).map(|k| ([k as f32 * 3.0, 0.0, 0.0], 1.0));
+        let (ctx, scene, _) = sphere_scene(spheres);
+        let mut info: rt2_context_properties = std::mem::zeroed();
+        info.struct_size = std::mem::size_of::<rt2_context_properties>() as u32;
+        assert_eq!(rt2_context_info(ctx, &mut info), Rt2Status::Ok);
+        let on_gpu = info.backend == Rt2Backend::Gpu as u32;
+        let rope_bytes = || {
+            let mut stats: rt2_scene_statistics = std::mem::zeroed();
+            stats.struct_size = std::mem::size_of::<rt2_scene_statistics>() as u32;
+            assert_eq!(rt2_scene_stats(scene, &mut stats), Rt2Status::Ok);
+            stats.bytes_ropes
+        };
+        let rays: Vec<rt2_ray> = (0..64)
+            .map(|k| rt2_ray {
+                org: [k as f32 * 3.0, 0.0, 5.0],
+                tmin: 0.0,
+                dir: [0.0, 0.0, -1.0],
+                tmax: f32::INFINITY,
+            })
+            .collect();
+        let mut hits: Vec<rt2_hit> = vec![std::mem::zeroed(); rays.len()];
+        for (mode, ropes) in [
+            (Rt2QueryMode::Packet, on_gpu),
+            (Rt2QueryMode::Stream, on_gpu),
+            (Rt2QueryMode::Single, true),
+        ] {
+            let mut opt = rt2_query_options_default();
+            opt.traversal = Rt2Traversal::RopesPlusPlus as u32;
+            opt.mode = mode as u32;
+            let st = intersect_all(ctx, scene, &rays, &mut hits, &opt);
+            assert_eq!(st, Rt2Status::Ok);
+            assert!(hits.iter().all(|h| h.t == 4.0), "{mode:?}");
+            assert_eq!(rope_bytes() > 0, ropes, "{mode:?}: ropes built?");
+        }
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}

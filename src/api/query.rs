@@ -10,6 +10,8 @@ use super::options::{
 };
 use super::scene::rt2_scene;
 use crate::context::QueryOptions;
+use crate::cpu::query::QueryMode;
+use crate::dispatch::Backend;
 use crate::error::{Error, Rt2Status};
 use crate::fallible;
 use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
@@ -231,8 +233,13 @@ unsafe fn run_query<T>(
         };
         // `query_options` validated the options (defaults are valid): refused ones never reach
         // the ropes or exact vertices built here, so a failed call leaves the scene as it was.
+        // Ropes (about 3x the tree) serve a rope traversal of single rays, and any GPU job
+        // (its kernels take the traversal whatever the mode); the CPU's packets and streams
+        // follow the standard order and never read them.
+        let ropes = q.traversal.is_some_and(|t| t.needs_ropes())
+            && (q.mode == QueryMode::Single || c.inner.decision().backend == Backend::Gpu);
         let guard = s.prepared_with(
-            q.traversal.is_some_and(|t| t.needs_ropes()),
+            ropes,
             q.intersector == crate::precision::Intersector::Watertight,
             between,
         )?;
