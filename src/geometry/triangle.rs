@@ -95,22 +95,26 @@ impl Triangle {
         Vec3::from(self.e1).cross(Vec3::from(self.e2))
     }
 
-    /// Whether the triangle has no area up to rounding: `|e1 × e2|` (taken in f64, where the
-    /// products of f32 values are exact) at most 2^-21 of `|e1| |e2|`. Such a triangle is no
-    /// surface either test can place: both divide by its area (Möller–Trumbore's determinant,
-    /// the watertight test's `U + V + W`), which rounding knows to about 2^-23 of `|e1| |e2|`,
-    /// so its `t`, `u` and `v` are wrong by a quarter or more. A corner computed as the
-    /// midpoint of the two others, as triangle strips and T-junction repairs leave them, gave
-    /// hits 68 units from a triangle 1 unit long, and up to a third of the way in front of a
-    /// quad whose diagonal it lay on. The tree leaves them out
-    /// ([`super::PrimitiveSet::bounds`]), so no method hits them. Thicker slivers are kept:
-    /// their `t` has a relative error of about 2^-23 divided by that ratio.
+    /// Whether the triangle has no area up to rounding: its largest angle within 2^-21 of a
+    /// straight one, i.e. `|e1 × e2|` (twice its area, taken in f64, where the products of
+    /// f32 values are exact) at most 2^-21 times the product of its two shortest sides. Its
+    /// corners then lie on one line but for rounding, as a corner computed as the midpoint of
+    /// the two others (triangle strips, T-junction repairs) leaves them, and both tests divide
+    /// by an area that is all rounding: Möller–Trumbore "hit" such a triangle 68 units away
+    /// from it (it was 1 unit long), and both intersectors answered rays aimed at a quad's
+    /// diagonal with the zero-area triangle lying on it, up to a third of the way in front of
+    /// the quad. The tree leaves them out ([`super::PrimitiveSet::bounds`]), so no method hits
+    /// them. The largest angle, not the one at `v0`: a needle, whose angle at its tip is tiny
+    /// but whose area is real, is a part of a closed mesh (a needle listed tip first was left
+    /// out, and rays leaked through the gap).
     pub fn is_degenerate(&self) -> bool {
         let (e1, e2) = (
             Vec3::from(self.e1).as_dvec3(),
             Vec3::from(self.e2).as_dvec3(),
         );
-        e1.cross(e2).length() <= (-21f64).exp2() * e1.length() * e2.length()
+        let mut sides = [e1.length(), e2.length(), (e2 - e1).length()];
+        sides.sort_by(f64::total_cmp);
+        e1.cross(e2).length() <= (-21f64).exp2() * sides[0] * sides[1]
     }
 
     /// The test `how` asks for. Returns `(t, u, v)` with `tmin <= t < tmax`.
