@@ -1033,7 +1033,8 @@ enum rt2_status rt2_scene_load_file(rt2_scene *scene,
  * Sets an object's object-to-world transform: a row-major 3×4 matrix `[R | t]` (12 floats),
  * replacing the previous one. Takes effect at the next commit (the per-frame rebuild).
  * Boxes accept only transforms that keep them axis-aligned (each column of `R` one entry;
- * others at most 2^-20 of it are taken for rounding, as in a quarter turn made with `cosf`).
+ * others at most 2^-20 of it are taken for rounding and set to zero, as in a quarter turn
+ * made with `cosf`).
  *
  * # Safety
  * `scene` is a live scene; `m3x4` holds 12 floats.

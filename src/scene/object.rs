@@ -42,26 +42,12 @@ impl Shape {
     }
 
     /// Whether `t` keeps this shape representable. Boxes are axis-aligned, so they accept
-    /// only transforms whose linear part maps axes onto axes: each column one entry, the
-    /// others at most 2^-20 of it. Those are rounding: a quarter turn built with `cosf` and
-    /// `sinf` has a cosine of -4.4e-8, not 0, and was refused. Placement takes the box
-    /// spanned by the two transformed corners, within that much of the exact one.
+    /// only transforms whose linear part maps axes onto axes ([`axis_aligned`]).
     pub fn accepts(&self, t: &Affine3A) -> Result<()> {
-        if let Shape::Box { .. } = self {
-            let m = Mat3::from(t.matrix3);
-            for c in 0..3 {
-                let col = m.col(c).abs();
-                let off_axis = col.cmpgt(Vec3::splat(col.max_element() * (-20f32).exp2()));
-                if off_axis.bitmask().count_ones() != 1 {
-                    return Err(Error::unsupported(format!(
-                        "boxes are axis-aligned: their transform may only translate, scale and \
-                         swap axes, but column {c} of its 3x3 part is {:?}",
-                        m.col(c).to_array()
-                    )));
-                }
-            }
+        match self {
+            Shape::Box { .. } => axis_aligned(t).map(|_| ()),
+            _ => Ok(()),
         }
-        Ok(())
     }
 }
 
@@ -80,6 +66,30 @@ impl Object {
     pub fn mirrors(&self) -> bool {
         mirrors(&self.transform)
     }
+}
+
+/// `t` with the entries of its linear part that are rounding set to zero, for a box: each
+/// column must have one entry, and others at most 2^-20 of it are taken for rounding (a
+/// quarter turn built with `cosf` and `sinf` has a cosine of -4.4e-8, not 0, and was
+/// refused). Zeroed, not kept: an entry of 2^-20 would tilt a face by that much of the box's
+/// extent along another axis, many times the thickness of a flat box. An error otherwise.
+fn axis_aligned(t: &Affine3A) -> Result<Affine3A> {
+    let mut m = Mat3::from(t.matrix3);
+    for c in 0..3 {
+        let col = m.col(c);
+        let keep = col
+            .abs()
+            .cmpgt(Vec3::splat(col.abs().max_element() * (-20f32).exp2()));
+        if keep.bitmask().count_ones() != 1 {
+            return Err(Error::unsupported(format!(
+                "boxes are axis-aligned: their transform may only translate, scale and swap \
+                 axes, but column {c} of its 3x3 part is {:?}",
+                col.to_array()
+            )));
+        }
+        *m.col_mut(c) = Vec3::select(keep, col, Vec3::ZERO);
+    }
+    Ok(Affine3A::from_mat3_translation(m, t.translation.into()))
 }
 
 /// Whether `t` mirrors (see [`Object::mirrors`]); one test for the placement of the
@@ -243,6 +253,7 @@ fn place_shape(
             )?))?;
         }
         Shape::Box { min, max } => {
+            let t = axis_aligned(t)?;
             let (a, b) = (t.transform_point3(*min), t.transform_point3(*max));
             let bounds = Aabb::new(a.min(b), a.max(b));
             if !bounds.is_finite() {
