@@ -137,7 +137,7 @@ unsafe fn query_options(
 
 /// The primitives `exclude` names as the library's indices (4 bytes per ray, a fifth of the
 /// hits' size; refused as OUT_OF_MEMORY when that much cannot be had), once every entry is
-/// checked, and the id of the commit they belong to. Builds the scene's lookup on first use,
+/// checked, and the placement they belong to (`Committed::placement`). Builds the scene's lookup on first use,
 /// under the write lock; later queries only read.
 fn excluded_all(
     scene: &super::scene::rt2_scene,
@@ -160,12 +160,12 @@ fn excluded_all(
         let c = r.committed()?;
         if !c.lookup.is_empty() {
             map(&c.lookup, &mut global)?;
-            return Ok((global, c.id));
+            return Ok((global, c.placement));
         }
     }
     let mut w = scene.write();
     w.ensure_prim_lookup(|lookup| map(lookup, &mut global))?;
-    Ok((global, w.committed()?.id))
+    Ok((global, w.committed()?.placement))
 }
 
 /// The global index of the primitive `h` names (`INVALID` for a miss), or an error naming
@@ -245,7 +245,10 @@ unsafe fn run_query<T>(
         )?;
         let committed = guard.committed()?;
         let out = slice_mut(out, count, out_name)?;
-        if exclude.as_ref().is_some_and(|(_, id)| *id != committed.id) {
+        if exclude
+            .as_ref()
+            .is_some_and(|(_, id)| *id != committed.placement)
+        {
             // Another thread committed between the lookup and the trace.
             return Err(Error::invalid_operation(
                 "the scene was committed again while this query read opt.exclude: its \
@@ -394,7 +397,8 @@ mod tests {
 
     /// A rebuilding commit by another thread after the exclusions were read (here while a
     /// watertight query builds its exact corners) may renumber the primitives: the query fails with
-    /// INVALID_OPERATION and writes nothing, rather than exclude by the old numbering.
+    /// INVALID_OPERATION and writes nothing, rather than exclude by the old numbering. A
+    /// commit of new lights alone keeps the numbering, and the query runs.
     #[test]
     fn a_commit_after_the_exclusions_were_read_fails_the_query() {
         let made = triangle_scene();
@@ -445,6 +449,40 @@ mod tests {
             // Asked again, the query runs: the one triangle excluded, a miss.
             let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, &opt, null_mut());
             assert_eq!((st, hit.object), (Rt2Status::Ok, RT2_INVALID_ID));
+
+            // A commit of a new light alone keeps the numbering: the query runs. (Refused
+            // before, as the commit's id changed.) A rebuild first drops the exact corners,
+            // for the query to build them again and commit while it does.
+            s.write().rebuild().unwrap();
+            let mut hit = untouched;
+            let lit = Cell::new(false);
+            let st = run_query(
+                ctx,
+                scene,
+                &ray,
+                1,
+                (&mut hit as *mut rt2_hit, "hits"),
+                &opt,
+                null_mut(),
+                |_, _, _, out, _| {
+                    out[0].t = f32::INFINITY;
+                    Ok(TraversalStats::default())
+                },
+                || {
+                    if !lit.replace(true) {
+                        let mut w = s.write();
+                        w.add_light(crate::scene::PointLight {
+                            position: Vec3::ONE,
+                            color: Vec3::ONE,
+                            intensity: 1.0,
+                        })
+                        .unwrap();
+                        w.commit().unwrap();
+                    }
+                },
+            );
+            assert!(lit.get(), "the commit did not happen");
+            assert_eq!((st, hit.t), (Rt2Status::Ok, f32::INFINITY), "traced");
         }
         destroy(made);
     }

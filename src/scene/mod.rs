@@ -71,6 +71,9 @@ pub struct Committed {
     pub commit_ms: f32,
     /// Unique per commit in this process: the GPU backend re-checks its copy when it changes.
     pub id: u64,
+    /// The `id` of the commit that placed the primitives: kept by a commit of new materials
+    /// and lights alone, which leaves their numbering (and the lookup) as it was.
+    pub placement: u64,
 }
 
 static NEXT_COMMIT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
@@ -391,6 +394,7 @@ impl Scene {
         }
         let mut tree = kdtree::build(&prims, &self.build)?;
         locality::renumber(&mut prims, &mut origins, &mut tree)?;
+        let id = NEXT_COMMIT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.committed = Some(Committed {
             bounds: prims.scene_bounds(),
             prims,
@@ -402,7 +406,8 @@ impl Scene {
             materials: fallible::collect(self.materials.iter().cloned())?,
             lights: fallible::collect(self.lights.iter().cloned())?,
             commit_ms: start.elapsed().as_secs_f32() * 1e3,
-            id: NEXT_COMMIT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
+            id,
+            placement: id,
         });
         self.stale = Stale::Nothing;
         Ok(())
