@@ -424,29 +424,39 @@ mod tests {
                 t: -1.0,
                 ..triangle
             };
-            let mut hit = untouched;
-            let (s, committed) = (&*scene, Cell::new(false));
-            let st = run_query(
-                ctx,
-                scene,
-                &ray,
-                1,
-                (&mut hit as *mut rt2_hit, "hits"),
-                &opt,
-                null_mut(),
-                |_, _, _, _, _| Ok(TraversalStats::default()),
-                || {
-                    if !committed.replace(true) {
-                        s.write().rebuild().unwrap();
-                    }
-                },
-            );
-            assert!(committed.get(), "the commit did not happen");
+            let s = &*scene;
+            // The query, with `edit` committed by "another thread" while it builds the exact
+            // corners; a traced ray's hit gets `t` = inf.
+            let query_while = |edit: &dyn Fn(&mut crate::scene::Scene)| {
+                let (mut hit, edited) = (untouched, Cell::new(false));
+                let st = run_query(
+                    ctx,
+                    scene,
+                    &ray,
+                    1,
+                    (&mut hit as *mut rt2_hit, "hits"),
+                    &opt,
+                    null_mut(),
+                    |_, _, _, out, _| {
+                        out[0].t = f32::INFINITY;
+                        Ok(TraversalStats::default())
+                    },
+                    || {
+                        if !edited.replace(true) {
+                            edit(&mut s.write());
+                        }
+                    },
+                );
+                assert!(edited.get(), "the commit did not happen");
+                (st, hit)
+            };
+            let (st, hit) = query_while(&|w| w.rebuild().unwrap());
             let message = CStr::from_ptr(rt2_last_error_message()).to_string_lossy();
             assert_eq!(st, Rt2Status::InvalidOperation, "{message}");
             assert!(message.contains("committed again"), "{message}");
             assert_eq!((hit.t, hit.object), (untouched.t, untouched.object));
             // Asked again, the query runs: the one triangle excluded, a miss.
+            let mut hit = untouched;
             let st = rt2_intersect(ctx, scene, &ray, 1, &mut hit, &opt, null_mut());
             assert_eq!((st, hit.object), (Rt2Status::Ok, RT2_INVALID_ID));
 
@@ -454,34 +464,15 @@ mod tests {
             // before, as the commit's id changed.) A rebuild first drops the exact corners,
             // for the query to build them again and commit while it does.
             s.write().rebuild().unwrap();
-            let mut hit = untouched;
-            let lit = Cell::new(false);
-            let st = run_query(
-                ctx,
-                scene,
-                &ray,
-                1,
-                (&mut hit as *mut rt2_hit, "hits"),
-                &opt,
-                null_mut(),
-                |_, _, _, out, _| {
-                    out[0].t = f32::INFINITY;
-                    Ok(TraversalStats::default())
-                },
-                || {
-                    if !lit.replace(true) {
-                        let mut w = s.write();
-                        w.add_light(crate::scene::PointLight {
-                            position: Vec3::ONE,
-                            color: Vec3::ONE,
-                            intensity: 1.0,
-                        })
-                        .unwrap();
-                        w.commit().unwrap();
-                    }
-                },
-            );
-            assert!(lit.get(), "the commit did not happen");
+            let (st, hit) = query_while(&|w| {
+                let light = crate::scene::PointLight {
+                    position: Vec3::ONE,
+                    color: Vec3::ONE,
+                    intensity: 1.0,
+                };
+                w.add_light(light).unwrap();
+                w.commit().unwrap();
+            });
             assert_eq!((st, hit.t), (Rt2Status::Ok, f32::INFINITY), "traced");
         }
         destroy(made);
