@@ -328,7 +328,8 @@ impl Scene {
                  determinant {det:?}, must be finite and non-zero)"
             )));
         }
-        obj.shape.accepts(&t)?;
+        // Placement refuses what a shape cannot take (a box turned off its axes, one that
+        // leaves f32), as a commit would.
         object::check(&obj.shape, &t)?;
         self.objects[object as usize].transform = t;
         self.stale = Stale::Geometry;

@@ -40,15 +40,6 @@ impl Shape {
             _ => 1,
         }
     }
-
-    /// Whether `t` keeps this shape representable. Boxes are axis-aligned, so they accept
-    /// only transforms whose linear part maps axes onto axes ([`axis_aligned`]).
-    pub fn accepts(&self, t: &Affine3A) -> Result<()> {
-        match self {
-            Shape::Box { .. } => axis_aligned(t).map(|_| ()),
-            _ => Ok(()),
-        }
-    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
