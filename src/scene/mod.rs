@@ -76,7 +76,11 @@ pub struct Committed {
     pub placement: u64,
 }
 
-static NEXT_COMMIT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+/// A new `Committed::id`, unique in this process.
+fn next_commit_id() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+}
 
 impl Committed {
     pub fn material_of(&self, prim: u32) -> &Material {
@@ -356,7 +360,7 @@ impl Scene {
                 c.materials = materials;
                 c.lights = lights;
                 c.commit_ms = start.elapsed().as_secs_f32() * 1e3;
-                c.id = NEXT_COMMIT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                c.id = next_commit_id();
             }
             _ => return self.rebuild(),
         }
@@ -395,7 +399,7 @@ impl Scene {
         }
         let mut tree = kdtree::build(&prims, &self.build)?;
         locality::renumber(&mut prims, &mut origins, &mut tree)?;
-        let id = NEXT_COMMIT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let id = next_commit_id();
         self.committed = Some(Committed {
             bounds: prims.scene_bounds(),
             prims,
