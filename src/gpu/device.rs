@@ -5,14 +5,14 @@
 //! default; each device records them instead (out of memory apart from the rest, and a lost
 //! device through its own callback), and every job checks the record.
 
-use super::faults::{Faults, InjectedFault, JobFaults};
+use super::faults::{lock_faults, Faults, InjectedFault, JobFaults};
 use super::kernels::{self, Program};
 use super::scene::SceneCache;
 use super::{GpuError, GpuResult};
 use crate::cpu::traverse::Traversal;
 use crate::error::{Error, Result, Rt2Status};
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Mutex, MutexGuard};
 
 /// How the GPU backend picks and uses adapters.
 #[derive(Clone, Debug, Default)]
@@ -662,12 +662,6 @@ pub(crate) fn lock_cache<T: Default>(cache: &Mutex<T>) -> MutexGuard<'_, T> {
         cache.clear_poison();
         guard
     })
-}
-
-/// Locks a device's fault record whatever a panic left in it: the record is only appended to
-/// and taken from, and a lost device must stay known as lost, so it is kept as it is.
-pub(super) fn lock_faults(faults: &Mutex<Faults>) -> MutexGuard<'_, Faults> {
-    faults.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// The GPU of the unit tests (any adapter, software ones included), or `None`, said aloud,

@@ -2,8 +2,7 @@
 //! default) and its lost-device callback record here instead, per thread, and every job checks
 //! the record ([`super::Device::check`]).
 
-use super::device::lock_faults;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::thread::ThreadId;
 
 /// What wgpu's callbacks reported about a device since the last [`super::Device::check`].
@@ -95,6 +94,12 @@ impl Drop for JobFaults<'_> {
     fn drop(&mut self) {
         lock_faults(self.0).drop_thread_errors();
     }
+}
+
+/// Locks a device's fault record whatever a panic left in it: the record is only appended to
+/// and taken from, and a lost device must stay known as lost, so it is kept as it is.
+pub(super) fn lock_faults(faults: &Mutex<Faults>) -> MutexGuard<'_, Faults> {
+    faults.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// A fault injected by [`super::Device::inject_fault`], as a driver would report it.
