@@ -14,6 +14,7 @@ use crate::gpu::{self, Gpu, GpuOptions, GpuResult};
 use crate::precision::Intersector;
 use crate::render::{GpuPathRequest, RenderOptions};
 use crate::scene::Committed;
+use std::borrow::Cow;
 use std::sync::Mutex;
 
 pub struct Context {
@@ -34,7 +35,7 @@ impl Drop for Context {
     /// In a forked child, the workers to join and the devices to release belong to the
     /// parent: they are left alone (their memory leaks) rather than waited for.
     fn drop(&mut self) {
-        if self.pid != std::process::id() {
+        if self.pid != crate::process::id() {
             std::mem::forget(self.gpu.take());
             if let Ok(mut threads) = self._workers.threads.lock() {
                 std::mem::forget(std::mem::take(&mut *threads));
@@ -133,14 +134,14 @@ impl Context {
             gpu,
             last_job: Mutex::new(JobRecord::default()),
             _workers: workers,
-            pid: std::process::id(),
+            pid: crate::process::id(),
         })
     }
 
     /// An error unless this is the process that made the context (see `pid`): after a `fork`,
     /// the child makes its own context.
     pub fn same_process(&self) -> Result<()> {
-        let here = std::process::id();
+        let here = crate::process::id();
         if self.pid == here {
             return Ok(());
         }
@@ -179,7 +180,7 @@ impl Context {
     pub fn last_job(&self) -> (Option<String>, Option<String>) {
         self.last_job
             .lock()
-            .map(|r| (r.fallback.clone(), r.auto_choice.clone()))
+            .map(|r| (r.fallback.clone(), r.auto_choice.report()))
             .unwrap_or_default()
     }
 
@@ -232,7 +233,7 @@ impl Context {
         if let Ok(mut r) = self.last_job.lock() {
             *r = JobRecord {
                 fallback,
-                auto_choice: choices.report(),
+                auto_choice: choices,
             };
         }
         result
@@ -251,7 +252,7 @@ impl Context {
             gpu_lacks(opts.intersector),
             |g, frame, choices| {
                 let (traversal, why) = dispatch::choose_gpu_traversal(scene, opts.traversal);
-                choices.note(
+                choices.traversal(
                     opts.traversal.is_none(),
                     "GPU traversal",
                     traversal.name(),
@@ -259,12 +260,12 @@ impl Context {
                 );
                 let (path, why) = dispatch::choose_gpu_path(scene, opts, g.software);
                 let auto = opts.gpu_path == GpuPathRequest::Auto;
-                choices.note(auto, "GPU render path", path.name(), &why);
+                choices.gpu_path(auto, path.name(), why);
                 gpu::render(g, scene, camera, opts, traversal, path, frame)
             },
             |frame, choices| {
                 let (traversal, why) = dispatch::choose_traversal(scene, opts.traversal);
-                choices.note(
+                choices.traversal(
                     opts.traversal.is_none(),
                     "CPU traversal",
                     traversal.name(),
@@ -405,7 +406,7 @@ impl Context {
         choices: &mut AutoChoices,
     ) -> (Traversal, TraverseOptions) {
         let (how, why) = dispatch::choose_traversal(scene, q.traversal);
-        choices.note(q.traversal.is_none(), "CPU traversal", how.name(), why);
+        choices.traversal(q.traversal.is_none(), "CPU traversal", how.name(), why);
         (
             how,
             TraverseOptions {
@@ -447,7 +448,7 @@ fn gpu_query_traversal(
     choices: &mut AutoChoices,
 ) -> Traversal {
     let (how, why) = dispatch::choose_gpu_traversal(scene, q.traversal);
-    choices.note(q.traversal.is_none(), "GPU traversal", how.name(), why);
+    choices.traversal(q.traversal.is_none(), "GPU traversal", how.name(), why);
     how
 }
 
@@ -455,23 +456,58 @@ fn gpu_query_traversal(
 #[derive(Clone, Debug, Default)]
 struct JobRecord {
     fallback: Option<String>,
-    auto_choice: Option<String>,
+    auto_choice: AutoChoices,
 }
 
-/// The choices a job left to AUTO, each with its reason.
-#[derive(Default)]
-struct AutoChoices(Vec<String>);
+/// The choices a job left to AUTO, each with its reason: a traversal, and for a GPU render its
+/// path. Kept as given and put into words only when asked for ([`AutoChoices::report`]): a
+/// loop of one-ray queries would otherwise format a sentence per call, which cost about a
+/// sixth of such a call.
+#[derive(Clone, Debug, Default)]
+struct AutoChoices {
+    traversal: Option<Choice>,
+    gpu_path: Option<Choice>,
+}
+
+/// One choice AUTO made: `what` = `name` because of `why`.
+#[derive(Clone, Debug)]
+struct Choice {
+    what: &'static str,
+    name: &'static str,
+    why: Cow<'static, str>,
+}
 
 impl AutoChoices {
-    /// Notes `what` = `name` because of `why`, if AUTO chose it (`auto`).
-    fn note(&mut self, auto: bool, what: &str, name: &str, why: &str) {
+    /// Notes the traversal `name` that `what` ("CPU traversal", "GPU traversal") runs, if
+    /// AUTO chose it (`auto`).
+    fn traversal(&mut self, auto: bool, what: &'static str, name: &'static str, why: &'static str) {
         if auto {
-            self.0.push(format!("{what} {name}: {why}"));
+            self.traversal = Some(Choice {
+                what,
+                name,
+                why: why.into(),
+            });
         }
     }
 
-    fn report(self) -> Option<String> {
-        (!self.0.is_empty()).then(|| self.0.join("; "))
+    /// Notes the GPU render path `name`, if AUTO chose it (`auto`).
+    fn gpu_path(&mut self, auto: bool, name: &'static str, why: String) {
+        if auto {
+            self.gpu_path = Some(Choice {
+                what: "GPU render path",
+                name,
+                why: why.into(),
+            });
+        }
+    }
+
+    fn report(&self) -> Option<String> {
+        let said: Vec<String> = [&self.traversal, &self.gpu_path]
+            .into_iter()
+            .flatten()
+            .map(|c| format!("{} {}: {}", c.what, c.name, c.why))
+            .collect();
+        (!said.is_empty()).then(|| said.join("; "))
     }
 }
 
