@@ -20,6 +20,7 @@ pub mod geometry;
 pub mod gpu;
 pub mod kdtree;
 pub mod precision;
+mod process;
 pub mod rayset;
 pub mod render;
 pub mod scene;
