@@ -91,3 +91,62 @@ fn a_commit_redoes_only_what_the_edits_made_stale() {
     assert_eq!(s.build_options().builder, Builder::Midpoint);
     assert_eq!(hits(&ctx, &s), moved);
 }
+
+/// Enabling or disabling an object is a geometry edit: the next commit builds a new tree. Setting
+/// the state an object already has is no edit: the scene stays committed and the next commit
+/// is the same one (it rebuilt everything before `set_enabled` compared the states).
+#[test]
+fn enabled_state_rebuilds_only_when_it_changes() {
+    let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
+    let mut s = Scene::new();
+    for x in [-1.0, 1.0] {
+        let center = Vec3::new(x, 0.0, 0.0);
+        s.add_object(
+            Shape::Sphere {
+                center,
+                radius: 0.9,
+            },
+            0,
+        )
+        .unwrap();
+    }
+    s.commit().unwrap();
+    let c = s.committed().unwrap();
+    let (id, nodes, before) = (c.id, c.tree.nodes.as_ptr(), hits(&ctx, &s));
+
+    s.set_enabled(0, true).unwrap();
+    assert!(
+        s.committed().is_ok(),
+        "enabling an enabled object made the scene stale"
+    );
+    s.commit().unwrap();
+    let c = s.committed().unwrap();
+    assert_eq!((c.id, c.tree.nodes.as_ptr()), (id, nodes));
+
+    s.set_enabled(0, false).unwrap();
+    assert!(s.committed().is_err(), "stale until committed");
+    s.commit().unwrap();
+    let c = s.committed().unwrap();
+    assert_ne!(c.id, id, "a new commit");
+    assert_eq!(c.prims.spheres.len(), 1);
+    let (id, disabled) = (c.id, hits(&ctx, &s));
+    let on = |h: &Hit| h.is_hit().then(|| c.origins[h.prim as usize].object);
+    assert!(
+        disabled.iter().all(|h| on(h) != Some(0)),
+        "sphere 0 was hit"
+    );
+    assert!(disabled != before);
+
+    s.set_enabled(0, false).unwrap();
+    s.commit().unwrap();
+    assert_eq!(
+        s.committed().unwrap().id,
+        id,
+        "disabled again: the same commit"
+    );
+
+    s.set_enabled(0, true).unwrap();
+    s.commit().unwrap();
+    assert_eq!(hits(&ctx, &s), before, "enabled again: the first hits");
+    assert!(s.set_enabled(2, false).is_err(), "object 2 does not exist");
+}

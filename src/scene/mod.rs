@@ -2,8 +2,9 @@
 //! committed form (world-space primitive set + kd-tree) that the backends trace.
 //!
 //! Every edit validates first and changes nothing on error. Edits mark what they made stale;
-//! `commit` rebuilds the tree after objects, transforms or build options changed (the RT²
-//! per-frame rebuild when objects move), and only what changed otherwise.
+//! `commit` rebuilds the tree after objects, transforms, the objects' enabled state or build
+//! options changed (the RT² per-frame rebuild when objects move), and only what changed
+//! otherwise.
 
 pub mod builtin;
 pub mod loaders;
@@ -46,7 +47,8 @@ enum Stale {
     /// Materials or lights were added: a commit replaces their arrays and keeps the placed
     /// primitives, the tree and what was built on it (ropes, exact corners, the lookup).
     Shading,
-    /// Objects, transforms or build options: a commit places and builds everything again.
+    /// Objects, transforms, enabled state or build options: a commit places and builds
+    /// everything again.
     Geometry,
 }
 
@@ -310,19 +312,26 @@ impl Scene {
             shape,
             material,
             transform: Affine3A::IDENTITY,
+            enabled: true,
         });
         self.stale = Stale::Geometry;
         Ok(self.objects.len() as u32 - 1)
     }
 
-    /// Sets an object's object-to-world transform (replacing the previous one).
-    pub fn set_transform(&mut self, object: u32, t: Affine3A) -> Result<()> {
-        let obj = self.objects.get(object as usize).ok_or_else(|| {
+    /// Object `object`, or an error naming the id the scene lacks.
+    fn object(&self, object: u32) -> Result<&Object> {
+        self.objects.get(object as usize).ok_or_else(|| {
             Error::invalid_argument(format!(
                 "object is {object}, but the scene has {} objects",
                 self.objects.len()
             ))
-        })?;
+        })
+    }
+
+    /// Sets an object's object-to-world transform (replacing the previous one), whether the
+    /// object is enabled or not.
+    pub fn set_transform(&mut self, object: u32, t: Affine3A) -> Result<()> {
+        let obj = self.object(object)?;
         check_finite("transform", &t.to_cols_array())?;
         let det = t.matrix3.determinant();
         if det == 0.0 || !det.is_finite() {
@@ -337,6 +346,20 @@ impl Scene {
         object::check(&obj.shape, &t)?;
         self.objects[object as usize].transform = t;
         self.stale = Stale::Geometry;
+        Ok(())
+    }
+
+    /// Enables or disables an object (Embree's `rtcEnableGeometry` / `rtcDisableGeometry`):
+    /// from the next commit a disabled object is left out of the primitives and the tree, so
+    /// nothing hits it, and the scene traces as one built without it; its id, shape, material
+    /// and transform stay (a transform set meanwhile applies when it is enabled again). Setting
+    /// the state an object already has is no edit: the next commit keeps what it would have
+    /// kept.
+    pub fn set_enabled(&mut self, object: u32, enabled: bool) -> Result<()> {
+        if self.object(object)?.enabled != enabled {
+            self.objects[object as usize].enabled = enabled;
+            self.stale = Stale::Geometry;
+        }
         Ok(())
     }
 
@@ -368,17 +391,16 @@ impl Scene {
         Ok(())
     }
 
-    /// Places every object in world space and builds the kd-tree, whatever changed: what a
-    /// commit does after objects, transforms or build options changed, and what the
-    /// benchmarks time as a build. Fails as [`Self::commit`] does.
+    /// Places every enabled object in world space and builds the kd-tree, whatever changed:
+    /// what a commit does after objects, transforms, enabled state or build options changed,
+    /// and what the benchmarks time as a build. Fails as [`Self::commit`] does.
     pub fn rebuild(&mut self) -> Result<()> {
         let start = Instant::now();
+        let enabled = || self.objects.iter().enumerate().filter(|(_, o)| o.enabled);
         // Room for the triangles, known exactly, taken before placing (growing by doubling
         // could take twice as much); the other kinds grow as they are placed.
-        let triangles: usize = self
-            .objects
-            .iter()
-            .map(|o| match &o.shape {
+        let triangles: usize = enabled()
+            .map(|(_, o)| match &o.shape {
                 Shape::Mesh { triangles, .. } => triangles.len(),
                 _ => 0,
             })
@@ -390,7 +412,7 @@ impl Scene {
         // One origin list per kind, concatenated in the order of the global index.
         let mut by_kind: [Vec<PrimOrigin>; 5] = Default::default();
         by_kind[0] = fallible::with_capacity(triangles)?;
-        for (id, obj) in self.objects.iter().enumerate() {
+        for (id, obj) in enabled() {
             object::place(obj, id as u32, &mut prims, &mut by_kind)?;
         }
         let mut origins = fallible::with_capacity(by_kind.iter().map(Vec::len).sum())?;
@@ -435,15 +457,15 @@ impl Scene {
         self.committed()?;
         if let Some(c) = &mut self.committed {
             if c.prims.vertices.len() != c.prims.triangles.len() {
-                // The corners come in placement order (object by object, file order); the
-                // committed triangles are renumbered (`locality`): their origins say where
-                // each one was placed.
+                // The corners come in placement order (object by object, file order; disabled
+                // objects place none); the committed triangles are renumbered (`locality`):
+                // their origins say where each one was placed.
                 let corners = object::triangle_corners(&self.objects)?;
                 let mut first = fallible::with_capacity(self.objects.len())?;
                 let mut placed = 0;
                 for obj in &self.objects {
                     first.push(placed);
-                    if let Shape::Mesh { triangles, .. } = &obj.shape {
+                    if let (true, Shape::Mesh { triangles, .. }) = (obj.enabled, &obj.shape) {
                         placed += triangles.len();
                     }
                 }
@@ -467,7 +489,8 @@ impl Scene {
         self.committed()?;
         if let Some(c) = &mut self.committed {
             if c.lookup.is_empty() {
-                let lookup = PrimLookup::new(&c.origins, self.objects.len())?;
+                let counts = self.objects.iter().map(|o| o.shape.prim_count());
+                let lookup = PrimLookup::new(&c.origins, counts)?;
                 check(&lookup)?;
                 c.lookup = lookup;
             } else {

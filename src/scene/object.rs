@@ -47,6 +47,9 @@ pub struct Object {
     pub shape: Shape,
     pub material: u32,
     pub transform: Affine3A,
+    /// Whether commits place the object (`Scene::set_enabled`): a disabled one keeps its id,
+    /// shape, material and transform but is left out of the primitives and the tree.
+    pub enabled: bool,
 }
 
 impl Object {
@@ -108,11 +111,11 @@ fn world_corners(positions: &[Vec3], tri: &[u32; 3], t: &Affine3A, mirrors: bool
     }
 }
 
-/// The exact corners of every triangle of `objects`, in the order [`place`] gives the
-/// triangles (`PrimitiveSet::vertices`, for the watertight test).
+/// The exact corners of every triangle of the enabled `objects`, in the order [`place`] gives
+/// the triangles (`PrimitiveSet::vertices`, for the watertight test).
 pub fn triangle_corners(objects: &[Object]) -> Fallible<Vec<[[f32; 3]; 3]>> {
     let mut out = Vec::new();
-    for obj in objects {
+    for obj in objects.iter().filter(|o| o.enabled) {
         if let Shape::Mesh {
             positions,
             triangles,
