@@ -583,12 +583,13 @@ typedef struct rt2_query_options {
    * NULL (default), or one hit per ray: ray i ignores the primitive `exclude[i]` names by
    * its `object` and `prim` (`t`, `u`, `v` are not read), e.g. the hit a secondary ray
    * leaves (the exclude-prim offset of renders). A miss (both `RT2_INVALID_ID`) excludes
-   * nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. Every mode and
-   * the GPU honour it. It may be the call's own `hits` array (read whole before any hit is
-   * written). The first use builds a lookup of 4 bytes per primitive. A sphere, ellipsoid or
-   * box is one primitive, excluded whole: a ray that starts on a sphere and excludes it
-   * does not find the sphere's far side (the EXCLUDE_PRIM offset of renders gives such
-   * rays the robust offset instead).
+   * nothing, nor does a primitive of a disabled object (`rt2_scene_set_enabled`); any other
+   * id the scene lacks is an INVALID_ARGUMENT. Every mode and the GPU honour it. It may be
+   * the call's own `hits` array (read whole before any hit is written). The first use
+   * builds a lookup of 4 bytes per primitive. A sphere, ellipsoid or box is one primitive,
+   * excluded whole: a ray that starts on a sphere and excludes it does not find the
+   * sphere's far side (the EXCLUDE_PRIM offset of renders gives such rays the robust offset
+   * instead).
    */
   const struct rt2_hit *exclude;
 } rt2_query_options;
@@ -626,7 +627,9 @@ typedef struct rt2_query_stats {
 
 /**
  * Size and memory of a committed scene (`rt2_scene_stats`). Bytes are exact sizes of the
- * arrays the backends read.
+ * arrays the backends read. `object_count` counts every object added, disabled ones too; the
+ * primitive counts and the tree are what the commit placed: the enabled objects' primitives
+ * (`rt2_scene_set_enabled`).
  */
 typedef struct rt2_scene_statistics {
   /**
@@ -676,8 +679,8 @@ typedef struct rt2_scene_statistics {
   uint64_t bytes_primitives;
   /**
    * The lookup from `(object, prim)` to the library's primitive index that
-   * `rt2_query_options.exclude` needs: 4 bytes per primitive and a `size_t` per object; 0
-   * until a query names primitives to exclude.
+   * `rt2_query_options.exclude` needs: 4 bytes per primitive of every object (disabled ones
+   * too) and a `size_t` per object; 0 until a query names primitives to exclude.
    */
   uint64_t bytes_prim_lookup;
 } rt2_scene_statistics;
@@ -903,8 +906,9 @@ enum rt2_status rt2_render(const rt2_context *ctx,
  * Material 0, the default material (`rt2_material_default`), exists from the start.
  * Objects (of every `rt2_scene_add_*` shape and `rt2_scene_load_file`), materials and lights
  * are numbered from 0 in the order added, each kind on its own. Nothing added can be
- * removed or disabled, and only an object's transform can change (`rt2_scene_set_transform`):
- * materials, lights and an object's material are fixed once added.
+ * removed; an object can be disabled and enabled again (`rt2_scene_set_enabled`) and its
+ * transform changed (`rt2_scene_set_transform`): materials, lights and an object's material
+ * are fixed once added.
  *
  * # Safety
  * `ctx` is a live context; `out` is writable.
@@ -1034,7 +1038,8 @@ enum rt2_status rt2_scene_load_file(rt2_scene *scene,
 
 /**
  * Sets an object's object-to-world transform: a row-major 3×4 matrix `[R | t]` (12 floats),
- * replacing the previous one. Takes effect at the next commit (the per-frame rebuild).
+ * replacing the previous one. Takes effect at the next commit (the per-frame rebuild), and
+ * may be set on a disabled object (it is placed so when enabled again).
  * Boxes accept only transforms that keep them axis-aligned (each column of `R` one entry;
  * others at most 2^-20 of it are taken for rounding and set to zero, as in a quarter turn
  * made with `cosf`).
@@ -1043,6 +1048,28 @@ enum rt2_status rt2_scene_load_file(rt2_scene *scene,
  * `scene` is a live scene; `m3x4` holds 12 floats.
  */
 enum rt2_status rt2_scene_set_transform(rt2_scene *scene, uint32_t object, const float *m3x4);
+
+/**
+ * Enables (`enabled` non-zero) or disables (`enabled` 0) an object, like Embree's
+ * `rtcEnableGeometry` / `rtcDisableGeometry`; objects are enabled when added. Takes effect at
+ * the next commit, which builds the kd-tree again (the scene is stale until then). From that
+ * commit on, a disabled object is left out of the tree: no ray of `rt2_intersect` or
+ * `rt2_occluded` (every mode and traversal, CPU and GPU) hits it, it casts no shadow and is
+ * not rendered, and the scene traces as one built without it. Its id and every other id stay
+ * as they were; it keeps its shape, material and transform (`rt2_scene_set_transform` still
+ * applies to it), and once enabled and committed again it is hit exactly as before. An
+ * `rt2_query_options.exclude` entry may name its primitives: they are still the scene's, and
+ * exclude nothing. `rt2_scene_stats` counts it in `object_count` and its primitives nowhere. A
+ * scene whose objects are all disabled traces as an empty one (every ray misses).
+ *
+ * Setting the state the object already has changes nothing: the scene stays committed if it
+ * was, and the next commit keeps the tree. INVALID_ARGUMENT (and nothing changed) for an
+ * `object` the scene lacks.
+ *
+ * # Safety
+ * `scene` is a live scene.
+ */
+enum rt2_status rt2_scene_set_enabled(rt2_scene *scene, uint32_t object, uint32_t enabled);
 
 /**
  * Sets how the kd-tree is built; takes effect at the next commit.
@@ -1055,9 +1082,9 @@ enum rt2_status rt2_scene_set_build_options(rt2_scene *scene,
 
 /**
  * Builds the acceleration structure. Rendering needs a commit after the last edit. A commit
- * after objects, transforms or build options changed places every object and builds the
- * kd-tree again; one after only materials or lights were added keeps the tree; one after no
- * edit does nothing.
+ * after objects, transforms, enabled states or build options changed places every enabled
+ * object and builds the kd-tree again; one after only materials or lights were added keeps
+ * the tree; one after no edit does nothing.
  * `RT2_STATUS_OUT_OF_MEMORY` when the placed primitives or the kd-tree cannot be allocated:
  * the scene then keeps its last commit (or none) and its edits, and can be committed again.
  *

@@ -67,12 +67,13 @@ pub struct rt2_query_options {
     /// NULL (default), or one hit per ray: ray i ignores the primitive `exclude[i]` names by
     /// its `object` and `prim` (`t`, `u`, `v` are not read), e.g. the hit a secondary ray
     /// leaves (the exclude-prim offset of renders). A miss (both `RT2_INVALID_ID`) excludes
-    /// nothing; any other id the committed scene lacks is an INVALID_ARGUMENT. Every mode and
-    /// the GPU honour it. It may be the call's own `hits` array (read whole before any hit is
-    /// written). The first use builds a lookup of 4 bytes per primitive. A sphere, ellipsoid or
-    /// box is one primitive, excluded whole: a ray that starts on a sphere and excludes it
-    /// does not find the sphere's far side (the EXCLUDE_PRIM offset of renders gives such
-    /// rays the robust offset instead).
+    /// nothing, nor does a primitive of a disabled object (`rt2_scene_set_enabled`); any other
+    /// id the scene lacks is an INVALID_ARGUMENT. Every mode and the GPU honour it. It may be
+    /// the call's own `hits` array (read whole before any hit is written). The first use
+    /// builds a lookup of 4 bytes per primitive. A sphere, ellipsoid or box is one primitive,
+    /// excluded whole: a ray that starts on a sphere and excludes it does not find the
+    /// sphere's far side (the EXCLUDE_PRIM offset of renders gives such rays the robust offset
+    /// instead).
     pub exclude: *const rt2_hit,
 }
 
@@ -168,15 +169,15 @@ fn excluded_all(
     Ok((global, w.committed()?.placement))
 }
 
-/// The global index of the primitive `h` names (`INVALID` for a miss), or an error naming
-/// entry `i` of `opt.exclude`.
+/// The global index of the primitive `h` names (`INVALID` for a miss or a disabled object's
+/// primitive, which exclude nothing), or an error naming entry `i` of `opt.exclude`.
 fn excluded(lookup: &PrimLookup, i: usize, h: &rt2_hit) -> crate::error::Result<PrimIndex> {
     if h.object == RT2_INVALID_ID && h.prim == RT2_INVALID_ID {
         return Ok(INVALID);
     }
     lookup.get(h.object, h.prim).ok_or_else(|| {
         Error::invalid_argument(format!(
-            "opt.exclude[{i}] names object {} primitive {}, which the committed scene lacks \
+            "opt.exclude[{i}] names object {} primitive {}, which the scene lacks \
              (a miss, with both ids RT2_INVALID_ID, excludes nothing)",
             h.object, h.prim
         ))

@@ -132,8 +132,9 @@ unsafe fn prepare_and_edit<P>(
 /// Material 0, the default material (`rt2_material_default`), exists from the start.
 /// Objects (of every `rt2_scene_add_*` shape and `rt2_scene_load_file`), materials and lights
 /// are numbered from 0 in the order added, each kind on its own. Nothing added can be
-/// removed or disabled, and only an object's transform can change (`rt2_scene_set_transform`):
-/// materials, lights and an object's material are fixed once added.
+/// removed; an object can be disabled and enabled again (`rt2_scene_set_enabled`) and its
+/// transform changed (`rt2_scene_set_transform`): materials, lights and an object's material
+/// are fixed once added.
 ///
 /// # Safety
 /// `ctx` is a live context; `out` is writable.
@@ -357,7 +358,8 @@ pub unsafe extern "C" fn rt2_scene_load_file(
 }
 
 /// Sets an object's object-to-world transform: a row-major 3×4 matrix `[R | t]` (12 floats),
-/// replacing the previous one. Takes effect at the next commit (the per-frame rebuild).
+/// replacing the previous one. Takes effect at the next commit (the per-frame rebuild), and
+/// may be set on a disabled object (it is placed so when enabled again).
 /// Boxes accept only transforms that keep them axis-aligned (each column of `R` one entry;
 /// others at most 2^-20 of it are taken for rounding and set to zero, as in a quarter turn
 /// made with `cosf`).
@@ -376,6 +378,36 @@ pub unsafe extern "C" fn rt2_scene_set_transform(
         let lin = Mat3::from_cols_array(&[m[0], m[4], m[8], m[1], m[5], m[9], m[2], m[6], m[10]]);
         let t = Affine3A::from_mat3_translation(lin, Vec3::new(m[3], m[7], m[11]));
         s.write().set_transform(object, t)
+    })
+}
+
+/// Enables (`enabled` non-zero) or disables (`enabled` 0) an object, like Embree's
+/// `rtcEnableGeometry` / `rtcDisableGeometry`; objects are enabled when added. Takes effect at
+/// the next commit, which builds the kd-tree again (the scene is stale until then). From that
+/// commit on, a disabled object is left out of the tree: no ray of `rt2_intersect` or
+/// `rt2_occluded` (every mode and traversal, CPU and GPU) hits it, it casts no shadow and is
+/// not rendered, and the scene traces as one built without it. Its id and every other id stay
+/// as they were; it keeps its shape, material and transform (`rt2_scene_set_transform` still
+/// applies to it), and once enabled and committed again it is hit exactly as before. An
+/// `rt2_query_options.exclude` entry may name its primitives: they are still the scene's, and
+/// exclude nothing. `rt2_scene_stats` counts it in `object_count` and its primitives nowhere. A
+/// scene whose objects are all disabled traces as an empty one (every ray misses).
+///
+/// Setting the state the object already has changes nothing: the scene stays committed if it
+/// was, and the next commit keeps the tree. INVALID_ARGUMENT (and nothing changed) for an
+/// `object` the scene lacks.
+///
+/// # Safety
+/// `scene` is a live scene.
+#[no_mangle]
+pub unsafe extern "C" fn rt2_scene_set_enabled(
+    scene: *mut rt2_scene,
+    object: u32,
+    enabled: u32,
+) -> Rt2Status {
+    guard(|| {
+        let s = handle(scene, "scene")?;
+        s.write().set_enabled(object, enabled != 0)
     })
 }
 
@@ -400,9 +432,9 @@ pub unsafe extern "C" fn rt2_scene_set_build_options(
 }
 
 /// Builds the acceleration structure. Rendering needs a commit after the last edit. A commit
-/// after objects, transforms or build options changed places every object and builds the
-/// kd-tree again; one after only materials or lights were added keeps the tree; one after no
-/// edit does nothing.
+/// after objects, transforms, enabled states or build options changed places every enabled
+/// object and builds the kd-tree again; one after only materials or lights were added keeps
+/// the tree; one after no edit does nothing.
 /// `RT2_STATUS_OUT_OF_MEMORY` when the placed primitives or the kd-tree cannot be allocated:
 /// the scene then keeps its last commit (or none) and its edits, and can be committed again.
 ///
@@ -420,7 +452,9 @@ pub unsafe extern "C" fn rt2_scene_commit(scene: *mut rt2_scene) -> Rt2Status {
 }
 
 /// Size and memory of a committed scene (`rt2_scene_stats`). Bytes are exact sizes of the
-/// arrays the backends read.
+/// arrays the backends read. `object_count` counts every object added, disabled ones too; the
+/// primitive counts and the tree are what the commit placed: the enabled objects' primitives
+/// (`rt2_scene_set_enabled`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default)]
 pub struct rt2_scene_statistics {
@@ -456,8 +490,8 @@ pub struct rt2_scene_statistics {
     pub bytes_leaf_boxes: u64,
     pub bytes_primitives: u64,
     /// The lookup from `(object, prim)` to the library's primitive index that
-    /// `rt2_query_options.exclude` needs: 4 bytes per primitive and a `size_t` per object; 0
-    /// until a query names primitives to exclude.
+    /// `rt2_query_options.exclude` needs: 4 bytes per primitive of every object (disabled ones
+    /// too) and a `size_t` per object; 0 until a query names primitives to exclude.
     pub bytes_prim_lookup: u64,
 }
 

@@ -1,0 +1,615 @@
+//! `rt2_scene_set_enabled` through the C API, against scenes built without the disabled
+//! objects (the independent reference: what a user had to do before). A disabled object is
+//! missed by every query mode, traversal and intersector, casts no shadow, keeps every id as
+//! it was, and is hit again exactly as before once enabled; an unknown id changes nothing;
+//! setting an object's own state again leaves the scene committed.
+
+use rt2::api::*;
+use rt2::error::Rt2Status;
+use std::ffi::CStr;
+use std::ptr::{null, null_mut};
+
+fn last_error() -> String {
+    unsafe { CStr::from_ptr(rt2_last_error_message()) }
+        .to_string_lossy()
+        .into_owned()
+}
+
+fn ok(status: Rt2Status, what: &str) {
+    assert_eq!(status, Rt2Status::Ok, "{what}: {}", last_error());
+}
+
+/// One object as added through the C API.
+#[derive(Clone)]
+enum Obj {
+    Mesh(Vec<f32>, Vec<u32>),
+    Sphere([f32; 3], f32),
+    Ellipsoid([f32; 3], [f32; 3]),
+    Box([f32; 3], [f32; 3]),
+    Plane([f32; 3], f32),
+}
+
+/// A wavy grid of `n` × `n` quads (two triangles each) over `[x0, x0 + w]²` in x and y, at
+/// depth `z`: rays meet many different triangles.
+fn grid(n: u32, x0: f32, w: f32, z: f32) -> Obj {
+    let mut p = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, y) = (x0 + w * i as f32 / n as f32, x0 + w * j as f32 / n as f32);
+            p.extend([x, y, z + 0.2 * (1.3 * x).sin() * (0.7 * y).cos()]);
+        }
+    }
+    let mut t = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let v = j * (n + 1) + i;
+            t.extend([v, v + 1, v + n + 1, v + 1, v + n + 2, v + n + 1]);
+        }
+    }
+    Obj::Mesh(p, t)
+}
+
+/// Every kind of object, overlapping as seen from +z: two meshes (the second one after the
+/// first, so that disabling the first renumbers what the watertight test's exact corners are
+/// looked up by), a sphere, an ellipsoid and a box in front of the first mesh, a plane behind.
+fn objects() -> Vec<Obj> {
+    vec![
+        grid(12, -3.0, 6.0, -2.0),
+        Obj::Sphere([0.0, 0.0, 0.0], 1.0),
+        Obj::Ellipsoid([1.5, 1.0, -1.0], [0.5, 0.8, 0.3]),
+        Obj::Box([-2.0, -2.0, -1.0], [-1.0, -1.0, -0.5]),
+        Obj::Plane([0.0, 0.0, 1.0], -5.0),
+        grid(3, 0.5, 1.5, 1.5),
+    ]
+}
+
+unsafe fn add(scene: *mut rt2_scene, o: &Obj, material: u32) -> u32 {
+    let mut id = u32::MAX;
+    let st = match o {
+        Obj::Mesh(p, t) => rt2_scene_add_mesh(
+            scene,
+            p.as_ptr(),
+            p.len() / 3,
+            t.as_ptr(),
+            t.len() / 3,
+            material,
+            &mut id,
+        ),
+        Obj::Sphere(c, r) => rt2_scene_add_sphere(scene, c.as_ptr(), *r, material, &mut id),
+        Obj::Ellipsoid(c, r) => {
+            rt2_scene_add_ellipsoid(scene, c.as_ptr(), r.as_ptr(), material, &mut id)
+        }
+        Obj::Box(a, b) => rt2_scene_add_box(scene, a.as_ptr(), b.as_ptr(), material, &mut id),
+        Obj::Plane(n, d) => rt2_scene_add_plane(scene, n.as_ptr(), *d, material, &mut id),
+    };
+    ok(st, "add an object");
+    id
+}
+
+/// A context of `backend` (an `rt2_backend` value).
+fn context(backend: Rt2Backend) -> *mut rt2_context {
+    let mut desc = rt2_context_desc_default();
+    desc.backend = backend as u32;
+    let mut ctx = null_mut();
+    ok(unsafe { rt2_context_create(&desc, &mut ctx) }, "context");
+    ctx
+}
+
+/// A committed scene of `objs`, all of material 0.
+fn scene_of(ctx: *mut rt2_context, objs: &[Obj]) -> *mut rt2_scene {
+    unsafe {
+        let mut scene = null_mut();
+        ok(rt2_scene_create(ctx, &mut scene), "scene");
+        for o in objs {
+            add(scene, o, 0);
+        }
+        ok(rt2_scene_commit(scene), "commit");
+        scene
+    }
+}
+
+/// `objs` without those at the indices of `left_out`, and the id each kept one has in the
+/// full scene (by its id in the smaller one).
+fn without(objs: &[Obj], left_out: &[u32]) -> (Vec<Obj>, Vec<u32>) {
+    let kept = (0..objs.len() as u32).filter(|i| !left_out.contains(i));
+    kept.map(|i| (objs[i as usize].clone(), i)).unzip()
+}
+
+/// Rays from in front of the objects, spread over them, some slanted.
+fn rays() -> Vec<rt2_ray> {
+    (0..2500)
+        .map(|k| {
+            let (i, j) = ((k % 50) as f32, (k / 50) as f32);
+            let org = [-3.2 + 0.13 * i, -3.2 + 0.13 * j, 6.0];
+            let dir = [0.02 * (k as f32 * 0.7).sin(), 0.03 * (k as f32).cos(), -1.0];
+            rt2_ray {
+                org,
+                tmin: 0.0,
+                dir,
+                tmax: f32::INFINITY,
+            }
+        })
+        .collect()
+}
+
+const MISS: rt2_hit = rt2_hit {
+    t: 0.0,
+    u: 0.0,
+    v: 0.0,
+    object: 7,
+    prim: 7,
+};
+
+/// Every query option the tests compare: each mode and intersector, and each traversal of
+/// single rays.
+fn query_options() -> Vec<rt2_query_options> {
+    let mut all = Vec::new();
+    for mode in [
+        Rt2QueryMode::Single,
+        Rt2QueryMode::Packet,
+        Rt2QueryMode::Stream,
+    ] {
+        for intersector in [Rt2Intersector::MollerTrumbore, Rt2Intersector::Watertight] {
+            let mut o = rt2_query_options_default();
+            o.mode = mode as u32;
+            o.intersector = intersector as u32;
+            all.push(o);
+        }
+    }
+    for traversal in 1..=7 {
+        let mut o = rt2_query_options_default();
+        o.traversal = traversal;
+        all.push(o);
+    }
+    all
+}
+
+/// What the tests' messages call `opt`.
+fn name(opt: &rt2_query_options) -> String {
+    let o = opt;
+    format!(
+        "mode {} intersector {} traversal {}",
+        o.mode, o.intersector, o.traversal
+    )
+}
+
+/// The closest hits and occlusion of `rays` under `opt`.
+fn trace(
+    ctx: *const rt2_context,
+    scene: *const rt2_scene,
+    rays: &[rt2_ray],
+    opt: &rt2_query_options,
+) -> (Vec<rt2_hit>, Vec<u8>) {
+    let mut hits = vec![MISS; rays.len()];
+    let mut occ = vec![7u8; rays.len()];
+    unsafe {
+        let n = rays.len();
+        let (r, h, o) = (rays.as_ptr(), hits.as_mut_ptr(), occ.as_mut_ptr());
+        ok(
+            rt2_intersect(ctx, scene, r, n, h, opt, null_mut()),
+            "intersect",
+        );
+        ok(
+            rt2_occluded(ctx, scene, r, n, o, opt, null_mut()),
+            "occluded",
+        );
+    }
+    (hits, occ)
+}
+
+/// `hits` with each object id replaced by `ids[id]` (misses kept).
+fn renamed(mut hits: Vec<rt2_hit>, ids: &[u32]) -> Vec<rt2_hit> {
+    for h in &mut hits {
+        if h.object != RT2_INVALID_ID {
+            h.object = ids[h.object as usize];
+        }
+    }
+    hits
+}
+
+/// Fails, saying how many entries differ and the first of them, unless `got == want`.
+#[track_caller]
+fn same<T: PartialEq + std::fmt::Debug>(got: &[T], want: &[T], what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}");
+    let diff: Vec<usize> = (0..got.len()).filter(|&i| got[i] != want[i]).collect();
+    if let Some(&i) = diff.first() {
+        panic!(
+            "{what}: {} of {} differ, the first at {i}: {:?}, want {:?}",
+            diff.len(),
+            got.len(),
+            got[i],
+            want[i]
+        );
+    }
+}
+
+/// [`same`] for the hits and occlusion of [`trace`].
+#[track_caller]
+fn same_trace(got: &(Vec<rt2_hit>, Vec<u8>), want: &(Vec<rt2_hit>, Vec<u8>), what: &str) {
+    same(&got.0, &want.0, &format!("{what}, hits"));
+    same(&got.1, &want.1, &format!("{what}, occlusion"));
+}
+
+/// How many of `hits` are on one of `objects`.
+fn on(hits: &[rt2_hit], objects: &[u32]) -> usize {
+    hits.iter().filter(|h| objects.contains(&h.object)).count()
+}
+
+/// For several sets of disabled objects: every query option gives the hits (ids mapped back)
+/// and occlusion of a scene built without them; enabled again, the hits of before.
+#[test]
+fn disabled_objects_trace_as_a_scene_built_without_them() {
+    let ctx = context(Rt2Backend::Cpu);
+    let objs = objects();
+    let scene = scene_of(ctx, &objs);
+    let rays = rays();
+    let opts = query_options();
+    let before: Vec<_> = opts.iter().map(|o| trace(ctx, scene, &rays, o)).collect();
+    for off in [&[1u32, 3][..], &[0, 2], &[4, 5], &[1]] {
+        let (kept, ids) = without(&objs, off);
+        let reference = scene_of(ctx, &kept);
+        unsafe {
+            for &o in off {
+                ok(rt2_scene_set_enabled(scene, o, 0), "disable");
+            }
+            ok(rt2_scene_commit(scene), "commit");
+        }
+        for (opt, (hits_before, _)) in opts.iter().zip(&before) {
+            assert!(on(hits_before, off) > 20, "{off:?}: few rays meet them");
+            let (hits, occ) = trace(ctx, scene, &rays, opt);
+            let (want, want_occ) = trace(ctx, reference, &rays, opt);
+            let what = format!("{off:?} disabled, {}", name(opt));
+            assert_eq!(on(&hits, off), 0, "{what}: a disabled object was hit");
+            same_trace(&(hits, occ), &(renamed(want, &ids), want_occ), &what);
+        }
+        unsafe {
+            for &o in off {
+                ok(rt2_scene_set_enabled(scene, o, 1), "enable");
+            }
+            ok(rt2_scene_commit(scene), "commit");
+            rt2_scene_destroy(reference);
+        }
+        for (opt, was) in opts.iter().zip(&before) {
+            let what = format!("{off:?} enabled again, {}", name(opt));
+            same_trace(&trace(ctx, scene, &rays, opt), was, &what);
+        }
+    }
+    unsafe {
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// A 48×48 render of a sphere on a floor under a light, with an occluder above the camera's
+/// view: the occluder shows only as its shadow.
+fn shadow_scene(ctx: *mut rt2_context, occluder: bool) -> *mut rt2_scene {
+    unsafe {
+        let mut scene = null_mut();
+        ok(rt2_scene_create(ctx, &mut scene), "scene");
+        let mut red = rt2_material_default();
+        red.color = [0.9, 0.2, 0.2];
+        let mut m = 0;
+        ok(rt2_scene_add_material(scene, &red, &mut m), "material");
+        add(scene, &Obj::Sphere([0.0, 1.0, 0.0], 1.0), m);
+        if occluder {
+            add(scene, &Obj::Box([-1.5, 6.0, -1.5], [1.5, 6.5, 1.5]), 0);
+        }
+        add(scene, &Obj::Plane([0.0, 1.0, 0.0], 0.0), 0);
+        let (light, white) = ([0.5f32, 12.0, 0.5], [1.0f32; 3]);
+        let st = rt2_scene_add_point_light(scene, light.as_ptr(), white.as_ptr(), 1.0, null_mut());
+        ok(st, "light");
+        ok(rt2_scene_commit(scene), "commit");
+        scene
+    }
+}
+
+/// The pixels of `scene` rendered by `ctx` with `opt`.
+fn render(ctx: *const rt2_context, scene: *const rt2_scene, opt: &rt2_render_options) -> Vec<u8> {
+    unsafe {
+        let mut cam = null_mut();
+        ok(rt2_camera_create(&mut cam), "camera");
+        let (eye, at, up) = ([0.0f32, 2.5, 7.0], [0.0f32, 0.5, 0.0], [0.0f32, 1.0, 0.0]);
+        let st = rt2_camera_look_at(cam, eye.as_ptr(), at.as_ptr(), up.as_ptr());
+        ok(st, "look at");
+        let mut frame = null_mut();
+        ok(rt2_frame_create(48, 48, &mut frame), "frame");
+        ok(rt2_render(ctx, scene, cam, opt, frame), "render");
+        let px = std::slice::from_raw_parts(rt2_frame_pixels(frame), 48 * 48 * 4).to_vec();
+        rt2_frame_destroy(frame);
+        rt2_camera_destroy(cam);
+        px
+    }
+}
+
+/// A disabled occluder darkens no pixel: the image is the one of the scene built without it,
+/// bit for bit, in both schedules and every offset mode; enabled again, its shadow is back.
+#[test]
+fn a_disabled_occluder_casts_no_shadow() {
+    let ctx = context(Rt2Backend::Cpu);
+    let (scene, reference) = (shadow_scene(ctx, true), shadow_scene(ctx, false));
+    for (schedule, offset_mode) in [(0, 0), (1, 0), (0, 1), (0, 2)] {
+        let mut opt = rt2_render_options_default();
+        opt.schedule = schedule;
+        opt.offset_mode = offset_mode;
+        let shadowed = render(ctx, scene, &opt);
+        let unshadowed = render(ctx, reference, &opt);
+        let darker = shadowed
+            .iter()
+            .zip(&unshadowed)
+            .filter(|(s, u)| s < u)
+            .count();
+        assert!(darker > 100, "the occluder shades only {darker} channels");
+        unsafe {
+            ok(rt2_scene_set_enabled(scene, 1, 0), "disable");
+            ok(rt2_scene_commit(scene), "commit");
+        }
+        let what = format!("schedule {schedule}, offset mode {offset_mode}");
+        same(
+            &render(ctx, scene, &opt),
+            &unshadowed,
+            &format!("disabled, {what}"),
+        );
+        unsafe {
+            ok(rt2_scene_set_enabled(scene, 1, 1), "enable");
+            ok(rt2_scene_commit(scene), "commit");
+        }
+        same(
+            &render(ctx, scene, &opt),
+            &shadowed,
+            &format!("enabled, {what}"),
+        );
+    }
+    unsafe {
+        rt2_scene_destroy(scene);
+        rt2_scene_destroy(reference);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// The scene's statistics after `rt2_scene_commit`.
+fn stats(scene: *const rt2_scene) -> rt2_scene_statistics {
+    let mut st = rt2_scene_statistics {
+        struct_size: std::mem::size_of::<rt2_scene_statistics>() as u32,
+        ..Default::default()
+    };
+    ok(unsafe { rt2_scene_stats(scene, &mut st) }, "stats");
+    st
+}
+
+/// Every object disabled: the scene traces as an empty one (every ray misses, no pixel but
+/// the background), its statistics count the objects and no primitive.
+#[test]
+fn a_scene_of_disabled_objects_is_empty() {
+    let ctx = context(Rt2Backend::Cpu);
+    let objs = objects();
+    let scene = scene_of(ctx, &objs);
+    let empty = scene_of(ctx, &[]);
+    unsafe {
+        for o in 0..objs.len() as u32 {
+            ok(rt2_scene_set_enabled(scene, o, 0), "disable");
+        }
+        ok(rt2_scene_commit(scene), "commit");
+    }
+    let rays = rays();
+    for opt in query_options() {
+        let what = name(&opt);
+        let traced = trace(ctx, scene, &rays, &opt);
+        same_trace(&traced, &trace(ctx, empty, &rays, &opt), &what);
+        assert!(
+            traced.0.iter().all(|h| h.object == RT2_INVALID_ID),
+            "{what}"
+        );
+    }
+    let opt = rt2_render_options_default();
+    same(
+        &render(ctx, scene, &opt),
+        &render(ctx, empty, &opt),
+        "render",
+    );
+    let st = stats(scene);
+    assert_eq!(st.object_count, objs.len() as u32);
+    let prims = [
+        st.triangle_count,
+        st.sphere_count,
+        st.ellipsoid_count,
+        st.box_count,
+        st.plane_count,
+    ];
+    assert_eq!(prims, [0; 5]);
+    unsafe {
+        rt2_scene_destroy(scene);
+        rt2_scene_destroy(empty);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// `object_count` counts every object; the primitive counts and the tree are those of the scene
+/// built without the disabled ones.
+#[test]
+fn statistics_count_the_objects_and_the_primitives_placed() {
+    let ctx = context(Rt2Backend::Cpu);
+    let objs = objects();
+    let scene = scene_of(ctx, &objs);
+    let off = [0u32, 2, 4];
+    unsafe {
+        for o in off {
+            ok(rt2_scene_set_enabled(scene, o, 0), "disable");
+        }
+        ok(rt2_scene_commit(scene), "commit");
+    }
+    let reference = scene_of(ctx, &without(&objs, &off).0);
+    let (a, b) = (stats(scene), stats(reference));
+    assert_eq!(a.object_count, objs.len() as u32);
+    let counts = |s: &rt2_scene_statistics| {
+        [
+            s.triangle_count,
+            s.sphere_count,
+            s.ellipsoid_count,
+            s.box_count,
+            s.plane_count,
+            s.node_count,
+            s.leaf_count,
+        ]
+    };
+    assert_eq!(counts(&a), counts(&b));
+    assert_eq!(a.triangle_count, 18, "the second mesh's 3 × 3 quads alone");
+    unsafe {
+        rt2_scene_destroy(scene);
+        rt2_scene_destroy(reference);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// An unknown id is INVALID_ARGUMENT naming it, and changes nothing: the scene stays committed
+/// (queries run without a new commit) with the same hits. Setting the state an object already
+/// has leaves the scene committed too; changing it makes queries wait for a commit.
+#[test]
+fn unknown_ids_are_refused_and_no_change_is_no_edit() {
+    let ctx = context(Rt2Backend::Cpu);
+    let objs = objects();
+    let scene = scene_of(ctx, &objs);
+    let rays = rays();
+    let opt = rt2_query_options_default();
+    let before = trace(ctx, scene, &rays, &opt);
+    unsafe {
+        for id in [objs.len() as u32, RT2_INVALID_ID] {
+            let st = rt2_scene_set_enabled(scene, id, 0);
+            assert_eq!(st, Rt2Status::InvalidArgument);
+            let msg = last_error();
+            assert!(msg.contains(&format!("object is {id}")), "{msg}");
+        }
+        assert_eq!(
+            rt2_scene_set_enabled(null_mut(), 0, 0),
+            Rt2Status::InvalidArgument
+        );
+        same_trace(
+            &trace(ctx, scene, &rays, &opt),
+            &before,
+            "after refused ids",
+        );
+        // Already enabled: still committed.
+        ok(rt2_scene_set_enabled(scene, 1, 7), "enable again");
+        same_trace(&trace(ctx, scene, &rays, &opt), &before, "enabled again");
+        // Disabled: stale until committed; disabled again after the commit: still committed.
+        ok(rt2_scene_set_enabled(scene, 1, 0), "disable");
+        let mut hits = vec![MISS; rays.len()];
+        let st = rt2_intersect(
+            ctx,
+            scene,
+            rays.as_ptr(),
+            rays.len(),
+            hits.as_mut_ptr(),
+            null(),
+            null_mut(),
+        );
+        assert_eq!(st, Rt2Status::InvalidOperation, "queried a stale scene");
+        ok(rt2_scene_commit(scene), "commit");
+        let disabled = trace(ctx, scene, &rays, &opt);
+        assert!(disabled != before, "disabling the sphere changed no hit");
+        ok(rt2_scene_set_enabled(scene, 1, 0), "disable again");
+        same_trace(&trace(ctx, scene, &rays, &opt), &disabled, "disabled again");
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// `exclude` entries naming a disabled object's primitives are valid and exclude nothing (the
+/// same hits as without `exclude`); a primitive index past the object's is still refused.
+#[test]
+fn excluding_a_disabled_primitive_excludes_nothing() {
+    let ctx = context(Rt2Backend::Cpu);
+    let objs = objects();
+    let scene = scene_of(ctx, &objs);
+    unsafe {
+        ok(rt2_scene_set_enabled(scene, 0, 0), "disable the mesh");
+        ok(rt2_scene_set_enabled(scene, 1, 0), "disable the sphere");
+        ok(rt2_scene_commit(scene), "commit");
+    }
+    let rays = rays();
+    for mut opt in query_options() {
+        let plain = trace(ctx, scene, &rays, &opt);
+        // The mesh's 288 triangles and the sphere, in turn.
+        let exclude: Vec<rt2_hit> = (0..rays.len())
+            .map(|i| match i % 3 {
+                0 => rt2_hit {
+                    object: 1,
+                    prim: 0,
+                    ..MISS
+                },
+                _ => rt2_hit {
+                    object: 0,
+                    prim: (i % 288) as u32,
+                    ..MISS
+                },
+            })
+            .collect();
+        opt.exclude = exclude.as_ptr();
+        let what = format!("{}, excluding", name(&opt));
+        same_trace(&trace(ctx, scene, &rays, &opt), &plain, &what);
+        let mut bad = exclude.clone();
+        bad[5] = rt2_hit {
+            object: 0,
+            prim: 288,
+            ..MISS
+        };
+        opt.exclude = bad.as_ptr();
+        let mut hits = vec![MISS; rays.len()];
+        let st = unsafe {
+            rt2_intersect(
+                ctx,
+                scene,
+                rays.as_ptr(),
+                rays.len(),
+                hits.as_mut_ptr(),
+                &opt,
+                null_mut(),
+            )
+        };
+        assert_eq!(st, Rt2Status::InvalidArgument);
+        assert!(last_error().contains("opt.exclude[5]"), "{}", last_error());
+    }
+    unsafe {
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// A transform set while an object is disabled applies once it is enabled: the hits are those
+/// of a scene whose sphere was moved while enabled.
+#[test]
+fn a_disabled_object_can_be_moved() {
+    let ctx = context(Rt2Backend::Cpu);
+    let objs = objects();
+    let (scene, moved) = (scene_of(ctx, &objs), scene_of(ctx, &objs));
+    let m = [
+        1.0f32, 0.0, 0.0, 0.7, 0.0, 2.0, 0.0, -0.4, 0.0, 0.0, 1.0, 0.5,
+    ];
+    unsafe {
+        ok(rt2_scene_set_enabled(scene, 1, 0), "disable");
+        ok(rt2_scene_commit(scene), "commit");
+        ok(rt2_scene_set_transform(scene, 1, m.as_ptr()), "move");
+        ok(rt2_scene_commit(scene), "commit");
+        ok(rt2_scene_set_transform(moved, 1, m.as_ptr()), "move");
+        ok(rt2_scene_commit(moved), "commit");
+    }
+    let rays = rays();
+    let opt = rt2_query_options_default();
+    let (hidden, _) = trace(ctx, scene, &rays, &opt);
+    assert_eq!(on(&hidden, &[1]), 0, "moved, the disabled sphere was hit");
+    unsafe {
+        ok(rt2_scene_set_enabled(scene, 1, 1), "enable");
+        ok(rt2_scene_commit(scene), "commit");
+    }
+    let want = trace(ctx, moved, &rays, &opt);
+    assert!(on(&want.0, &[1]) > 20, "few rays meet the moved sphere");
+    same_trace(
+        &trace(ctx, scene, &rays, &opt),
+        &want,
+        "moved while disabled",
+    );
+    unsafe {
+        rt2_scene_destroy(scene);
+        rt2_scene_destroy(moved);
+        rt2_context_destroy(ctx);
+    }
+}
