@@ -1590,3 +1590,171 @@ fn refused_c_queries_build_nothing() {
         rt2_context_destroy(ctx);
     }
 }
+
+/// The shapes of [`disabled_objects_vanish_on_the_gpu`]: two spheres, one half behind the
+/// other, a box, a mesh of two triangles and a plane behind them all.
+fn enable_shapes() -> Vec<Shape> {
+    let sphere = |x: f32, y: f32, z: f32| Shape::Sphere {
+        center: Vec3::new(x, y, z),
+        radius: 1.0,
+    };
+    vec![
+        sphere(0.0, 0.0, 0.0),
+        sphere(0.9, 0.6, -3.0),
+        Shape::Box {
+            min: Vec3::new(1.0, -2.0, -1.0),
+            max: Vec3::new(2.0, -1.0, 0.0),
+        },
+        Shape::Mesh {
+            positions: vec![
+                Vec3::new(-2.0, 1.0, -1.0),
+                Vec3::new(-0.5, 1.0, -1.5),
+                Vec3::new(-2.0, 2.0, -1.0),
+                Vec3::new(-0.5, 2.0, -1.5),
+            ],
+            triangles: vec![[0, 1, 2], [1, 3, 2]],
+        },
+        Shape::Plane {
+            normal: Vec3::Z,
+            offset: -10.0,
+        },
+    ]
+}
+
+/// A committed scene of `shapes` (all enabled) under one light.
+fn enable_scene(shapes: &[Shape]) -> Scene {
+    let mut s = Scene::new();
+    let red = Material {
+        color: Vec3::new(0.9, 0.2, 0.2),
+        ..Material::default()
+    };
+    let m = s.add_material(red).unwrap();
+    for shape in shapes {
+        s.add_object(shape.clone(), m).unwrap();
+    }
+    s.add_light(PointLight {
+        position: Vec3::new(2.0, 3.0, 8.0),
+        color: Vec3::ONE,
+        intensity: 1.0,
+    })
+    .unwrap();
+    s.commit().unwrap();
+    s
+}
+
+/// A hit as the API reports it: `t`, `u`, `v` and (object, primitive in the object), `None`
+/// for a miss.
+type Reported = (f32, f32, f32, Option<(u32, u32)>);
+
+/// `hits` as the API reports them, each object renamed by `ids`.
+fn as_reported(c: &Committed, hits: &[Hit], ids: &[u32]) -> Vec<Reported> {
+    let origin = |h: &Hit| {
+        let o = c.origins[h.prim as usize];
+        (ids[o.object as usize], o.prim)
+    };
+    hits.iter()
+        .map(|h| (h.t, h.u, h.v, h.is_hit().then(|| origin(h))))
+        .collect()
+}
+
+/// Objects disabled and enabled again under one GPU context, which must notice each commit:
+/// disabled ones are missed by every traversal (the CPU's hits of the same commit, with and
+/// without exclusions), the hits and the render are those of a scene built without them, all
+/// disabled the scene is empty, and enabled again the first hits come back.
+#[test]
+fn disabled_objects_vanish_on_the_gpu() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let shapes = enable_shapes();
+    let mut s = enable_scene(&shapes);
+    let rays: Vec<Ray> = (0..1024)
+        .map(|k| {
+            let org = Vec3::new(
+                (k % 32) as f32 / 8.0 - 2.0,
+                (k / 32) as f32 / 8.0 - 2.0,
+                5.0,
+            );
+            Ray::new(org, Vec3::new(0.01, -0.02, -1.0), 0.0, f32::INFINITY)
+        })
+        .collect();
+    let mut cam = rt2::camera::Camera::default();
+    cam.look_at(Vec3::new(0.0, 0.0, 6.0), Vec3::ZERO, Vec3::Y)
+        .unwrap();
+    let trace = |s: &Scene| {
+        let mut hits = vec![Hit::MISS; rays.len()];
+        g.intersect(
+            s.committed().unwrap(),
+            &rays,
+            &mut hits,
+            &QueryOptions::default(),
+        )
+        .unwrap();
+        let mut f = Frame::new(32, 32).unwrap();
+        g.render(
+            s.committed().unwrap(),
+            &cam,
+            &RenderOptions::default(),
+            &mut f,
+        )
+        .unwrap();
+        (hits, f.pixels().to_vec())
+    };
+    let all: Vec<u32> = (0..shapes.len() as u32).collect();
+    let first = trace(&s);
+    let first_reported = as_reported(s.committed().unwrap(), &first.0, &all);
+    let on = |o: u32| {
+        let on_o = |h: &&Reported| h.3.is_some_and(|(obj, _)| obj == o);
+        first_reported.iter().filter(on_o).count()
+    };
+    for off in [&[0u32, 4][..], &[3], &[1, 2]] {
+        for &o in off {
+            assert!(on(o) > 10, "few rays meet object {o}");
+            s.set_enabled(o, false).unwrap();
+        }
+        s.commit().unwrap();
+        let (hits, pixels) = trace(&s);
+        let kept: Vec<u32> = all.iter().copied().filter(|o| !off.contains(o)).collect();
+        let reference = enable_scene(
+            &kept
+                .iter()
+                .map(|&o| shapes[o as usize].clone())
+                .collect::<Vec<_>>(),
+        );
+        let (want, want_pixels) = trace(&reference);
+        let got = as_reported(s.committed().unwrap(), &hits, &all);
+        assert!(
+            got == as_reported(reference.committed().unwrap(), &want, &kept),
+            "{off:?} disabled: not the hits of a scene built without them"
+        );
+        assert!(pixels == want_pixels, "{off:?} disabled: another image");
+        compare_queries(&format!("{off:?} disabled"), &g, &s, &rays);
+        for &o in off {
+            s.set_enabled(o, true).unwrap();
+        }
+        s.commit().unwrap();
+        assert!(
+            trace(&s) == first,
+            "{off:?} enabled again: other hits or pixels"
+        );
+    }
+    for &o in &all {
+        s.set_enabled(o, false).unwrap();
+    }
+    s.commit().unwrap();
+    let (hits, pixels) = trace(&s);
+    assert!(hits.iter().all(|h| !h.is_hit()), "all disabled: a hit");
+    assert!(
+        pixels == trace(&enable_scene(&[])).1,
+        "all disabled: not the empty image"
+    );
+    let mut occ = vec![true; rays.len()];
+    g.occluded(
+        s.committed().unwrap(),
+        &rays,
+        &mut occ,
+        &QueryOptions::default(),
+    )
+    .unwrap();
+    assert!(occ.iter().all(|o| !o), "all disabled: occluded");
+}
