@@ -243,6 +243,8 @@ int main(int argc, char **argv) {
     const float ident[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0}, singular[12] = {0};
     expect(rt2_scene_set_transform(scene, 5, ident), RT2_STATUS_INVALID_ARGUMENT, "object",
            "rt2_scene_set_transform(object 5 does not exist)");
+    expect(rt2_scene_set_enabled(scene, 5, 0), RT2_STATUS_INVALID_ARGUMENT, "object",
+           "rt2_scene_set_enabled(object 5 does not exist)");
     expect(rt2_scene_set_transform(scene, first, singular), RT2_STATUS_INVALID_ARGUMENT, "singular",
            "rt2_scene_set_transform(singular matrix)");
     {
