@@ -48,6 +48,13 @@ pub struct rt2_hit {
     pub prim: u32,
 }
 
+impl rt2_hit {
+    /// The miss record's ids: no object, no primitive.
+    pub(crate) fn is_miss(&self) -> bool {
+        self.object == RT2_INVALID_ID && self.prim == RT2_INVALID_ID
+    }
+}
+
 /// Per-call options of the ray queries.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
@@ -138,8 +145,8 @@ unsafe fn query_options(
 
 /// The primitives `exclude` names as the library's indices (4 bytes per ray, a fifth of the
 /// hits' size; refused as OUT_OF_MEMORY when that much cannot be had), once every entry is
-/// checked, and the placement they belong to (`Committed::placement`). Builds the scene's lookup on first use,
-/// under the write lock; later queries only read.
+/// checked, and the placement they belong to (`Committed::placement`). Builds the scene's
+/// lookup on first use, under the write lock; later queries only read.
 fn excluded_all(
     scene: &super::scene::rt2_scene,
     exclude: &[rt2_hit],
@@ -150,35 +157,30 @@ fn excluded_all(
             exclude.len()
         ))
     })?;
-    let map = |lookup: &PrimLookup, global: &mut Vec<PrimIndex>| {
+    scene.with_lookup(true, |c, lookup| {
         for (i, h) in exclude.iter().enumerate() {
-            global.push(excluded(lookup, i, h)?);
+            global.push(match h.is_miss() {
+                true => INVALID,
+                false => named_prim(lookup, "opt.exclude", i, h)?,
+            });
         }
-        Ok(())
-    };
-    {
-        let r = scene.read();
-        let c = r.committed()?;
-        if !c.lookup.is_empty() {
-            map(&c.lookup, &mut global)?;
-            return Ok((global, c.placement));
-        }
-    }
-    let mut w = scene.write();
-    w.ensure_prim_lookup(|lookup| map(lookup, &mut global))?;
-    Ok((global, w.committed()?.placement))
+        Ok((global, c.placement))
+    })
 }
 
-/// The global index of the primitive `h` names (`INVALID` for a miss or a disabled object's
-/// primitive, which exclude nothing), or an error naming entry `i` of `opt.exclude`.
-fn excluded(lookup: &PrimLookup, i: usize, h: &rt2_hit) -> crate::error::Result<PrimIndex> {
-    if h.object == RT2_INVALID_ID && h.prim == RT2_INVALID_ID {
-        return Ok(INVALID);
-    }
+/// The global index of the primitive that hit `h` (not a miss), entry `i` of the caller's
+/// array `what`, names: `INVALID` for a primitive of a disabled object (the id is the
+/// scene's; the committed scene left it out); an error naming the entry if the scene lacks it.
+pub(crate) fn named_prim(
+    lookup: &PrimLookup,
+    what: &str,
+    i: usize,
+    h: &rt2_hit,
+) -> crate::error::Result<PrimIndex> {
     lookup.get(h.object, h.prim).ok_or_else(|| {
         Error::invalid_argument(format!(
-            "opt.exclude[{i}] names object {} primitive {}, which the scene lacks \
-             (a miss, with both ids RT2_INVALID_ID, excludes nothing)",
+            "{what}[{i}] names object {} primitive {}, which the scene lacks (a miss has \
+             both ids RT2_INVALID_ID)",
             h.object, h.prim
         ))
     })
@@ -320,12 +322,7 @@ pub unsafe extern "C" fn rt2_intersect(
             for (h, o) in inner.iter().zip(out.iter_mut()) {
                 *o = if h.is_hit() {
                     let origin = committed.origins[h.prim as usize];
-                    // A mirrored mesh's triangles are stored with corners 1 and 2 swapped.
-                    let (u, v) = if committed.object_mirrors[origin.object as usize] {
-                        (h.v, h.u)
-                    } else {
-                        (h.u, h.v)
-                    };
+                    let (u, v) = committed.object_uv(origin.object, h.u, h.v);
                     rt2_hit {
                         t: h.t,
                         u,

@@ -12,7 +12,7 @@ use crate::context::Context;
 use crate::error::{Error, Result, Rt2Status};
 use crate::fallible;
 use crate::precision::Intersector;
-use crate::scene::{loaders, PointLight, Scene, Shape};
+use crate::scene::{loaders, Committed, PointLight, PrimLookup, Scene, Shape};
 use glam::{Affine3A, Mat3, Vec3};
 use std::sync::{Arc, RwLock, RwLockReadGuard, RwLockWriteGuard};
 
@@ -86,6 +86,26 @@ impl rt2_scene {
             "the scene was committed {PREPARE_ROUNDS} times by other threads while this job \
              built its ropes or exact corners; run it again"
         )))
+    }
+
+    /// Runs `f` on the committed scene and its [`PrimLookup`] (the public `(object, prim)` ids
+    /// to the library's), for calls that take hits. With `build`, a lookup not yet built is
+    /// built first, under the write lock, where `f` then runs too: no commit comes between,
+    /// and the lookup is kept only when `f` succeeds. Otherwise (the lookup is there, or `f`
+    /// reads no ids: the lookup may be empty) under the read lock, as queries run.
+    pub(crate) fn with_lookup<R>(
+        &self,
+        build: bool,
+        f: impl FnOnce(&Committed, &PrimLookup) -> Result<R>,
+    ) -> Result<R> {
+        {
+            let r = self.read();
+            let c = r.committed()?;
+            if !build || !c.lookup.is_empty() {
+                return f(c, &c.lookup);
+            }
+        }
+        self.write().ensure_prim_lookup(f)
     }
 }
 

@@ -90,6 +90,18 @@ impl Committed {
         &self.materials[self.object_material[object] as usize]
     }
 
+    /// Barycentrics `(u, v)` of a hit on a triangle of `object`, between the stored
+    /// triangle's corner order and the mesh's own: swapped for a mirrored object, whose
+    /// triangles are stored with corners 1 and 2 swapped ([`Object::mirrors`]). A swap is its
+    /// own inverse, so this converts either way.
+    pub fn object_uv(&self, object: u32, u: f32, v: f32) -> (f32, f32) {
+        if self.object_mirrors[object as usize] {
+            (v, u)
+        } else {
+            (u, v)
+        }
+    }
+
     /// A length that scales with the scene, for offsets of secondary-ray origins.
     pub fn scale(&self) -> f32 {
         let d = self.bounds.diagonal();
@@ -480,38 +492,48 @@ impl Scene {
     }
 
     /// Builds the committed scene's [`PrimLookup`] if it is not there yet (4 bytes per
-    /// primitive, for queries that name primitives to ignore) and runs `check` on it. A new
-    /// lookup is kept only when `check` passes, so a refused query leaves the scene as it was.
-    pub fn ensure_prim_lookup(
+    /// primitive, for callers that name primitives by their public ids) and runs `f` on the
+    /// committed scene and its lookup. A new lookup is kept only when `f` succeeds, so a
+    /// refused call leaves the scene as it was.
+    pub fn ensure_prim_lookup<R>(
         &mut self,
-        check: impl FnOnce(&PrimLookup) -> Result<()>,
-    ) -> Result<()> {
-        self.committed()?;
-        if let Some(c) = &mut self.committed {
-            if c.lookup.is_empty() {
-                let counts = self.objects.iter().map(|o| o.shape.prim_count());
-                let lookup = PrimLookup::new(&c.origins, counts)?;
-                check(&lookup)?;
-                c.lookup = lookup;
-            } else {
-                check(&c.lookup)?;
-            }
+        f: impl FnOnce(&Committed, &PrimLookup) -> Result<R>,
+    ) -> Result<R> {
+        let c = self.committed()?;
+        if !c.lookup.is_empty() {
+            return f(c, &c.lookup);
         }
-        Ok(())
+        let counts = self.objects.iter().map(|o| o.shape.prim_count());
+        let lookup = PrimLookup::new(&c.origins, counts)?;
+        let r = f(c, &lookup)?;
+        self.committed_mut()?.lookup = lookup;
+        Ok(r)
     }
 
     /// The committed scene, or an error if there is none or it is older than the last edit.
     pub fn committed(&self) -> Result<&Committed> {
         match (&self.committed, self.stale) {
             (Some(c), Stale::Nothing) => Ok(c),
-            (Some(_), _) => Err(Error::invalid_operation(
-                "the scene was modified after its last commit: call rt2_scene_commit first",
-            )),
-            (None, _) => Err(Error::invalid_operation(
-                "the scene was never committed: call rt2_scene_commit first",
-            )),
+            (committed, _) => Err(not_committed(committed.is_some())),
         }
     }
+
+    /// [`Self::committed`], mutable: for what is built on the committed scene on demand.
+    fn committed_mut(&mut self) -> Result<&mut Committed> {
+        match (&mut self.committed, self.stale) {
+            (Some(c), Stale::Nothing) => Ok(c),
+            (committed, _) => Err(not_committed(committed.is_some())),
+        }
+    }
+}
+
+/// Why a scene has no current commit: never committed, or edited since.
+fn not_committed(was_committed: bool) -> Error {
+    Error::invalid_operation(if was_committed {
+        "the scene was modified after its last commit: call rt2_scene_commit first"
+    } else {
+        "the scene was never committed: call rt2_scene_commit first"
+    })
 }
 
 /// A committed scene of one sphere of radius 1 at the origin: the unit tests' smallest scene
