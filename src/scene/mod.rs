@@ -12,11 +12,13 @@ mod locality;
 mod lookup;
 mod material;
 mod object;
+mod surface;
 pub mod tessellate;
 
 pub use lookup::PrimLookup;
 pub use material::{Checker, Material, PointLight};
 pub use object::{Object, PrimOrigin, Shape};
+pub use surface::HitSurface;
 
 use crate::error::{Error, Result};
 use crate::fallible;
