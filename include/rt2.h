@@ -679,11 +679,35 @@ typedef struct rt2_scene_statistics {
   uint64_t bytes_primitives;
   /**
    * The lookup from `(object, prim)` to the library's primitive index that
-   * `rt2_query_options.exclude` needs: 4 bytes per primitive of every object (disabled ones
-   * too) and a `size_t` per object; 0 until a query names primitives to exclude.
+   * `rt2_query_options.exclude` and `rt2_hit_surfaces` need: 4 bytes per primitive of every
+   * object (disabled ones too) and a `size_t` per object; 0 until a query names primitives
+   * to exclude or surfaces are asked for a hit.
    */
   uint64_t bytes_prim_lookup;
 } rt2_scene_statistics;
+
+/**
+ * The surface at one hit, in world space (28 bytes).
+ */
+typedef struct rt2_surface {
+  /**
+   * The hit point recomputed on the primitive, not `org + t * dir`: from the hit's `u`, `v`
+   * on triangles; `org + t * dir` moved onto the sphere, ellipsoid, box face or plane
+   * otherwise (the robust offset's point, README "Precision modes").
+   */
+  float position[3];
+  /**
+   * The geometric normal, unit length and not turned towards the ray: outward on spheres,
+   * ellipsoids and boxes; a plane's `normal` as added; on a triangle, the side of
+   * `(v1 - v0) × (v2 - v0)` of its corners as given. An object's transform carries it by
+   * its inverse transpose (a mirroring one included: a closed mesh stays outward).
+   */
+  float normal[3];
+  /**
+   * The material id of the hit's object.
+   */
+  uint32_t material;
+} rt2_surface;
 
 #ifdef __cplusplus
 extern "C" {
@@ -1119,6 +1143,34 @@ const char *rt2_status_string(uint32_t status);
  * static message says so.
  */
 const char *rt2_last_error_message(void);
+
+/**
+ * The surfaces at `count` hits: `surfaces[i]` for `hits[i]`, the closest hit of `rays[i]` by
+ * `rt2_intersect` (any context, mode or backend) on this scene's current commit: a commit
+ * since then may have renumbered the primitives, which this call cannot tell. A miss
+ * (`object = prim = RT2_INVALID_ID`) gets zero `position` and `normal` and material
+ * `RT2_INVALID_ID`, not an error.
+ *
+ * Every entry is checked before anything is written; on any error `surfaces` is untouched:
+ * INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks, a hit
+ * with a non-finite `t`, `u` or `v` or a ray with a non-finite `org` or `dir` (a query never
+ * returns such a hit), NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`,
+ * or a bad handle; INVALID_OPERATION for a scene never committed or edited since its commit.
+ * `count = 0` with NULL arrays is fine (the scene is still checked, as `rt2_intersect`
+ * does). Runs on the calling thread under the scene's read lock, like a query. The first
+ * call that names a primitive builds the lookup of `rt2_query_options.exclude` (4 bytes per
+ * primitive, kept until a commit places the objects again: `bytes_prim_lookup`); nothing
+ * else is allocated.
+ *
+ * # Safety
+ * `scene` is a live scene; `rays`, `hits` and `surfaces` hold `count` elements (may be NULL
+ * when count is 0).
+ */
+enum rt2_status rt2_hit_surfaces(const rt2_scene *scene,
+                                 const struct rt2_ray *rays,
+                                 const struct rt2_hit *hits,
+                                 size_t count,
+                                 struct rt2_surface *surfaces);
 
 #ifdef __cplusplus
 }  // extern "C"

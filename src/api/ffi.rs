@@ -155,6 +155,27 @@ pub(crate) unsafe fn slice_mut<'a, T>(p: *mut T, count: usize, arg: &str) -> Res
     Ok(std::slice::from_raw_parts_mut(p, count))
 }
 
+/// An error unless the `count` elements at `out` and the `input_count` at `input` (both
+/// already checked by [`slice()`]) share no byte: Rust may not read an input while writing
+/// an output over it, and a C caller may hand over one buffer as both.
+pub(crate) fn check_disjoint<T, U>(
+    (out, count, out_name): (*const T, usize, &str),
+    (input, input_count, input_name): (*const U, usize, &str),
+) -> Result<()> {
+    if count == 0 || input_count == 0 {
+        return Ok(());
+    }
+    let range = |p: *const u8, bytes: usize| (p as usize, p as usize + bytes);
+    let (a0, a1) = range(out.cast(), count * std::mem::size_of::<T>());
+    let (b0, b1) = range(input.cast(), input_count * std::mem::size_of::<U>());
+    if a0 < b1 && b0 < a1 {
+        return Err(Error::invalid_argument(format!(
+            "{out_name} overlaps {input_name}: the output must be a separate array"
+        )));
+    }
+    Ok(())
+}
+
 /// Reads a fixed-size array argument such as `const float pos[3]`.
 ///
 /// # Safety

@@ -16,6 +16,7 @@ mod query;
 mod render;
 mod scene;
 mod status;
+mod surface;
 
 pub use camera::*;
 pub use context::*;
@@ -25,3 +26,4 @@ pub use query::*;
 pub use render::*;
 pub use scene::*;
 pub use status::*;
+pub use surface::*;

@@ -510,8 +510,9 @@ pub struct rt2_scene_statistics {
     pub bytes_leaf_boxes: u64,
     pub bytes_primitives: u64,
     /// The lookup from `(object, prim)` to the library's primitive index that
-    /// `rt2_query_options.exclude` needs: 4 bytes per primitive of every object (disabled ones
-    /// too) and a `size_t` per object; 0 until a query names primitives to exclude.
+    /// `rt2_query_options.exclude` and `rt2_hit_surfaces` need: 4 bytes per primitive of every
+    /// object (disabled ones too) and a `size_t` per object; 0 until a query names primitives
+    /// to exclude or surfaces are asked for a hit.
     pub bytes_prim_lookup: u64,
 }
 

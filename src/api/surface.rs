@@ -1,0 +1,124 @@
+//! `rt2_hit_surfaces`: what shading the hits of `rt2_intersect` needs beyond the hit itself
+//! (Embree puts the geometric normal in every `RTCHit`; here it is asked for in a batch): the
+//! point on the surface, the geometric normal and the material, from the committed scene.
+
+use super::ffi::{check_disjoint, guard, handle, slice, slice_mut};
+use super::query::{named_prim, rt2_hit, rt2_ray, RT2_INVALID_ID};
+use super::scene::rt2_scene;
+use crate::error::{Error, Result, Rt2Status};
+use crate::geometry::{Hit, Ray};
+use crate::scene::{Committed, PrimLookup};
+
+/// The surface at one hit, in world space (28 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct rt2_surface {
+    /// The hit point recomputed on the primitive, not `org + t * dir`: from the hit's `u`, `v`
+    /// on triangles; `org + t * dir` moved onto the sphere, ellipsoid, box face or plane
+    /// otherwise (the robust offset's point, README "Precision modes").
+    pub position: [f32; 3],
+    /// The geometric normal, unit length and not turned towards the ray: outward on spheres,
+    /// ellipsoids and boxes; a plane's `normal` as added; on a triangle, the side of
+    /// `(v1 - v0) × (v2 - v0)` of its corners as given. An object's transform carries it by
+    /// its inverse transpose (a mirroring one included: a closed mesh stays outward).
+    pub normal: [f32; 3],
+    /// The material id of the hit's object.
+    pub material: u32,
+}
+
+/// What a miss gets: every coordinate 0 (a zero normal) and material `RT2_INVALID_ID`.
+const NO_SURFACE: rt2_surface = rt2_surface {
+    position: [0.0; 3],
+    normal: [0.0; 3],
+    material: RT2_INVALID_ID,
+};
+
+/// The surfaces at `count` hits: `surfaces[i]` for `hits[i]`, the closest hit of `rays[i]` by
+/// `rt2_intersect` (any context, mode or backend) on this scene's current commit: a commit
+/// since then may have renumbered the primitives, which this call cannot tell. A miss
+/// (`object = prim = RT2_INVALID_ID`) gets zero `position` and `normal` and material
+/// `RT2_INVALID_ID`, not an error.
+///
+/// Every entry is checked before anything is written; on any error `surfaces` is untouched:
+/// INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks, a hit
+/// with a non-finite `t`, `u` or `v` or a ray with a non-finite `org` or `dir` (a query never
+/// returns such a hit), NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`,
+/// or a bad handle; INVALID_OPERATION for a scene never committed or edited since its commit.
+/// `count = 0` with NULL arrays is fine (the scene is still checked, as `rt2_intersect`
+/// does). Runs on the calling thread under the scene's read lock, like a query. The first
+/// call that names a primitive builds the lookup of `rt2_query_options.exclude` (4 bytes per
+/// primitive, kept until a commit places the objects again: `bytes_prim_lookup`); nothing
+/// else is allocated.
+///
+/// # Safety
+/// `scene` is a live scene; `rays`, `hits` and `surfaces` hold `count` elements (may be NULL
+/// when count is 0).
+#[no_mangle]
+pub unsafe extern "C" fn rt2_hit_surfaces(
+    scene: *const rt2_scene,
+    rays: *const rt2_ray,
+    hits: *const rt2_hit,
+    count: usize,
+    surfaces: *mut rt2_surface,
+) -> Rt2Status {
+    guard(|| {
+        let s = handle(scene, "scene")?;
+        let rays = slice(rays, count, "rays")?;
+        let hits = slice(hits, count, "hits")?;
+        slice(surfaces, count, "surfaces")?;
+        check_disjoint(
+            (surfaces, count, "surfaces"),
+            (rays.as_ptr(), count, "rays"),
+        )?;
+        check_disjoint(
+            (surfaces, count, "surfaces"),
+            (hits.as_ptr(), count, "hits"),
+        )?;
+        let out = slice_mut(surfaces, count, "surfaces")?;
+        let named = hits.iter().any(|h| !h.is_miss());
+        s.with_lookup(named, |c, lookup| {
+            for (i, (r, h)) in rays.iter().zip(hits).enumerate() {
+                library_hit(c, lookup, i, r, h)?;
+            }
+            for (i, ((r, h), o)) in rays.iter().zip(hits).zip(out.iter_mut()).enumerate() {
+                let surface = library_hit(c, lookup, i, r, h)?
+                    .and_then(|hit| c.hit_surface(&Ray::from(r), &hit));
+                *o = surface.map_or(NO_SURFACE, |s| rt2_surface {
+                    position: s.position.to_array(),
+                    normal: s.normal.to_array(),
+                    material: s.material,
+                });
+            }
+            Ok(())
+        })
+    })
+}
+
+/// Entry `i`'s hit in the library's numbering (`None` for a miss), once checked.
+fn library_hit(
+    c: &Committed,
+    lookup: &PrimLookup,
+    i: usize,
+    r: &rt2_ray,
+    h: &rt2_hit,
+) -> Result<Option<Hit>> {
+    if h.is_miss() {
+        return Ok(None);
+    }
+    let prim = named_prim(lookup, "hits", i, h)?;
+    if ![h.t, h.u, h.v].iter().all(|x| x.is_finite()) {
+        return Err(Error::invalid_argument(format!(
+            "hits[{i}] has t = {:?}, u = {:?}, v = {:?}: a hit has finite ones",
+            h.t, h.u, h.v
+        )));
+    }
+    if !r.org.iter().chain(&r.dir).all(|x| x.is_finite()) {
+        return Err(Error::invalid_argument(format!(
+            "rays[{i}] has org {:?}, dir {:?}, but hits[{i}] is a hit: a ray with a \
+             non-finite component misses",
+            r.org, r.dir
+        )));
+    }
+    let (u, v) = c.object_uv(h.object, h.u, h.v);
+    Ok(Some(Hit { t: h.t, u, v, prim }))
+}
