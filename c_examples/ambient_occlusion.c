@@ -1,7 +1,8 @@
 /* ambient_occlusion.c: the ray query API instead of rt2_render. A ground, a wall, a box and a
  * sphere are shaded by ambient occlusion from the program's own rays:
  *   1. one camera ray per pixel -> rt2_intersect (closest hits);
- *   2. from every hit, S rays over the hemisphere around the surface normal (cosine-weighted)
+ *   2. the surface at every hit (point on the surface, geometric normal) -> rt2_hit_surfaces;
+ *   3. from every hit, S rays over the hemisphere around the surface normal (cosine-weighted)
  *      -> rt2_occluded, each ray ignoring the primitive it leaves (rt2_query_options.exclude
  *      = the camera hit): no epsilon offset, and no ray hits the triangle it starts on (a
  *      coplanar neighbour still can, near a shared edge: the exclude-prim limit in README.md;
@@ -66,8 +67,7 @@ static rt2_ray ray(v3 o, v3 d, float tmax) {
     return r;
 }
 
-/* The scene, kept by the program to compute surface normals from the hits' object and prim.
- * The ground is one triangle covering [-L, L]^2 (no shared edge for a ray leaving it to hit);
+/* The scene. The ground is one triangle covering [-L, L]^2 (no shared edge for a ray leaving it to hit);
  * behind the wall (x > 0) stand a box of height 0.8 and a sphere of radius 0.5. */
 static const float GROUND_POS[] = {-L, 0, -L, 3 * L, 0, -L, -L, 0, 3 * L};
 static const uint32_t GROUND_IDX[] = {0, 2, 1};
@@ -79,24 +79,8 @@ static const uint32_t BOX_IDX[] = {0, 1, 2, 0, 2, 3, 4, 6, 5, 4, 7, 6, 0, 4, 5, 
                                    3, 2, 6, 3, 6, 7, 0, 3, 7, 0, 7, 4, 1, 5, 6, 1, 6, 2};
 static const float SPHERE_C[3] = {2.0f, 0.5f, 1.0f}, SPHERE_R = 0.5f;
 
-typedef struct { const float *pos; const uint32_t *idx; } mesh;
 enum { GROUND, WALL, BOX, SPHERE, OBJECTS };
-static mesh MESHES[OBJECTS] = {{GROUND_POS, GROUND_IDX}, {WALL_POS, WALL_IDX}, {BOX_POS, BOX_IDX}, {NULL, NULL}};
 static uint32_t ID[OBJECTS]; /* object ids the library returned */
-
-/* Unit normal at hit h of ray r, facing the ray's origin. */
-static v3 normal(const rt2_ray *r, const rt2_hit *h, v3 p) {
-    v3 n;
-    if (h->object == ID[SPHERE]) {
-        n = norm(sub(p, at(SPHERE_C)));
-    } else {
-        int k = h->object == ID[GROUND] ? GROUND : h->object == ID[WALL] ? WALL : BOX;
-        const uint32_t *t = MESHES[k].idx + 3 * h->prim;
-        v3 a = at(MESHES[k].pos + 3 * t[0]), b = at(MESHES[k].pos + 3 * t[1]), c = at(MESHES[k].pos + 3 * t[2]);
-        n = norm(cross(sub(b, a), sub(c, a)));
-    }
-    return dot(n, at(r->dir)) > 0 ? mul(n, -1.0f) : n;
-}
 
 /* splitmix64: a fixed sequence, so every run (and every mode) traces the same rays. */
 static uint64_t rng_state = 0x5eed;
@@ -238,6 +222,10 @@ int main(int argc, char **argv) {
     }
     report(same, "camera rays: the three modes agree");
 
+    /* Where each camera ray hit and which way the surface faces there (outward, or the side
+     * of the triangle's winding: turned towards the camera below). */
+    rt2_surface *surf = alloc(W * H, sizeof *surf);
+    check(rt2_hit_surfaces(scene, cam, hits[0], W * H, surf), "rt2_hit_surfaces");
     size_t n_ao = 0;
     for (int p = 0; p < W * H; p++) n_ao += hits[0][p].object != RT2_INVALID_ID;
     n_ao *= samples;
@@ -247,7 +235,8 @@ int main(int argc, char **argv) {
     for (int p = 0; p < W * H; p++) {
         const rt2_hit *h = &hits[0][p];
         if (h->object == RT2_INVALID_ID) continue;
-        v3 pos = add(at(cam[p].org), mul(at(cam[p].dir), h->t)), n = normal(&cam[p], h, pos);
+        v3 pos = at(surf[p].position), n = at(surf[p].normal);
+        if (dot(n, at(cam[p].dir)) > 0) n = mul(n, -1.0f);
         for (int s = 0; s < samples; s++, k++) {
             ao[k] = ray(pos, cosine_dir(n), AO_RADIUS);
             leaves[k] = *h;
@@ -265,7 +254,7 @@ int main(int argc, char **argv) {
         int visible = 0;
         for (int s = 0; s < samples; s++, k++) visible += !occ[k];
         image[p] = (uint8_t)((255 * visible + samples / 2) / samples);
-        float x = cam[p].org[0] + h->t * cam[p].dir[0];
+        float x = surf[p].position[0];
         if (h->object == ID[GROUND] && x < -AO_RADIUS - 0.01f) {
             open++;
             open_exact += visible == samples;
@@ -287,6 +276,7 @@ int main(int argc, char **argv) {
     free(occ);
     free(leaves);
     free(ao);
+    free(surf);
     for (int m = 0; m < 3; m++) free(hits[m]);
     free(cam);
     rt2_scene_destroy(scene);
