@@ -259,7 +259,7 @@ fn off_surface(shape: &Shape, prim: u32, q: DVec3) -> f64 {
 }
 
 /// Tolerances: positions are f32 (a few ULPs of coordinates about 10 here, 1e-6; relative to
-/// the distance along the ray, which a plane's hits can take far), normals
+/// the origin's and the hit's distance, which a plane's hits can take far), normals
 /// are f32 products of a few terms (1e-6 measured); both kept well above that and well below
 /// what a wrong normal (another face, a transform by the matrix instead of its inverse
 /// transpose: 0.1 and more) or a wrong point (swapped barycentrics: the triangle's size)
@@ -290,8 +290,8 @@ fn check(scene: &Scene, rays: &[rt2_ray], hits: &[rt2_hit], out: &[rt2_surface])
         compared += 1;
         let what = format!("object {} prim {} ray {r:?}", h.object, h.prim);
         assert_eq!(s.material, obj.material, "{what}");
-        let length = (on_ray - Vec3::from(r.org).as_dvec3()).length();
-        let tol = POSITION_TOL * (1.0 + length);
+        let org = Vec3::from(r.org).as_dvec3();
+        let tol = POSITION_TOL * (org.length() + (on_ray - org).length());
         assert!(
             (p - on_ray).length() < tol,
             "{what}: {p} against org + t dir {on_ray}"
@@ -348,11 +348,11 @@ fn general(scale: Vec3, at: Vec3) -> Affine3A {
     )
 }
 
-/// Traces rays at each object's `target` and checks the surfaces of their hits; each object
-/// must be compared on at least `min` hits.
-fn trace_and_check(scene: &Scene, targets: &[(u32, Vec3, f32)], min: usize) {
+/// Traces rays from `dist` away at each object's `target` and checks the surfaces of their
+/// hits; each object must be hit at least `min` times, and some rays must miss.
+fn trace_and_check(scene: &Scene, targets: &[(u32, Vec3, f32)], dist: f32, min: usize) {
     for &(id, target, spread) in targets {
-        let rays = rays(target, 6.0, spread, 2000);
+        let rays = rays(target, dist, spread, 2000);
         let hits = scene.intersect(&rays);
         let (st, out) = scene.surfaces(&rays, &hits);
         assert_eq!(st, Rt2Status::Ok, "{}", last_error());
@@ -360,10 +360,7 @@ fn trace_and_check(scene: &Scene, targets: &[(u32, Vec3, f32)], min: usize) {
         let on_it = hits.iter().filter(|h| h.object == id).count();
         let misses = hits.iter().filter(|h| h.object == RT2_INVALID_ID).count();
         assert!(on_it >= min, "object {id}: only {on_it} hits");
-        assert!(
-            misses > 0 || spread == 0.0,
-            "object {id}: no miss among the rays"
-        );
+        assert!(misses > 0, "object {id}: no miss among the rays");
     }
 }
 
@@ -386,8 +383,26 @@ fn a_mesh_hit_has_its_triangles_normal_also_when_placed_mirrored() {
             (plain, Vec3::new(-4.0, 0.0, 0.0) + c, 0.8),
             (mirror, mirrored.transform_point3(c), 0.8),
         ],
+        6.0,
         500,
     );
+}
+
+/// Triangles far from unit size: `e1 × e2` squared (its length) underflows for edges below
+/// about 1e-10 and overflows above about 1e10, though such triangles are hit.
+#[test]
+fn tiny_and_huge_triangles_have_unit_normals() {
+    for s in [1e-12f32, 1e11] {
+        let mut scene = Scene::new();
+        let id = scene.add(tetrahedron(), Affine3A::from_scale(Vec3::splat(s)));
+        scene.commit();
+        trace_and_check(
+            &scene,
+            &[(id, Vec3::splat(0.25 * s), 0.8 * s)],
+            6.0 * s,
+            500,
+        );
+    }
 }
 
 #[test]
@@ -426,6 +441,7 @@ fn analytic_shapes_have_their_normals_under_rotations_and_non_uniform_scales() {
             (ellipsoid, ellipsoid_at, 1.5),
             (boxed, box_at, 1.5),
         ],
+        6.0,
         300,
     );
     // A plane alone: it would catch the other objects' misses.
@@ -435,7 +451,7 @@ fn analytic_shapes_have_their_normals_under_rotations_and_non_uniform_scales() {
         general(Vec3::new(1.0, 2.5, 0.5), Vec3::new(0.0, -4.0, 1.0)),
     );
     scene.commit();
-    trace_and_check(&scene, &[(plane, Vec3::new(0.0, -4.0, 1.0), 1.5)], 300);
+    trace_and_check(&scene, &[(plane, Vec3::new(0.0, -4.0, 1.0), 1.5)], 6.0, 300);
 }
 
 #[test]

@@ -193,7 +193,7 @@ impl PrimitiveSet {
             return Vec3::from(self.planes[i - self.len()].normal).normalize_or_zero();
         }
         match self.locate(i) {
-            (PrimKind::Triangle, k) => self.triangles[k].normal().normalize_or_zero(),
+            (PrimKind::Triangle, k) => self.triangles[k].unit_normal(),
             (PrimKind::Sphere, k) => self.spheres[k].normal(p),
             (PrimKind::Ellipsoid, k) => self.ellipsoids[k].normal(p),
             (PrimKind::Box, k) => box_normal(&self.boxes[k], p),

@@ -2,7 +2,7 @@
 //! of vertices per test (the precomputation of the vectorised-traversal paper), and the two
 //! ray–triangle tests of [`crate::precision::Intersector`].
 
-use super::{Aabb, Clipped, Ray};
+use super::{power_of_two_scale, unit, Aabb, Clipped, Ray};
 use crate::precision::Intersector;
 use glam::Vec3;
 
@@ -93,6 +93,23 @@ impl Triangle {
     /// Unnormalised geometric normal `e1 × e2` (zero for degenerate triangles).
     pub fn normal(&self) -> Vec3 {
         Vec3::from(self.e1).cross(Vec3::from(self.e2))
+    }
+
+    /// The unit normal along `e1 × e2`, or zero. The length squares the cross product, which
+    /// underflows for edges below about 1e-10 and overflows above about 1e10: triangles 1e-12
+    /// and 1e11 across were hit but had zero normals. There each edge is first scaled by a
+    /// power of two to about unit length, which keeps the direction; elsewhere the plain
+    /// normalisation, bit for bit.
+    pub fn unit_normal(&self) -> Vec3 {
+        let n = self.normal();
+        if n.length_squared().is_normal() {
+            return n.normalize_or_zero();
+        }
+        let scaled = |e: [f32; 3]| {
+            let e = Vec3::from(e);
+            power_of_two_scale(e.abs().max_element()).map_or(e, |s| e * s)
+        };
+        unit(scaled(self.e1).cross(scaled(self.e2))).unwrap_or(Vec3::ZERO)
     }
 
     /// Whether the triangle has no area up to rounding: its largest angle within 2^-21 of a
@@ -368,5 +385,36 @@ impl Sheared {
         let ok = !outside & (det != 0.0) & det.is_finite() & (t >= tmin) & (t < tmax);
         // `u` weighs vertex 1 (`b`) and `v` vertex 2 (`c`), as Möller–Trumbore's.
         (if ok { t } else { f32::INFINITY }, v * inv, w * inv)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One triangle at scales from 1e-30 to 1e18: the unit normal of the triangle at unit
+    /// scale, (2, 3, 6) / 7 for this one, whatever the scale; at unit scale the plain
+    /// normalisation's bits.
+    #[test]
+    fn unit_normals_at_any_scale() {
+        let (a, b, c) = (
+            Vec3::ZERO,
+            Vec3::new(3.0, 0.0, -1.0),
+            Vec3::new(0.0, 2.0, -1.0),
+        );
+        let want = Vec3::new(2.0, 3.0, 6.0) / 7.0;
+        let wrong: Vec<_> = [1e-30f32, 1e-12, 1e-6, 1.0, 1e11, 1e18]
+            .into_iter()
+            .map(|s| {
+                (
+                    s,
+                    Triangle::from_vertices(a * s, b * s, c * s).unit_normal(),
+                )
+            })
+            .filter(|(_, n)| (*n - want).length() >= 1e-6)
+            .collect();
+        assert!(wrong.is_empty(), "(scale, normal): {wrong:?}");
+        let t = Triangle::from_vertices(a, b, c);
+        assert_eq!(t.unit_normal(), t.normal().normalize_or_zero());
     }
 }
