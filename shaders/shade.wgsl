@@ -74,12 +74,32 @@ fn box_on_surface(b: Aabb, p: vec3<f32>) -> vec3<f32> {
     return q;
 }
 
+// `Triangle::unit_normal`: e1 × e2 normalised. Where its square leaves the normal range (edges
+// below about 1e-10 or above about 1e10) each edge is first scaled by a power of two, which
+// keeps the direction, and the product divided by its largest component (`geometry::unit`).
+fn triangle_normal(t: Triangle) -> vec3<f32> {
+    let n = cross(v3(t.e1), v3(t.e2));
+    let l2 = bitcast<u32>(dot(n, n)) & 0x7fffffffu;
+    if (l2 >= 0x00800000u && l2 < 0x7f800000u) { return normalize_or_zero(n); }
+    let m = cross(scaled_edge(v3(t.e1)), scaled_edge(v3(t.e2)));
+    let k = max3(abs(m));
+    if (!(k > 0.0) || (bitcast<u32>(k) & 0x7fffffffu) >= 0x7f800000u) { return vec3<f32>(0.0); }
+    return normalize_or_zero(m / k);
+}
+
+// An edge scaled by the power of two that brings its largest component near 1 (kept as it is
+// where there is none: a zero edge).
+fn scaled_edge(e: vec3<f32>) -> vec3<f32> {
+    let s = pow2_scale(max3(abs(e)));
+    return e * select(1.0, s, s > 0.0);
+}
+
 // `PrimitiveSet::normal`: geometric normal at p, not oriented towards the ray.
 fn prim_normal(i: u32, p: vec3<f32>) -> vec3<f32> {
     let nb = n_bounded();
     if (i >= nb) { return normalize_or_zero(v3(planes[i - nb].normal)); }
     var k = i;
-    if (k < params.n_tri) { let t = triangles[k]; return normalize_or_zero(cross(v3(t.e1), v3(t.e2))); }
+    if (k < params.n_tri) { return triangle_normal(triangles[k]); }
     k -= params.n_tri;
     if (k < params.n_sph) { return normalize_or_zero(p - v3(spheres[k].center)); }
     k -= params.n_sph;
