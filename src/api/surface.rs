@@ -45,10 +45,10 @@ const NO_SURFACE: rt2_surface = rt2_surface {
 /// returns such a hit), NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`,
 /// or a bad handle; INVALID_OPERATION for a scene never committed or edited since its commit.
 /// `count = 0` with NULL arrays is fine (the scene is still checked, as `rt2_intersect`
-/// does). Runs on the calling thread under the scene's read lock, like a query. The first
-/// call that names a primitive builds the lookup of `rt2_query_options.exclude` (4 bytes per
-/// primitive, kept until a commit places the objects again: `bytes_prim_lookup`); nothing
-/// else is allocated.
+/// does). Runs on the calling thread under the scene's read lock, like a query, and allocates
+/// nothing but the lookup of `rt2_query_options.exclude`: the first call that names a
+/// primitive builds it under the write lock (4 bytes per primitive, kept until a commit
+/// places the objects again: `bytes_prim_lookup`).
 ///
 /// # Safety
 /// `scene` is a live scene; `rays`, `hits` and `surfaces` hold `count` elements (may be NULL
