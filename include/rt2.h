@@ -1152,7 +1152,8 @@ const char *rt2_last_error_message(void);
  * `RT2_INVALID_ID`, not an error.
  *
  * Every entry is checked before anything is written; on any error `surfaces` is untouched:
- * INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks, a hit
+ * INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks (a
+ * disabled object's too), a hit
  * with a non-finite `t`, `u` or `v` or a ray with a non-finite `org` or `dir` (a query never
  * returns such a hit), NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`,
  * or a bad handle; INVALID_OPERATION for a scene never committed or edited since its commit.

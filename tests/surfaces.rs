@@ -747,3 +747,46 @@ fn a_scene_never_committed_is_refused() {
         assert!(last_error().contains("never committed"), "{}", last_error());
     }
 }
+
+/// A hit on an object disabled since (`rt2_scene_set_enabled` + commit) is no hit of the
+/// current commit: refused, naming the object, and nothing written. Enabled again, the same
+/// hits give the same surfaces as before.
+#[test]
+fn hits_on_a_disabled_object_are_refused_until_it_is_enabled_again() {
+    let mut scene = Scene::new();
+    scene.add(tetrahedron(), Affine3A::IDENTITY);
+    let sphere = scene.add(
+        Shape::Sphere(DVec3::new(3.0, 0.0, 0.0), 1.0),
+        Affine3A::IDENTITY,
+    );
+    scene.commit();
+    let all = rays(Vec3::new(3.0, 0.0, 0.0), 6.0, 0.5, 32);
+    let (rays, hits): (Vec<rt2_ray>, Vec<rt2_hit>) = all
+        .iter()
+        .zip(scene.intersect(&all))
+        .filter(|(_, h)| h.object == sphere)
+        .unzip();
+    assert!(rays.len() >= 16, "{} of 32 rays hit the sphere", rays.len());
+    let (st, before) = scene.surfaces(&rays, &hits);
+    assert_eq!(st, Rt2Status::Ok, "{}", last_error());
+    assert_eq!(check(&scene, &rays, &hits, &before), rays.len());
+    let enable = |on: u32| unsafe {
+        ok(rt2_scene_set_enabled(scene.scene, sphere, on));
+        scene.commit();
+    };
+    enable(0);
+    let (st, out) = scene.surfaces(&rays, &hits);
+    let message = last_error();
+    assert_eq!(st, Rt2Status::InvalidArgument, "{message}");
+    assert!(
+        message.contains(&format!(
+            "hits[0] names object {sphere} primitive 0, whose object is disabled"
+        )),
+        "{message}"
+    );
+    assert!(out.iter().all(|s| *s == SENTINEL), "written: {out:?}");
+    enable(1);
+    let (st, after) = scene.surfaces(&rays, &hits);
+    assert_eq!(st, Rt2Status::Ok, "{}", last_error());
+    assert_eq!(after, before);
+}

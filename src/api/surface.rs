@@ -6,7 +6,7 @@ use super::ffi::{check_disjoint, guard, handle, slice, slice_mut};
 use super::query::{named_prim, rt2_hit, rt2_ray, RT2_INVALID_ID};
 use super::scene::rt2_scene;
 use crate::error::{Error, Result, Rt2Status};
-use crate::geometry::{Hit, Ray};
+use crate::geometry::{Hit, Ray, INVALID};
 use crate::scene::{Committed, PrimLookup};
 
 /// The surface at one hit, in world space (28 bytes).
@@ -40,7 +40,8 @@ const NO_SURFACE: rt2_surface = rt2_surface {
 /// `RT2_INVALID_ID`, not an error.
 ///
 /// Every entry is checked before anything is written; on any error `surfaces` is untouched:
-/// INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks, a hit
+/// INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks (a
+/// disabled object's too), a hit
 /// with a non-finite `t`, `u` or `v` or a ray with a non-finite `org` or `dir` (a query never
 /// returns such a hit), NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`,
 /// or a bad handle; INVALID_OPERATION for a scene never committed or edited since its commit.
@@ -106,6 +107,13 @@ fn library_hit(
         return Ok(None);
     }
     let prim = named_prim(lookup, "hits", i, h)?;
+    if prim == INVALID {
+        return Err(Error::invalid_argument(format!(
+            "hits[{i}] names object {} primitive {}, whose object is disabled in the committed \
+             scene (rt2_scene_set_enabled): no query of this commit hits it",
+            h.object, h.prim
+        )));
+    }
     if ![h.t, h.u, h.v].iter().all(|x| x.is_finite()) {
         return Err(Error::invalid_argument(format!(
             "hits[{i}] has t = {:?}, u = {:?}, v = {:?}: a hit has finite ones",
