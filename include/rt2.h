@@ -881,6 +881,8 @@ struct rt2_query_options rt2_query_options_default(void);
  * backend failed part-way (internal error, GPU lost or out of memory), which leaves the
  * earlier steps' hits written.
  *
+ * `hits` overlapping `rays` is an INVALID_ARGUMENT (`opt->exclude` may be `hits` itself).
+ *
  * # Safety
  * Handles are live; `rays` and `hits` hold `count` elements (may be NULL when count is 0).
  */
@@ -894,7 +896,8 @@ enum rt2_status rt2_intersect(const rt2_context *ctx,
 
 /**
  * Any-hit queries: `occluded[i]` becomes 1 when something lies in ray i's `[tmin, tmax)`,
- * else 0 (shadow rays). Failures leave `occluded` as `rt2_intersect` leaves `hits`.
+ * else 0 (shadow rays). Failures leave `occluded` as `rt2_intersect` leaves `hits`;
+ * `occluded` overlapping `rays` is an INVALID_ARGUMENT.
  *
  * # Safety
  * Handles are live; `rays` and `occluded` hold `count` elements (may be NULL when count is 0).

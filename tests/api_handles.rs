@@ -356,3 +356,62 @@ fn objects_beyond_the_f32_range_are_errors_and_extreme_valid_ones_are_hit() {
         rt2_context_destroy(ctx);
     }
 }
+
+/// Outputs of the queries may not overlap their rays: the hits are written while the rays are
+/// read, one step at a time (and Rust may not read what it writes through another borrow).
+/// Such a call is an error naming both arrays, and neither is written.
+#[test]
+fn query_outputs_overlapping_their_rays_are_errors() {
+    unsafe {
+        let mut desc = rt2_context_desc_default();
+        desc.backend = 1;
+        let (mut ctx, mut scene) = (null_mut(), null_mut());
+        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let c = [0.0f32; 3];
+        assert_eq!(
+            rt2_scene_add_sphere(scene, c.as_ptr(), 1.0, 0, null_mut()),
+            Rt2Status::Ok
+        );
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        let ray = rt2_ray {
+            org: [0.0, 0.0, 5.0],
+            tmin: 0.0,
+            dir: [0.0, 0.0, -1.0],
+            tmax: f32::INFINITY,
+        };
+        let mut rays = [ray; 4];
+        let base = rays.as_mut_ptr();
+        let expect_overlap = |status: Rt2Status, out: &str| {
+            assert_eq!(status, Rt2Status::InvalidArgument, "{out}");
+            let e = last_error();
+            assert!(e.contains(&format!("{out} overlaps rays")), "{out}: {e}");
+        };
+        // The hits over the rays themselves, and from the last ray on (the arrays share 12 bytes).
+        for hits in [base.cast::<rt2_hit>(), base.add(3).cast::<rt2_hit>()] {
+            let st = rt2_intersect(ctx, scene, base, 4, hits, null(), null_mut());
+            expect_overlap(st, "hits");
+        }
+        let st = rt2_occluded(ctx, scene, base, 4, base.add(1).cast(), null(), null_mut());
+        expect_overlap(st, "occluded");
+        assert!(rays
+            .iter()
+            .all(|r| r.org == ray.org && r.dir == ray.dir && r.tmax == ray.tmax));
+        // Right after the rays (no byte shared) is fine.
+        let mut both = vec![0u64; (4 * std::mem::size_of::<rt2_ray>() + 4 * 20) / 8];
+        let rays_at = both.as_mut_ptr().cast::<rt2_ray>();
+        for k in 0..4 {
+            rays_at.add(k).write(ray);
+        }
+        let hits_at = rays_at.add(4).cast::<rt2_hit>();
+        assert_eq!(
+            rt2_intersect(ctx, scene, rays_at, 4, hits_at, null(), null_mut()),
+            Rt2Status::Ok,
+            "{}",
+            last_error()
+        );
+        assert!((0..4).all(|k| (*hits_at.add(k)).t == 4.0));
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}

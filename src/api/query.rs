@@ -3,7 +3,8 @@
 
 use super::context::rt2_context;
 use super::ffi::{
-    check_out, guard, handle, read_versioned, slice, slice_mut, versioned, write_out,
+    check_disjoint, check_out, guard, handle, read_versioned, slice, slice_mut, versioned,
+    write_out,
 };
 use super::options::{
     intersector_from, intersector_to, query_mode_from, traversal_from, Rt2QueryMode,
@@ -222,6 +223,8 @@ unsafe fn run_query<T>(
         // The outputs checked now (NULL, size, alignment), the hits borrowed below once the
         // exclusions are read.
         slice_mut(out, count, out_name)?;
+        // The hits are written while the rays are read (one step at a time).
+        check_disjoint((out, count, out_name), (rays.as_ptr(), count, "rays"))?;
         if !stats.is_null() {
             check_out(stats, "stats")?;
         }
@@ -293,6 +296,8 @@ unsafe fn run_query<T>(
 /// backend failed part-way (internal error, GPU lost or out of memory), which leaves the
 /// earlier steps' hits written.
 ///
+/// `hits` overlapping `rays` is an INVALID_ARGUMENT (`opt->exclude` may be `hits` itself).
+///
 /// # Safety
 /// Handles are live; `rays` and `hits` hold `count` elements (may be NULL when count is 0).
 #[no_mangle]
@@ -347,7 +352,8 @@ pub unsafe extern "C" fn rt2_intersect(
 }
 
 /// Any-hit queries: `occluded[i]` becomes 1 when something lies in ray i's `[tmin, tmax)`,
-/// else 0 (shadow rays). Failures leave `occluded` as `rt2_intersect` leaves `hits`.
+/// else 0 (shadow rays). Failures leave `occluded` as `rt2_intersect` leaves `hits`;
+/// `occluded` overlapping `rays` is an INVALID_ARGUMENT.
 ///
 /// # Safety
 /// Handles are live; `rays` and `occluded` hold `count` elements (may be NULL when count is 0).
