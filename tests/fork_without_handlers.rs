@@ -1,0 +1,63 @@
+//! A child made by glibc's `_Fork` (2.34, POSIX.1-2024: a fork that runs no `pthread_atfork`
+//! handler, async-signal-safe) is a forked child like any other: its calls on the parent's
+//! handles are refused, not run on worker threads that do not exist (a hang). One test alone
+//! in its binary, as in `fork.rs`.
+
+#![cfg(all(target_os = "linux", target_env = "gnu"))]
+
+use rt2::api::*;
+use rt2::error::Rt2Status;
+use std::ptr::null_mut;
+
+#[test]
+fn a_child_of_fork_without_handlers_is_refused_the_parents_scene() {
+    // Looked up, not linked: a glibc before 2.34 lacks it, and the test is then moot.
+    let f = unsafe { libc::dlsym(libc::RTLD_DEFAULT, c"_Fork".as_ptr()) };
+    if f.is_null() {
+        eprintln!("no _Fork in this libc: skipped");
+        return;
+    }
+    let fork_without_handlers: unsafe extern "C" fn() -> libc::pid_t =
+        unsafe { std::mem::transmute(f) };
+    unsafe {
+        let mut desc = rt2_context_desc_default();
+        desc.backend = 1;
+        desc.threads = 2;
+        let (mut ctx, mut scene) = (null_mut(), null_mut());
+        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let centre = [0.0f32; 3];
+        let add = |c: &[f32; 3]| rt2_scene_add_sphere(scene, c.as_ptr(), 1.0, 0, null_mut());
+        assert_eq!(add(&centre), Rt2Status::Ok);
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+
+        let pid = fork_without_handlers();
+        assert!(pid >= 0, "_Fork failed");
+        if pid == 0 {
+            libc::alarm(20);
+            // An edit and a commit would run on the parent's workers.
+            let added = add(&[3.0, 0.0, 0.0]);
+            let commit = rt2_scene_commit(scene);
+            rt2_scene_destroy(scene);
+            rt2_context_destroy(ctx);
+            let refused = Rt2Status::InvalidOperation;
+            libc::_exit((added != refused) as i32 | ((commit != refused) as i32) << 1);
+        }
+        let mut status = 0;
+        assert_eq!(libc::waitpid(pid, &mut status, 0), pid);
+        assert!(
+            libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0,
+            "the child {}",
+            if libc::WIFEXITED(status) {
+                format!(
+                    "was not refused: {:#b} (1: add, 2: commit)",
+                    libc::WEXITSTATUS(status)
+                )
+            } else {
+                format!("died of signal {} (14: hung)", libc::WTERMSIG(status))
+            }
+        );
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
