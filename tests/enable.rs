@@ -2,7 +2,10 @@
 //! objects (the independent reference: what a user had to do before). A disabled object is
 //! missed by every query mode, traversal and intersector, casts no shadow, keeps every id as
 //! it was, and is hit again exactly as before once enabled; an unknown id changes nothing;
-//! setting an object's own state again leaves the scene committed.
+//! setting an object's own state again leaves the scene committed. Every subset of six objects
+//! of every kind, disabled one toggle per commit (a Gray code), traces and renders bit for bit
+//! as a scene built from the enabled objects alone (CPU, and both GPU render paths), also
+//! with mirrored meshes and while another thread queries.
 
 use rt2::api::*;
 use rt2::error::Rt2Status;
@@ -610,6 +613,345 @@ fn a_disabled_object_can_be_moved() {
     unsafe {
         rt2_scene_destroy(scene);
         rt2_scene_destroy(moved);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// Every subset of the six objects disabled (64), in one scene edited from subset to subset:
+/// hits and occlusion under every query option, and renders in both schedules and the three
+/// offset modes, equal those of a scene built from the enabled objects alone.
+#[test]
+fn every_subset_traces_and_renders_as_a_scene_without_it() {
+    subsets(
+        Rt2Backend::Cpu,
+        &query_options(),
+        &[
+            (0, 0, 0, 0),
+            (1, 0, 1, 0),
+            (0, 1, 1, 0),
+            (0, 2, 0, 0),
+            (1, 2, 1, 0),
+        ],
+        1,
+    );
+}
+
+/// The same on the GPU: GPU queries of every traversal, with and without exclusions of hits,
+/// and renders of both paths. Without an adapter it prints SKIPPED and passes, unless
+/// `RT2_REQUIRE_GPU=1` (CI runs it on lavapipe).
+#[test]
+fn every_subset_on_the_gpu() {
+    let mut desc = rt2_context_desc_default();
+    desc.backend = Rt2Backend::Gpu as u32;
+    let mut probe = null_mut();
+    if unsafe { rt2_context_create(&desc, &mut probe) } != Rt2Status::Ok {
+        let why = last_error();
+        assert!(
+            std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
+            "RT2_REQUIRE_GPU=1 but no GPU: {why}"
+        );
+        eprintln!("SKIPPED (no GPU adapter): {why}");
+        return;
+    }
+    unsafe { rt2_context_destroy(probe) };
+    let mut opts = Vec::new();
+    for traversal in 0..=7 {
+        let mut o = rt2_query_options_default();
+        o.traversal = traversal;
+        opts.push(o);
+    }
+    subsets(
+        Rt2Backend::Gpu,
+        &opts,
+        &[
+            (0, 0, 0, 1),
+            (0, 2, 1, 1),
+            (0, 0, 0, 2),
+            (0, 2, 1, 2),
+            (0, 1, 0, 2),
+        ],
+        3,
+    );
+}
+
+fn subsets(
+    backend: Rt2Backend,
+    opts: &[rt2_query_options],
+    renders: &[(u32, u32, u32, u32)],
+    step: u32,
+) {
+    let ctx = context(backend);
+    let objs = objects();
+    let scene = unsafe {
+        let mut scene = null_mut();
+        ok(rt2_scene_create(ctx, &mut scene), "scene");
+        let mut red = rt2_material_default();
+        red.color = [0.9, 0.2, 0.2];
+        red.transparency = 0.3;
+        let mut m = 0;
+        ok(rt2_scene_add_material(scene, &red, &mut m), "material");
+        for (i, o) in objs.iter().enumerate() {
+            add(scene, o, if i % 2 == 0 { m } else { 0 });
+        }
+        let light = [0.5f32, 3.0, 9.0];
+        let white = [1.0f32; 3];
+        ok(
+            rt2_scene_add_point_light(scene, light.as_ptr(), white.as_ptr(), 1.0, null_mut()),
+            "light",
+        );
+        ok(rt2_scene_commit(scene), "commit");
+        scene
+    };
+    let rays = rays();
+    let mut enabled = vec![true; objs.len()];
+    // Gray-code order: one object toggles per step, so that every edit is a single toggle.
+    for k in (1..=64u32).step_by(step as usize) {
+        let g = (k % 64) ^ ((k % 64) >> 1);
+        let off: Vec<u32> = (0..6).filter(|i| g & (1 << i) != 0).collect();
+        unsafe {
+            for i in 0..6u32 {
+                let want = !off.contains(&i);
+                if enabled[i as usize] != want {
+                    ok(rt2_scene_set_enabled(scene, i, want as u32), "toggle");
+                    enabled[i as usize] = want;
+                }
+            }
+            ok(rt2_scene_commit(scene), "commit");
+        }
+        let (kept, ids) = without(&objs, &off);
+        let reference = unsafe {
+            let mut r = null_mut();
+            ok(rt2_scene_create(ctx, &mut r), "scene");
+            let mut red = rt2_material_default();
+            red.color = [0.9, 0.2, 0.2];
+            red.transparency = 0.3;
+            let mut m = 0;
+            ok(rt2_scene_add_material(r, &red, &mut m), "material");
+            for (o, &id) in kept.iter().zip(&ids) {
+                add(r, o, if id % 2 == 0 { m } else { 0 });
+            }
+            let light = [0.5f32, 3.0, 9.0];
+            let white = [1.0f32; 3];
+            ok(
+                rt2_scene_add_point_light(r, light.as_ptr(), white.as_ptr(), 1.0, null_mut()),
+                "light",
+            );
+            ok(rt2_scene_commit(r), "commit");
+            r
+        };
+        for opt in opts {
+            let (hits, occ) = trace(ctx, scene, &rays, opt);
+            let (want, want_occ) = trace(ctx, reference, &rays, opt);
+            let what = format!("{off:?} disabled, {}", name(opt));
+            same_trace(
+                &(hits.clone(), occ),
+                &(renamed(want.clone(), &ids), want_occ),
+                &what,
+            );
+            // Excluding the hits found (each ray its own), and a disabled object's primitive.
+            let mut o2 = *opt;
+            o2.exclude = hits.as_ptr();
+            let (h2, _) = trace(ctx, scene, &rays, &o2);
+            let mut o3 = *opt;
+            o3.exclude = want.as_ptr();
+            let (w2, _) = trace(ctx, reference, &rays, &o3);
+            same(
+                &h2,
+                &renamed(w2, &ids),
+                &format!("{what}, excluding the first hits"),
+            );
+            if let Some(&d) = off.first() {
+                let ex: Vec<rt2_hit> = (0..rays.len())
+                    .map(|i| rt2_hit {
+                        object: d,
+                        prim: if d == 0 {
+                            (i % 288) as u32
+                        } else if d == 5 {
+                            (i % 18) as u32
+                        } else {
+                            0
+                        },
+                        ..MISS
+                    })
+                    .collect();
+                let mut o4 = *opt;
+                o4.exclude = ex.as_ptr();
+                same_trace(
+                    &trace(ctx, scene, &rays, &o4),
+                    &(
+                        renamed(want.clone(), &ids),
+                        trace(ctx, reference, &rays, opt).1,
+                    ),
+                    &format!("{what}, excluding a disabled object's primitives"),
+                );
+            }
+        }
+        for &(schedule, offset_mode, transparency, gpu_path) in renders {
+            let mut opt = rt2_render_options_default();
+            opt.gpu_path = gpu_path;
+            opt.schedule = schedule;
+            opt.offset_mode = offset_mode;
+            opt.transparency = transparency;
+            same(
+                &render(ctx, scene, &opt),
+                &render(ctx, reference, &opt),
+                &format!(
+                    "{off:?} disabled, render {schedule} {offset_mode} {transparency} {gpu_path}"
+                ),
+            );
+        }
+        unsafe { rt2_scene_destroy(reference) };
+    }
+    unsafe {
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// One thread toggles the sphere (object 1) and commits, another queries with exclusions
+/// naming the sphere and the first mesh's triangles: each query is refused as raced
+/// (INVALID_OPERATION) or stale, or gives the hits of one of the two states exactly.
+#[test]
+fn toggling_while_another_thread_queries_with_exclusions() {
+    #[derive(Clone, Copy)]
+    struct P(*mut rt2_context, *mut rt2_scene);
+    unsafe impl Send for P {}
+    let ctx = context(Rt2Backend::Cpu);
+    let objs = objects();
+    let scene = unsafe {
+        let mut scene = null_mut();
+        ok(rt2_scene_create(ctx, &mut scene), "scene");
+        for o in &objs {
+            add(scene, o, 0);
+        }
+        ok(rt2_scene_commit(scene), "commit");
+        scene
+    };
+    let rays = rays();
+    let exclude: Vec<rt2_hit> = (0..rays.len())
+        .map(|i| rt2_hit {
+            object: (i % 2) as u32,
+            prim: if i % 2 == 0 { (i % 288) as u32 } else { 0 },
+            ..MISS
+        })
+        .collect();
+    let mut opt = rt2_query_options_default();
+    opt.exclude = exclude.as_ptr();
+    let enabled = trace(ctx, scene, &rays, &opt).0;
+    unsafe {
+        ok(rt2_scene_set_enabled(scene, 1, 0), "disable");
+        ok(rt2_scene_commit(scene), "commit");
+    }
+    let disabled = trace(ctx, scene, &rays, &opt).0;
+    assert!(enabled != disabled);
+    let p = P(ctx, scene);
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let s2 = stop.clone();
+    let toggler = std::thread::spawn(move || {
+        let p = p;
+        let mut n = 0u32;
+        while !s2.load(std::sync::atomic::Ordering::Relaxed) {
+            unsafe {
+                ok(rt2_scene_set_enabled(p.1, 1, n % 2), "toggle");
+                ok(rt2_scene_commit(p.1), "commit");
+            }
+            n += 1;
+        }
+        n
+    });
+    let (mut good, mut refused) = (0, 0);
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(3);
+    while std::time::Instant::now() < deadline {
+        let mut hits = vec![MISS; rays.len()];
+        let st = unsafe {
+            rt2_intersect(
+                p.0,
+                p.1,
+                rays.as_ptr(),
+                rays.len(),
+                hits.as_mut_ptr(),
+                &opt,
+                null_mut(),
+            )
+        };
+        match st {
+            Rt2Status::Ok => {
+                assert!(hits == enabled || hits == disabled, "a mixed result");
+                good += 1;
+            }
+            Rt2Status::InvalidOperation => refused += 1,
+            other => panic!("{other:?}: {}", last_error()),
+        }
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let toggles = toggler.join().unwrap();
+    eprintln!("{good} queries answered, {refused} refused, {toggles} toggles");
+    assert!(good > 0);
+    unsafe {
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// Mirrored meshes (objects 0 and 5; hits report `u`, `v` swapped back by object id, and the
+/// watertight test looks their exact corners up by placement order) with every subset
+/// disabled: the hits, `u` and `v` included, of a scene built from the enabled objects.
+#[test]
+fn mirrored_meshes_with_every_subset_disabled() {
+    let ctx = context(Rt2Backend::Cpu);
+    let objs = objects();
+    let mirror: [f32; 12] = [-1.0, 0.0, 0.0, 0.1, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let tilt: [f32; 12] = [1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.2, 0.0, 0.0, 1.0, 0.3];
+    let transform = |scene: *mut rt2_scene, id: u32, orig: u32| unsafe {
+        match orig {
+            0 => ok(
+                rt2_scene_set_transform(scene, id, mirror.as_ptr()),
+                "mirror",
+            ),
+            5 => ok(rt2_scene_set_transform(scene, id, tilt.as_ptr()), "tilt"),
+            _ => {}
+        }
+    };
+    let build = |objs: &[Obj], ids: &[u32]| unsafe {
+        let mut s = null_mut();
+        ok(rt2_scene_create(ctx, &mut s), "scene");
+        for (k, (o, &orig)) in objs.iter().zip(ids).enumerate() {
+            add(s, o, 0);
+            transform(s, k as u32, orig);
+        }
+        ok(rt2_scene_commit(s), "commit");
+        s
+    };
+    let all: Vec<u32> = (0..6).collect();
+    let scene = build(&objs, &all);
+    let rays = rays();
+    let opts = query_options();
+    let mut checked = 0;
+    for g in 1..64u32 {
+        let off: Vec<u32> = (0..6).filter(|i| g & (1 << i) != 0).collect();
+        unsafe {
+            for i in 0..6u32 {
+                ok(
+                    rt2_scene_set_enabled(scene, i, !off.contains(&i) as u32),
+                    "set",
+                );
+            }
+            ok(rt2_scene_commit(scene), "commit");
+        }
+        let (kept, ids) = without(&objs, &off);
+        let reference = build(&kept, &ids);
+        for opt in &opts {
+            let (hits, occ) = trace(ctx, scene, &rays, opt);
+            let (want, want_occ) = trace(ctx, reference, &rays, opt);
+            let what = format!("{off:?} disabled, {}", name(opt));
+            same_trace(&(hits, occ), &(renamed(want, &ids), want_occ), &what);
+            checked += 1;
+        }
+        unsafe { rt2_scene_destroy(reference) };
+    }
+    eprintln!("{checked} comparisons of {} rays", rays.len());
+    unsafe {
+        rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);
     }
 }
