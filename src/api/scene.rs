@@ -410,8 +410,9 @@ pub unsafe extern "C" fn rt2_scene_set_transform(
 /// as they were; it keeps its shape, material and transform (`rt2_scene_set_transform` still
 /// applies to it), and once enabled and committed again it is hit exactly as before. An
 /// `rt2_query_options.exclude` entry may name its primitives: they are still the scene's, and
-/// exclude nothing. `rt2_scene_stats` counts it in `object_count` and its primitives nowhere. A
-/// scene whose objects are all disabled traces as an empty one (every ray misses).
+/// exclude nothing. `rt2_scene_stats` counts it in `object_count`, and its primitives in
+/// `bytes_prim_lookup` only (not in the primitive counts, the tree or its bytes). A scene whose
+/// objects are all disabled traces as an empty one (every ray misses).
 ///
 /// Setting the state the object already has changes nothing: the scene stays committed if it
 /// was, and the next commit keeps the tree. INVALID_ARGUMENT (and nothing changed) for an
