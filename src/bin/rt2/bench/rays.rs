@@ -154,11 +154,19 @@ fn c_call_per_ray(model: &Path, rays: &[Ray], runs: usize) -> Result<f64> {
             }
             let opts = rt2_query_options_default();
             let mut hit = std::mem::zeroed::<rt2_hit>();
+            // A failed call would be timed as a traced ray: the last failure is reported.
+            let mut status = Rt2Status::Ok;
             let ms = time_ms(runs, || {
                 for r in &c_rays {
-                    rt2_intersect(ctx, scene, r, 1, &mut hit, &opts, std::ptr::null_mut());
+                    let s = rt2_intersect(ctx, scene, r, 1, &mut hit, &opts, std::ptr::null_mut());
+                    if s != Rt2Status::Ok {
+                        status = s;
+                    }
                 }
             });
+            if status != Rt2Status::Ok {
+                return Err(fail("rt2_intersect", status));
+            }
             Ok(c_rays.len() as f64 / ms / 1e3)
         };
         let mrays = traced();
