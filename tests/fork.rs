@@ -13,6 +13,8 @@ use rt2::error::Rt2Status;
 use std::ffi::CStr;
 use std::ptr::{null, null_mut};
 
+mod support;
+
 fn last_error() -> String {
     unsafe { CStr::from_ptr(rt2_last_error_message()) }
         .to_string_lossy()
@@ -66,23 +68,11 @@ fn a_forked_child_is_refused_the_parents_context_and_makes_its_own() {
             rt2_context_destroy(ctx);
             libc::_exit(failed);
         }
-        let mut status = 0;
-        assert_eq!(libc::waitpid(pid, &mut status, 0), pid);
-        assert!(
-            libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0,
-            "the child {}",
-            if libc::WIFEXITED(status) {
-                format!(
-                    "failed checks {:#b} (1: commit, 2: render refused; 4: own context)",
-                    libc::WEXITSTATUS(status)
-                )
-            } else {
-                format!(
-                    "was killed by signal {} (20 s alarm: a hang)",
-                    libc::WTERMSIG(status)
-                )
-            }
-        );
+        if let Some(failure) =
+            support::child_failure(pid, "1: commit, 2: render refused; 4: own context")
+        {
+            panic!("the child {failure}");
+        }
         // The parent's handles are untouched by the child.
         assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok, "{}", last_error());
         assert_eq!(rt2_render(ctx, scene, camera, null(), frame), Rt2Status::Ok);

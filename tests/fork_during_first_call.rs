@@ -13,6 +13,8 @@ use rt2::error::Rt2Status;
 use std::ptr::null_mut;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+mod support;
+
 unsafe fn cpu_context() -> (Rt2Status, *mut rt2_context) {
     let mut desc = rt2_context_desc_default();
     desc.backend = 1;
@@ -47,9 +49,7 @@ fn round() -> usize {
     }
     let mut bad = (first.join().unwrap() != Rt2Status::Ok) as usize;
     for &pid in &children {
-        let mut status = 0;
-        assert_eq!(unsafe { libc::waitpid(pid, &mut status, 0) }, pid);
-        bad += !(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0) as usize;
+        bad += support::child_failure(pid, "1: no context").is_some() as usize;
     }
     bad
 }
@@ -65,16 +65,8 @@ fn children_forked_during_the_first_context_make_their_own() {
             let bad = std::panic::catch_unwind(round).unwrap_or(255);
             unsafe { libc::_exit(bad.min(255) as i32) };
         }
-        let mut status = 0;
-        assert_eq!(unsafe { libc::waitpid(pid, &mut status, 0) }, pid);
-        assert!(
-            libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0,
-            "round {r}: {} children hung or failed to make a context (status {status:#x})",
-            if libc::WIFEXITED(status) {
-                libc::WEXITSTATUS(status)
-            } else {
-                -1
-            }
-        );
+        if let Some(failure) = support::child_failure(pid, "children hung or without a context") {
+            panic!("round {r}: the round {failure}");
+        }
     }
 }

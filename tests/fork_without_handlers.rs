@@ -9,6 +9,8 @@ use rt2::api::*;
 use rt2::error::Rt2Status;
 use std::ptr::null_mut;
 
+mod support;
+
 #[test]
 fn a_child_of_fork_without_handlers_is_refused_the_parents_scene() {
     // Looked up, not linked: a glibc before 2.34 lacks it, and the test is then moot.
@@ -43,20 +45,9 @@ fn a_child_of_fork_without_handlers_is_refused_the_parents_scene() {
             let refused = Rt2Status::InvalidOperation;
             libc::_exit((added != refused) as i32 | ((commit != refused) as i32) << 1);
         }
-        let mut status = 0;
-        assert_eq!(libc::waitpid(pid, &mut status, 0), pid);
-        assert!(
-            libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0,
-            "the child {}",
-            if libc::WIFEXITED(status) {
-                format!(
-                    "was not refused: {:#b} (1: add, 2: commit)",
-                    libc::WEXITSTATUS(status)
-                )
-            } else {
-                format!("died of signal {} (14: hung)", libc::WTERMSIG(status))
-            }
-        );
+        if let Some(failure) = support::child_failure(pid, "1: add, 2: commit not refused") {
+            panic!("the child {failure}");
+        }
         rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);
     }

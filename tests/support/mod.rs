@@ -1,6 +1,7 @@
 //! Shared by the integration tests: for those that compile C against `include/rt2.h` or load
 //! the built shared library, where the library is and a `cc` compiler configured outside
-//! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`.
+//! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`; the
+//! fork tests' wait for a child.
 
 #![allow(dead_code)]
 
@@ -122,4 +123,26 @@ pub fn status_mib(field: &str) -> f64 {
         .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
         .unwrap_or_else(|| panic!("{field} in /proc/self/status"));
     kib / 1024.0
+}
+
+/// Waits for the forked child `pid`: `None` if it exited with status 0, else how it failed:
+/// its exit status, also in binary (`meaning` says what it counts or what each bit means), or
+/// the signal that killed it (14, the child's alarm: a hang).
+#[cfg(unix)]
+pub fn child_failure(pid: i32, meaning: &str) -> Option<String> {
+    let mut status = 0;
+    assert_eq!(
+        unsafe { libc::waitpid(pid, &mut status, 0) },
+        pid,
+        "waitpid"
+    );
+    if libc::WIFEXITED(status) {
+        let code = libc::WEXITSTATUS(status);
+        (code != 0).then(|| format!("exited with status {code} = {code:#b} ({meaning})"))
+    } else {
+        Some(format!(
+            "was killed by signal {} (14, its alarm: a hang)",
+            libc::WTERMSIG(status)
+        ))
+    }
 }
