@@ -7,6 +7,8 @@ use rt2::error::Rt2Status;
 use std::ffi::CStr;
 use std::ptr::{null, null_mut};
 
+mod support;
+
 fn last_error() -> String {
     unsafe { CStr::from_ptr(rt2_last_error_message()) }
         .to_string_lossy()
@@ -44,22 +46,6 @@ fn null_handles_and_outputs_are_errors_and_destroy_null_is_a_no_op() {
     }
 }
 
-/// A CPU context and a committed scene of a unit sphere at the origin.
-unsafe fn unit_sphere() -> (*mut rt2_context, *mut rt2_scene) {
-    let mut desc = rt2_context_desc_default();
-    desc.backend = 1;
-    let (mut ctx, mut scene) = (null_mut(), null_mut());
-    assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
-    assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
-    let c = [0.0f32; 3];
-    assert_eq!(
-        rt2_scene_add_sphere(scene, c.as_ptr(), 1.0, 0, null_mut()),
-        Rt2Status::Ok
-    );
-    assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
-    (ctx, scene)
-}
-
 /// A C caller may pass any address, e.g. a pointer into a packed byte buffer. Rust may not
 /// read a float, a ray or a handle from a misaligned one (undefined behaviour; an abort in a
 /// build with debug assertions): every such argument is an error naming it, and nothing is
@@ -67,7 +53,7 @@ unsafe fn unit_sphere() -> (*mut rt2_context, *mut rt2_scene) {
 #[test]
 fn misaligned_pointers_are_errors() {
     unsafe {
-        let (ctx, scene) = unit_sphere();
+        let (ctx, scene) = support::c_unit_sphere(0);
         let c = [0.0f32; 3];
         // 64-byte aligned storage, used one byte in.
         let mut buffer = vec![0u64; 64];
@@ -370,7 +356,7 @@ fn objects_beyond_the_f32_range_are_errors_and_extreme_valid_ones_are_hit() {
 #[test]
 fn query_outputs_overlapping_their_rays_are_errors() {
     unsafe {
-        let (ctx, scene) = unit_sphere();
+        let (ctx, scene) = support::c_unit_sphere(0);
         let ray = rt2_ray {
             org: [0.0, 0.0, 5.0],
             tmin: 0.0,

@@ -21,25 +21,10 @@ fn last_error() -> String {
         .into_owned()
 }
 
-/// A CPU context with two workers and a committed scene of one sphere.
-unsafe fn context_and_scene() -> (*mut rt2_context, *mut rt2_scene) {
-    let mut desc = rt2_context_desc_default();
-    desc.backend = 1;
-    desc.threads = 2;
-    let (mut ctx, mut scene) = (null_mut(), null_mut());
-    assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
-    assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
-    let centre = [0.0f32; 3];
-    let status = rt2_scene_add_sphere(scene, centre.as_ptr(), 1.0, 0, null_mut());
-    assert_eq!(status, Rt2Status::Ok);
-    assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
-    (ctx, scene)
-}
-
 #[test]
 fn a_forked_child_is_refused_the_parents_context_and_makes_its_own() {
     unsafe {
-        let (ctx, scene) = context_and_scene();
+        let (ctx, scene) = support::c_unit_sphere(2);
         let (mut camera, mut frame) = (null_mut(), null_mut());
         assert_eq!(rt2_camera_create(&mut camera), Rt2Status::Ok);
         assert_eq!(rt2_frame_create(16, 16, &mut frame), Rt2Status::Ok);
@@ -58,7 +43,7 @@ fn a_forked_child_is_refused_the_parents_context_and_makes_its_own() {
             if rt2_render(ctx, scene, camera, null(), frame) != Rt2Status::InvalidOperation {
                 failed |= 2;
             }
-            let (own_ctx, own_scene) = context_and_scene();
+            let (own_ctx, own_scene) = support::c_unit_sphere(2);
             if rt2_render(own_ctx, own_scene, camera, null(), frame) != Rt2Status::Ok {
                 failed |= 4;
             }

@@ -22,16 +22,8 @@ fn a_child_of_fork_without_handlers_is_refused_the_parents_scene() {
     let fork_without_handlers: unsafe extern "C" fn() -> libc::pid_t =
         unsafe { std::mem::transmute(f) };
     unsafe {
-        let mut desc = rt2_context_desc_default();
-        desc.backend = 1;
-        desc.threads = 2;
-        let (mut ctx, mut scene) = (null_mut(), null_mut());
-        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
-        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
-        let centre = [0.0f32; 3];
+        let (ctx, scene) = support::c_unit_sphere(2);
         let add = |c: &[f32; 3]| rt2_scene_add_sphere(scene, c.as_ptr(), 1.0, 0, null_mut());
-        assert_eq!(add(&centre), Rt2Status::Ok);
-        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
 
         let pid = fork_without_handlers();
         assert!(pid >= 0, "_Fork failed");

@@ -1,7 +1,7 @@
 //! Shared by the integration tests: for those that compile C against `include/rt2.h` or load
 //! the built shared library, where the library is and a `cc` compiler configured outside
 //! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`; the
-//! fork tests' wait for a child.
+//! fork tests' wait for a child; the C API tests' smallest scene.
 
 #![allow(dead_code)]
 
@@ -145,4 +145,27 @@ pub fn child_failure(pid: i32, meaning: &str) -> Option<String> {
             libc::WTERMSIG(status)
         ))
     }
+}
+
+/// A CPU context of `threads` workers (0: one per core) and a committed scene of a unit sphere
+/// at the origin, through the C API.
+///
+/// # Safety
+/// The caller destroys both handles.
+pub unsafe fn c_unit_sphere(
+    threads: u32,
+) -> (*mut rt2::api::rt2_context, *mut rt2::api::rt2_scene) {
+    use rt2::api::*;
+    use rt2::error::Rt2Status;
+    let mut desc = rt2_context_desc_default();
+    desc.backend = 1;
+    desc.threads = threads;
+    let (mut ctx, mut scene) = (std::ptr::null_mut(), std::ptr::null_mut());
+    assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
+    assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+    let centre = [0.0f32; 3];
+    let status = rt2_scene_add_sphere(scene, centre.as_ptr(), 1.0, 0, std::ptr::null_mut());
+    assert_eq!(status, Rt2Status::Ok);
+    assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+    (ctx, scene)
 }
