@@ -189,23 +189,14 @@ const SENTINEL: rt2_surface = rt2_surface {
 /// `n` rays from a sphere of radius `dist` around `target` towards points within `spread` of
 /// it (xorshift, fixed seed).
 fn rays(target: Vec3, dist: f32, spread: f32, n: usize) -> Vec<rt2_ray> {
-    let mut state = 0x2545_f491_4f6c_dd1du64 ^ target.x.to_bits() as u64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    };
-    (0..n)
-        .map(|_| {
-            let from = Vec3::new(next(), next(), next()).normalize_or(Vec3::X) * dist;
-            let to = Vec3::new(next(), next(), next()) * spread;
-            rt2_ray {
-                org: (target + from).to_array(),
-                tmin: 0.0,
-                dir: (to - from).to_array(),
-                tmax: f32::INFINITY,
-            }
+    let seed = 0x2545_f491_4f6c_dd1du64 ^ target.x.to_bits() as u64;
+    support::rays_around(target, dist, spread, n, seed)
+        .into_iter()
+        .map(|(org, dir)| rt2_ray {
+            org: org.to_array(),
+            tmin: 0.0,
+            dir: dir.to_array(),
+            tmax: f32::INFINITY,
         })
         .collect()
 }

@@ -14,6 +14,8 @@ use rt2::error::Rt2Status;
 use rt2::geometry::{Hit, Ray};
 use rt2::scene::{Scene, Shape};
 
+mod support;
+
 /// The object-space hit of a ray `o + t d` (`d` not unit length): `t`, the primitive (the
 /// triangle of a mesh, else 0) and how far the hit is from the shape's silhouette or edges,
 /// relative to the shape's size (small: a grazing ray, left out).
@@ -100,19 +102,9 @@ fn reference(shape: &Shape, o: DVec3, d: DVec3) -> Reference {
 /// Rays from a sphere of radius 6 around `target` to points within 1.5 of it: most hit the
 /// object, many miss, some graze.
 fn rays(target: Vec3, n: usize) -> Vec<Ray> {
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    };
-    (0..n)
-        .map(|_| {
-            let from = Vec3::new(next(), next(), next()).normalize_or(Vec3::X) * 6.0;
-            let to = Vec3::new(next(), next(), next()) * 1.5;
-            Ray::new(target + from, to - from, 0.0, f32::INFINITY)
-        })
+    support::rays_around(target, 6.0, 1.5, n, 0x2545_f491_4f6c_dd1d)
+        .into_iter()
+        .map(|(org, dir)| Ray::new(org, dir, 0.0, f32::INFINITY))
         .collect()
 }
 

@@ -1,7 +1,7 @@
 //! Shared by the integration tests: for those that compile C against `include/rt2.h` or load
 //! the built shared library, where the library is and a `cc` compiler configured outside
 //! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`; the
-//! fork tests' wait for a child; the C API tests' smallest scene.
+//! fork tests' wait for a child; the C API tests' smallest scene; rays around a target.
 
 #![allow(dead_code)]
 
@@ -168,4 +168,31 @@ pub unsafe fn c_unit_sphere(
     assert_eq!(status, Rt2Status::Ok);
     assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
     (ctx, scene)
+}
+
+/// `n` rays (origin, direction) from a sphere of radius `dist` around `target` towards points
+/// within `spread` of it, from a xorshift sequence seeded by `seed`: most hit an object there,
+/// many miss, some graze.
+pub fn rays_around(
+    target: glam::Vec3,
+    dist: f32,
+    spread: f32,
+    n: usize,
+    seed: u64,
+) -> Vec<(glam::Vec3, glam::Vec3)> {
+    use glam::Vec3;
+    let mut state = seed;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    (0..n)
+        .map(|_| {
+            let from = Vec3::new(next(), next(), next()).normalize_or(Vec3::X) * dist;
+            let to = Vec3::new(next(), next(), next()) * spread;
+            (target + from, to - from)
+        })
+        .collect()
 }
