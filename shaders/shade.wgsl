@@ -106,7 +106,14 @@ fn prim_normal(i: u32, p: vec3<f32>) -> vec3<f32> {
     if (k < params.n_ell) {
         let e = ellipsoids[k];
         let m = m3(e.inv);
-        return normalize_or_zero(transpose(m) * (m * (p - v3(e.center))));
+        // `Ellipsoid::normal` (`geometry::unit`): divided by its largest component before
+        // normalising, as the gradient's square overflows for semi-axes below about 5e-20.
+        let g = transpose(m) * (m * (p - v3(e.center)));
+        let l2 = bitcast<u32>(dot(g, g)) & 0x7fffffffu;
+        if (l2 >= 0x00800000u && l2 < 0x7f800000u) { return normalize_or_zero(g); }
+        let k = max3(abs(g));
+        if (!(k > 0.0) || (bitcast<u32>(k) & 0x7fffffffu) >= 0x7f800000u) { return vec3<f32>(0.0); }
+        return normalize_or_zero(g / k);
     }
     return box_normal(boxes[k - params.n_ell], p);
 }

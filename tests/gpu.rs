@@ -637,6 +637,57 @@ fn tiny_and_huge_meshes_are_shaded_as_on_the_cpu() {
     }
 }
 
+/// Ellipsoids with a semi-axis below about 5e-20 (accepted down to about 1e-22), where the
+/// gradient `inv^T inv (p - c)` squared overflows: `Ellipsoid::normal` and the kernels'
+/// `prim_normal` divide by its largest component first (with the plain normalisation both
+/// had zero normals: a black ellipsoid). Review14s.
+#[test]
+fn tiny_and_thin_ellipsoids_are_shaded_as_on_the_cpu() {
+    let g = gpu(GpuOptions::default());
+    for (s, radii) in [(1e-20f32, Vec3::new(1.0, 0.7, 0.5)), (1.0, Vec3::new(1.0, 0.7, 3e-20))] {
+        let mut scene = Scene::new();
+        let shape = Shape::Ellipsoid {
+            center: Vec3::ZERO,
+            radii: radii * s,
+        };
+        scene.add_object(shape, 0).unwrap();
+        let light = PointLight {
+            position: Vec3::new(2.0, 3.0, 4.0) * s,
+            color: Vec3::ONE,
+            intensity: 1.0,
+        };
+        scene.add_light(light).unwrap();
+        scene.commit().unwrap();
+        let mut camera = rt2::camera::Camera::default();
+        camera
+            .look_at(Vec3::new(1.0, 1.5, 2.5) * s, Vec3::ZERO, Vec3::Y)
+            .unwrap();
+        let frame = |ctx: &Context, opts: &RenderOptions| {
+            let mut f = Frame::new(48, 48).unwrap();
+            ctx.render(scene.committed().unwrap(), &camera, opts, &mut f)
+                .unwrap();
+            f
+        };
+        let want = frame(&cpu(), &RenderOptions::default());
+        let lit = want.pixels().chunks_exact(4).filter(|p| p[0] > 100).count();
+        assert!(lit > 100, "scale {s:e}: {lit} lit pixels on the CPU");
+        let Some(g) = &g else {
+            continue;
+        };
+        for path in [GpuPathRequest::Megakernel, GpuPathRequest::Wavefront] {
+            let opts = RenderOptions {
+                gpu_path: path,
+                ..RenderOptions::default()
+            };
+            let d = image_diff(&frame(g, &opts), &want);
+            println!("scale {s:e} {path:?}: (mean, p99) per channel {d:?}");
+            for (mean, p99) in d {
+                assert!(mean <= MEAN_MAX && p99 <= P99_MAX, "{s:e} {path:?}: {d:?}");
+            }
+        }
+    }
+}
+
 /// Spheres1 (1.2 M spheres, ray casting) at 64x36: its scene build dominates the time.
 #[test]
 fn images_match_the_cpu_on_spheres1() {

@@ -1,7 +1,7 @@
 //! Analytic primitives: spheres, ellipsoids, axis-aligned boxes and planes. They stay
 //! analytic (never tessellated): a sphere costs 16 bytes where a mesh of it costs kilobytes.
 
-use super::{power_of_two_scale, Aabb, Ray};
+use super::{power_of_two_scale, unit, Aabb, Ray};
 use glam::{Mat3, Vec3};
 
 /// Nearest intersection in `[tmin, tmax)` of the ray `o + t d` (relative to the centre) with
@@ -240,7 +240,14 @@ impl Ellipsoid {
     pub fn normal(&self, p: Vec3) -> Vec3 {
         let inv = Mat3::from_cols_array(&self.inv);
         let s = inv * (p - Vec3::from(self.center));
-        (inv.transpose() * s).normalize_or_zero()
+        // `inv` is about 1 / the semi-axis: below about 5e-20 the gradient's square overflows
+        // (normalize_or_zero gave zero); `unit` divides by the largest component first.
+        // Elsewhere the plain normalisation, bit for bit.
+        let g = inv.transpose() * s;
+        if g.length_squared().is_normal() {
+            return g.normalize_or_zero();
+        }
+        unit(g).unwrap_or(Vec3::ZERO)
     }
 
     /// `p`, a point near the surface on a ray of direction `d`, moved along that ray onto

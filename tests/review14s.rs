@@ -1,0 +1,224 @@
+//! review14s: rt2_hit_surfaces against f64 references in cases tests/surfaces.rs leaves out.
+use glam::{DVec3, Vec3};
+use rt2::api::*;
+use rt2::error::Rt2Status;
+use std::ffi::CStr;
+use std::ptr::{null, null_mut};
+
+fn last_error() -> String {
+    unsafe { CStr::from_ptr(rt2_last_error_message()) }.to_string_lossy().into_owned()
+}
+fn ok(s: Rt2Status) {
+    assert_eq!(s, Rt2Status::Ok, "{}", last_error());
+}
+struct S {
+    ctx: *mut rt2_context,
+    scene: *mut rt2_scene,
+}
+impl Drop for S {
+    fn drop(&mut self) {
+        unsafe {
+            rt2_scene_destroy(self.scene);
+            rt2_context_destroy(self.ctx);
+        }
+    }
+}
+fn new(backend: Rt2Backend) -> S {
+    let (mut ctx, mut scene) = (null_mut(), null_mut());
+    let mut d = rt2_context_desc_default();
+    d.backend = backend as u32;
+    unsafe {
+        ok(rt2_context_create(&d, &mut ctx));
+        ok(rt2_scene_create(ctx, &mut scene));
+    }
+    S { ctx, scene }
+}
+fn ray(o: [f32; 3], d: [f32; 3]) -> rt2_ray {
+    rt2_ray { org: o, tmin: 0.0, dir: d, tmax: f32::INFINITY }
+}
+fn miss() -> rt2_hit {
+    rt2_hit { t: f32::INFINITY, u: 0.0, v: 0.0, object: RT2_INVALID_ID, prim: RT2_INVALID_ID }
+}
+impl S {
+    fn commit(&self) {
+        unsafe { ok(rt2_scene_commit(self.scene)) }
+    }
+    fn hits(&self, rays: &[rt2_ray], opt: Option<&rt2_query_options>) -> Vec<rt2_hit> {
+        let mut h = vec![miss(); rays.len()];
+        unsafe {
+            ok(rt2_intersect(
+                self.ctx,
+                self.scene,
+                rays.as_ptr(),
+                rays.len(),
+                h.as_mut_ptr(),
+                opt.map_or(null(), |o| o as *const _),
+                null_mut(),
+            ))
+        };
+        h
+    }
+    fn surf(&self, rays: &[rt2_ray], hits: &[rt2_hit]) -> Vec<rt2_surface> {
+        let mut out = vec![
+            rt2_surface { position: [-7.0; 3], normal: [-7.0; 3], material: 0xdead };
+            rays.len()
+        ];
+        unsafe {
+            ok(rt2_hit_surfaces(self.scene, rays.as_ptr(), hits.as_ptr(), rays.len(), out.as_mut_ptr()))
+        };
+        out
+    }
+}
+fn mat(s: &S) -> u32 {
+    let mut m = 0;
+    unsafe { ok(rt2_scene_add_material(s.scene, &rt2_material_default(), &mut m)) };
+    m
+}
+
+/// Ellipsoids far from unit size: the normal inv^T inv (p - c) is ~1/size long; squared it
+/// overflows below ~5e-20 and underflows above ~3e22 (the same as the triangle fix).
+#[test]
+fn ellipsoid_normals_far_from_unit_size() {
+    let mut bad = vec![];
+    for (radii, name) in [
+        ([1e-20f32, 1e-20, 1e-20], "tiny"),
+        ([1.0, 1.0, 1e-20], "thin"),
+        ([1e25, 1e25, 1e25], "huge"), ([1e22, 1e22, 1e22], "huge22"), ([1e-19, 1e-19, 1e-19], "tiny19"), ([1e-30, 1e-30, 1e-30], "tiny30"), ([1.0, 1e-25, 1.0], "thin25"),
+        ([1e-10, 1e-10, 1e-10], "small-ok"),
+        ([1e20, 1e20, 1e20], "large-ok"),
+    ] {
+        let s = new(Rt2Backend::Cpu);
+        let m = mat(&s);
+        let mut id = 0;
+        let st = unsafe { rt2_scene_add_ellipsoid(s.scene, [0.0; 3].as_ptr(), radii.as_ptr(), m, &mut id) };
+        if st != Rt2Status::Ok { eprintln!("{name}: refused: {}", last_error()); continue; }
+        s.commit();
+        let r = [ray([0.0, 0.0, 5.0 * radii[2]], [0.0, 0.0, -1.0])];
+        let h = s.hits(&r, None);
+        assert_eq!(h[0].object, id, "{name}: no hit");
+        let o = s.surf(&r, &h);
+        let n = Vec3::from(o[0].normal);
+        if (n - Vec3::Z).length() > 1e-5 {
+            bad.push((name, o[0]));
+        }
+    }
+    assert!(bad.is_empty(), "{bad:?}");
+}
+
+/// Directions far from unit length: the query scales them by a power of two and scales t
+/// back; the surface from the caller's ray and returned t must be the unit-direction one.
+#[test]
+fn surfaces_of_rays_with_long_and_short_directions() {
+    let s = new(Rt2Backend::Cpu);
+    let m = mat(&s);
+    let mut ids = [0u32; 5];
+    unsafe {
+        let p: [f32; 9] = [-1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 0.0, 1.0, 0.0];
+        ok(rt2_scene_add_mesh(s.scene, p.as_ptr(), 3, [0u32, 1, 2].as_ptr(), 1, m, &mut ids[0]));
+        ok(rt2_scene_add_sphere(s.scene, [5.0, 0.0, 0.0].as_ptr(), 1.0, m, &mut ids[1]));
+        ok(rt2_scene_add_ellipsoid(s.scene, [10.0, 0.0, 0.0].as_ptr(), [1.0, 0.5, 0.25].as_ptr(), m, &mut ids[2]));
+        ok(rt2_scene_add_box(s.scene, [14.0, -1.0, -1.0].as_ptr(), [16.0, 1.0, 1.0].as_ptr(), m, &mut ids[3]));
+        ok(rt2_scene_add_plane(s.scene, [0.0, 0.0, 1.0].as_ptr(), -5.0, m, &mut ids[4]));
+    }
+    s.commit();
+    let targets = [[0.1f32, 0.2, 0.0], [5.3, 0.2, 0.0], [10.2, 0.1, 0.0], [15.2, 0.3, 0.0], [30.0, 0.0, -5.0]];
+    let mut bad = vec![];
+    let mut n = 0;
+    for (k, tg) in targets.iter().enumerate() {
+        let org = [tg[0] + 0.37, tg[1] - 0.21, 20.0];
+        let d0 = Vec3::from(*tg) - Vec3::from(org);
+        let base = [ray(org, d0.to_array())];
+        let hb = s.hits(&base, None);
+        assert_eq!(hb[0].object, ids[k], "target {k}");
+        let sb = s.surf(&base, &hb)[0];
+        for sc in [1e-38f32, 1e-30, 1e-20, 1e-5, 1e5, 1e20, 1e30, 1e36] {
+            for tmin in [0.0f32, -1.0] {
+                let mut r = base[0];
+                r.dir = (d0 * sc).to_array();
+                r.tmin = tmin / sc;
+                let h = s.hits(&[r], None);
+                n += 1;
+                if h[0].object != ids[k] {
+                    bad.push(format!("target {k} scale {sc:e}: hit {:?}", h[0]));
+                    continue;
+                }
+                let o = s.surf(&[r], &h)[0];
+                let dp = (Vec3::from(o.position) - Vec3::from(sb.position)).length();
+                let dn = (Vec3::from(o.normal) - Vec3::from(sb.normal)).length();
+                if dp > 1e-5 * 20.0 || dn > 1e-5 {
+                    bad.push(format!("target {k} scale {sc:e} tmin {tmin}: {o:?} vs {sb:?} (t {} vs {})", h[0].t, hb[0].t));
+                }
+            }
+        }
+    }
+    assert!(bad.is_empty(), "{n} rays:\n{}", bad.join("\n"));
+}
+
+/// Every traversal and mode: the same surfaces.
+#[test]
+fn every_traversal_and_mode_same_surfaces() {
+    let s = new(Rt2Backend::Cpu);
+    let m = mat(&s);
+    let mut id = 0;
+    let (mut pos, mut idx) = (vec![], vec![]);
+    let n = 24u32;
+    for i in 0..=n {
+        for j in 0..=n {
+            let (x, y) = (i as f32 / n as f32 * 2.0 - 1.0, j as f32 / n as f32 * 2.0 - 1.0);
+            pos.extend([x, y, 0.3 * (3.0 * x).sin() * (2.0 * y).cos()]);
+        }
+    }
+    for i in 0..n {
+        for j in 0..n {
+            let a = i * (n + 1) + j;
+            idx.extend([a, a + 1, a + n + 2, a, a + n + 2, a + n + 1]);
+        }
+    }
+    unsafe {
+        ok(rt2_scene_add_mesh(s.scene, pos.as_ptr(), pos.len() / 3, idx.as_ptr(), idx.len() / 3, m, &mut id));
+        // mirrored, rotated, scaled
+        let t: [f32; 12] = [-0.8, 0.3, 0.0, 0.2, 0.1, 1.5, 0.2, -0.1, 0.0, 0.2, 0.6, 0.05];
+        ok(rt2_scene_set_transform(s.scene, id, t.as_ptr()));
+    }
+    s.commit();
+    let mut st = 0x1234_5678_9abc_def1u64;
+    let mut next = move || {
+        st ^= st << 13;
+        st ^= st >> 7;
+        st ^= st << 17;
+        (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    let rays: Vec<rt2_ray> = (0..4096)
+        .map(|_| ray([next() * 2.0, next() * 2.0, 5.0], [next() * 0.3, next() * 0.3, -1.0]))
+        .collect();
+    let base = s.hits(&rays, None);
+    let sb = s.surf(&rays, &base);
+    let hits = base.iter().filter(|h| h.object != RT2_INVALID_ID).count();
+    assert!(hits > 1000, "{hits}");
+    let mut bad = vec![];
+    for mode in [Rt2QueryMode::Single as u32, Rt2QueryMode::Packet as u32, Rt2QueryMode::Stream as u32] {
+        for trav in 0..8u32 {
+            let mut o = rt2_query_options_default();
+            o.mode = mode;
+            o.traversal = trav;
+            for isect in 0..2u32 {
+                o.intersector = isect;
+                let mut h = vec![miss(); rays.len()];
+                let st = unsafe { rt2_intersect(s.ctx, s.scene, rays.as_ptr(), rays.len(), h.as_mut_ptr(), &o, null_mut()) };
+                if st != Rt2Status::Ok { eprintln!("mode {mode} trav {trav}: {st:?} {}", last_error()); continue; }
+                let sf = s.surf(&rays, &h);
+                let diff = sf.iter().zip(&sb).filter(|(a, b)| {
+                    (Vec3::from(a.position) - Vec3::from(b.position)).length() > 1e-5
+                        || (Vec3::from(a.normal) - Vec3::from(b.normal)).length() > 1e-5
+                        || a.material != b.material
+                }).count();
+                if diff > 0 {
+                    bad.push((mode, trav, isect, diff));
+                }
+            }
+        }
+    }
+    // Reference: f64 normal of the mirrored mesh: inverse transpose of the object normal.
+    assert!(bad.is_empty(), "{bad:?}");
+    let _ = DVec3::ZERO;
+}
