@@ -222,3 +222,129 @@ fn every_traversal_and_mode_same_surfaces() {
     assert!(bad.is_empty(), "{bad:?}");
     let _ = DVec3::ZERO;
 }
+
+/// GPU hits (lavapipe): the same surfaces as the CPU's hits, per traversal, on a mirrored
+/// mesh and analytic shapes.
+#[test]
+fn gpu_hits_give_the_cpu_surfaces() {
+    if std::env::var("RT2_REQUIRE_GPU").is_err() {
+        return;
+    }
+    let build = |b: Rt2Backend| {
+        let s = new(b);
+        let m = mat(&s);
+        let mut id = 0;
+        let (mut pos, mut idx) = (vec![], vec![]);
+        let n = 16u32;
+        for i in 0..=n {
+            for j in 0..=n {
+                let (x, y) = (i as f32 / n as f32 * 2.0 - 1.0, j as f32 / n as f32 * 2.0 - 1.0);
+                pos.extend([x, y, 0.3 * (3.0 * x).sin() * (2.0 * y).cos()]);
+            }
+        }
+        for i in 0..n {
+            for j in 0..n {
+                let a = i * (n + 1) + j;
+                idx.extend([a, a + 1, a + n + 2, a, a + n + 2, a + n + 1]);
+            }
+        }
+        unsafe {
+            ok(rt2_scene_add_mesh(s.scene, pos.as_ptr(), pos.len() / 3, idx.as_ptr(), idx.len() / 3, m, &mut id));
+            let t: [f32; 12] = [-0.8, 0.3, 0.0, 0.2, 0.1, 1.5, 0.2, -0.1, 0.0, 0.2, 0.6, 0.05];
+            ok(rt2_scene_set_transform(s.scene, id, t.as_ptr()));
+            ok(rt2_scene_add_sphere(s.scene, [1.5, 1.0, 0.5].as_ptr(), 0.4, m, &mut id));
+            ok(rt2_scene_add_ellipsoid(s.scene, [-1.5, 1.0, 0.5].as_ptr(), [0.6, 0.3, 0.1].as_ptr(), m, &mut id));
+            ok(rt2_scene_add_box(s.scene, [-1.5, -1.5, 0.0].as_ptr(), [-1.0, -1.0, 0.5].as_ptr(), m, &mut id));
+            ok(rt2_scene_add_plane(s.scene, [0.0, 0.0, 1.0].as_ptr(), -1.0, m, &mut id));
+        }
+        s.commit();
+        s
+    };
+    let (c, g) = (build(Rt2Backend::Cpu), build(Rt2Backend::Gpu));
+    let mut st = 0x9876_5432_1abc_def1u64;
+    let mut next = move || {
+        st ^= st << 13;
+        st ^= st >> 7;
+        st ^= st << 17;
+        (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    let rays: Vec<rt2_ray> = (0..4096)
+        .map(|_| ray([next() * 2.0, next() * 2.0, 5.0], [next() * 0.5, next() * 0.5, -1.0]))
+        .collect();
+    let hc = c.hits(&rays, None);
+    let sc = c.surf(&rays, &hc);
+    let mut bad = vec![];
+    for trav in [0u32, 1, 2, 3, 4, 5] {
+        let mut o = rt2_query_options_default();
+        o.traversal = trav;
+        let hg = g.hits(&rays, Some(&o));
+        // GPU hits looked up in the GPU context's scene and in the CPU one (same scene).
+        let sg = g.surf(&rays, &hg);
+        let sx = c.surf(&rays, &hg);
+        for i in 0..rays.len() {
+            let (a, b) = (sg[i], sc[i]);
+            if hg[i].object != hc[i].object || hg[i].prim != hc[i].prim {
+                continue;
+            }
+            let dp = (Vec3::from(a.position) - Vec3::from(b.position)).length();
+            let dn = (Vec3::from(a.normal) - Vec3::from(b.normal)).length();
+            if dp > 1e-4 || dn > 1e-4 || a.material != b.material || sx[i] != sg[i] {
+                bad.push(format!("trav {trav} ray {i}: {:?} {:?} gpu {a:?} cpu {b:?}", hg[i], hc[i]));
+            }
+        }
+        let same = hg.iter().zip(&hc).filter(|(a, b)| a.object == b.object && a.prim == b.prim).count();
+        eprintln!("trav {trav}: {same}/{} same ids, {} hits", rays.len(), hc.iter().filter(|h| h.object != RT2_INVALID_ID).count());
+    }
+    assert!(bad.len() == 0, "{}", bad[..bad.len().min(10)].join("\n"));
+}
+
+/// Slivers (largest angle 1e-4..1e-6 rad from straight, above the 2^-21 the tree drops): the
+/// f32 cross product `e1 × e2` cancels; its direction against the f64 one of the same f32
+/// corners.
+#[test]
+fn sliver_normals_against_f64() {
+    let mut st = 0x5151_2323_abab_0101u64;
+    let mut next = move || {
+        st ^= st << 13;
+        st ^= st >> 7;
+        st ^= st << 17;
+        (st >> 40) as f64 / (1u64 << 24) as f64 * 2.0 - 1.0
+    };
+    let mut worst = (0.0f64, 0.0f64);
+    let mut hist = [0usize; 4];
+    let mut count = 0;
+    for k in 0..2000 {
+        let delta = 10f64.powf(-4.0 - 2.0 * (k as f64 / 2000.0));
+        let dir = DVec3::new(next(), next(), next()).normalize();
+        let perp = dir.any_orthonormal_vector();
+        let perp = (perp * next() + dir.cross(perp) * next()).normalize();
+        // a = 0, c = 2 * dir, b = dir + perp * delta: angle at b is pi - ~2 delta.
+        let a = DVec3::ZERO;
+        let c = (dir * 2.0).as_vec3().as_dvec3();
+        let b = (dir + perp * delta).as_vec3().as_dvec3();
+        let s = new(Rt2Backend::Cpu);
+        let m = mat(&s);
+        let mut id = 0;
+        let p: Vec<f32> = [a, b, c].iter().flat_map(|v| v.as_vec3().to_array()).collect();
+        unsafe { ok(rt2_scene_add_mesh(s.scene, p.as_ptr(), 3, [0u32, 1, 2].as_ptr(), 1, m, &mut id)) };
+        s.commit();
+        let want = (b - a).cross(c - a);
+        let sin = want.length() / ((b - a).length() * (c - b).length());
+        let want = want.normalize();
+        let centroid = (a + b + c) / 3.0;
+        let r = [ray((centroid + want * 3.0).as_vec3().to_array(), (-want).as_vec3().to_array())];
+        let h = s.hits(&r, None);
+        if h[0].object != id {
+            continue;
+        }
+        count += 1;
+        let o = s.surf(&r, &h)[0];
+        let err = Vec3::from(o.normal).as_dvec3().angle_between(want);
+        if err > worst.0 {
+            worst = (err, sin);
+        }
+        hist[if err < 1e-6 { 0 } else if err < 1e-4 { 1 } else if err < 1e-2 { 2 } else { 3 }] += 1;
+    }
+    eprintln!("{count} hit; angle error <1e-6 / <1e-4 / <1e-2 / more: {hist:?}; worst {worst:?} (rad, sin of largest angle)");
+    assert!(worst.0 < 1e-4, "{worst:?}");
+}

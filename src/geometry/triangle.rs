@@ -2,7 +2,7 @@
 //! of vertices per test (the precomputation of the vectorised-traversal paper), and the two
 //! ray–triangle tests of [`crate::precision::Intersector`].
 
-use super::{power_of_two_scale, unit, Aabb, Clipped, Ray};
+use super::{Aabb, Clipped, Ray};
 use crate::precision::Intersector;
 use glam::Vec3;
 
@@ -97,19 +97,30 @@ impl Triangle {
 
     /// The unit normal along `e1 × e2`, or zero. The length squares the cross product, which
     /// underflows for edges below about 1e-10 and overflows above about 1e10: triangles 1e-12
-    /// and 1e11 across were hit but had zero normals. There each edge is first scaled by a
-    /// power of two to about unit length, which keeps the direction; elsewhere the plain
-    /// normalisation, bit for bit.
+    /// and 1e11 across were hit but had zero normals. And the f32 cross product of the edges
+    /// of a sliver (its largest angle near a straight one, `sin θ` from it) cancels: each
+    /// component is off by about 2^-23 of `|e1| |e2|`, the direction by about `2^-23 / sin θ`
+    /// (0.02 rad at `sin θ` = 2e-6, which the tree still holds: it drops them below 2^-21).
+    /// There the cross product is taken in f64, where the products of f32 values are exact
+    /// and none under- or overflows; elsewhere (`sin² θ` above 2^-12: the direction within
+    /// about 1e-5) the plain normalisation, bit for bit.
     pub fn unit_normal(&self) -> Vec3 {
         let n = self.normal();
-        if n.length_squared().is_normal() {
+        let l2 = n.length_squared();
+        let (e1, e2) = (
+            Vec3::from(self.e1).as_dvec3(),
+            Vec3::from(self.e2).as_dvec3(),
+        );
+        let (a2, b2) = (e1.length_squared(), e2.length_squared());
+        if l2.is_normal() && l2 as f64 >= (-12f64).exp2() * a2 * b2 {
             return n.normalize_or_zero();
         }
-        let scaled = |e: [f32; 3]| {
-            let e = Vec3::from(e);
-            power_of_two_scale(e.abs().max_element()).map_or(e, |s| e * s)
-        };
-        unit(scaled(self.e1).cross(scaled(self.e2))).unwrap_or(Vec3::ZERO)
+        let m = e1.cross(e2);
+        let len = m.length();
+        if !(len > 0.0 && len.is_finite()) {
+            return Vec3::ZERO;
+        }
+        (m / len).as_vec3()
     }
 
     /// Whether the triangle has no area up to rounding: its largest angle within 2^-21 of a
