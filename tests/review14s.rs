@@ -348,3 +348,69 @@ fn sliver_normals_against_f64() {
     eprintln!("{count} hit; angle error <1e-6 / <1e-4 / <1e-2 / more: {hist:?}; worst {worst:?} (rad, sin of largest angle)");
     assert!(worst.0 < 1e-4, "{worst:?}");
 }
+
+/// A unit sphere and ellipsoid 1e6 from the origin, seen from 5 away: the normal against the
+/// f64 one at the f64 hit point of the same f32 ray.
+#[test]
+fn far_from_origin_normals_against_f64() {
+    for off in [1e2, 1e3, 1e4, 1e5, 1e6] {
+        far_from_origin(off);
+    }
+}
+fn far_from_origin(off: f64) {
+    let s = new(Rt2Backend::Cpu);
+    let m = mat(&s);
+    let (mut sid, mut eid) = (0, 0);
+    let cs = DVec3::new(off, 0.0, 0.0);
+    let ce = DVec3::new(off, 10.0, 0.0);
+    let radii = DVec3::new(1.0, 0.7, 0.5);
+    unsafe {
+        ok(rt2_scene_add_sphere(s.scene, cs.as_vec3().to_array().as_ptr(), 1.0, m, &mut sid));
+        ok(rt2_scene_add_ellipsoid(s.scene, ce.as_vec3().to_array().as_ptr(), radii.as_vec3().to_array().as_ptr(), m, &mut eid));
+    }
+    s.commit();
+    let mut st = 0x1111_2222_3333_4445u64;
+    let mut next = move || {
+        st ^= st << 13;
+        st ^= st >> 7;
+        st ^= st << 17;
+        (st >> 40) as f64 / (1u64 << 24) as f64 * 2.0 - 1.0
+    };
+    for (id, c) in [(sid, cs), (eid, ce)] {
+        let rays: Vec<rt2_ray> = (0..2000)
+            .map(|_| {
+                let o = c + DVec3::new(next() * 0.5, next() * 0.5, 5.0);
+                let t = c + DVec3::new(next() * 0.8, next() * 0.5, 0.0);
+                ray(o.as_vec3().to_array(), (t - o).as_vec3().to_array())
+            })
+            .collect();
+        let h = s.hits(&rays, None);
+        let out = s.surf(&rays, &h);
+        let mut worst = 0.0f64;
+        let mut worst_local = 0.0f64;
+        let mut n = 0;
+        for ((r, h), o) in rays.iter().zip(&h).zip(&out) {
+            if h.object != id {
+                continue;
+            }
+            n += 1;
+            // f64 root of the f32 ray with the shape (unit-sphere space).
+            let org = Vec3::from(r.org).as_dvec3() - c;
+            let dir = Vec3::from(r.dir).as_dvec3();
+            let sc = if id == sid { DVec3::ONE } else { radii };
+            let (ou, du) = (org / sc, dir / sc);
+            let (a, b, cc) = (du.dot(du), ou.dot(du), ou.dot(ou) - 1.0);
+            let t = (-b - (b * b - a * cc).sqrt()) / a;
+            let p = org + t * dir;
+            let want = (p / (sc * sc)).normalize();
+            let err = Vec3::from(o.normal).as_dvec3().angle_between(want);
+            worst = worst.max(err);
+            // What the f32 local point org - c + t dir (all f32) would give.
+            let lp = (Vec3::from(r.org) - c.as_vec3()) + h.t * Vec3::from(r.dir);
+            let ln = (lp.as_dvec3() / (sc * sc)).normalize();
+            worst_local = worst_local.max(ln.angle_between(want));
+        }
+        eprintln!("offset {off:e} object {id}: {n} hits, worst normal error {worst:e} rad (local f32 point: {worst_local:e})");
+        assert!(n > 1000 && worst < 1e-4, "offset {off:e} object {id}: {n} hits, worst normal error {worst:e} rad");
+    }
+}

@@ -238,8 +238,13 @@ impl Ellipsoid {
     }
 
     pub fn normal(&self, p: Vec3) -> Vec3 {
+        self.normal_local(p - Vec3::from(self.center))
+    }
+
+    /// [`Self::normal`] at `q` relative to the centre (`p - center`).
+    pub fn normal_local(&self, q: Vec3) -> Vec3 {
         let inv = Mat3::from_cols_array(&self.inv);
-        let s = inv * (p - Vec3::from(self.center));
+        let s = inv * q;
         // `inv` is about 1 / the semi-axis: below about 5e-20 the gradient's square overflows
         // (normalize_or_zero gave zero); `unit` divides by the largest component first.
         // Elsewhere the plain normalisation, bit for bit.
@@ -260,8 +265,21 @@ impl Ellipsoid {
     /// power of two first (the point `p + t d` does not change), so that `M⁻¹ d` is about 1.
     /// A ray that does not meet the surface from `p` (a grazing one) keeps `p`.
     pub fn on_surface(&self, p: Vec3, d: Vec3) -> Vec3 {
+        self.on_surface_from(p, p - Vec3::from(self.center), d)
+    }
+
+    /// [`Self::on_surface`] for `q` relative to the centre: `q` moved onto the surface, still
+    /// relative to the centre. Far from the origin `p - center` is rounded to `p`'s grid (an
+    /// ULP of the centre's coordinates), while `(org - center) + t dir` of a ray from nearby
+    /// is not: the normal at that point stays accurate (`Committed::hit_surface`).
+    pub fn on_surface_local(&self, q: Vec3, d: Vec3) -> Vec3 {
+        self.on_surface_from(q, q, d)
+    }
+
+    /// `p` moved along `d` by the root nearest it of the ray from `q` (= `p - center`).
+    fn on_surface_from(&self, p: Vec3, q: Vec3, d: Vec3) -> Vec3 {
         let inv = Mat3::from_cols_array(&self.inv);
-        let u = inv * (p - Vec3::from(self.center));
+        let u = inv * q;
         let du = inv * d;
         let Some(k) = power_of_two_scale(du.abs().max_element()) else {
             return p;

@@ -1,8 +1,9 @@
 //! The surface at a hit, for callers that shade the hits of their own queries (Embree hands
 //! the geometric normal to every hit; here it is asked for): the point recomputed on the
-//! primitive, the geometric normal and the material. The same primitive methods give the
+//! primitive, the geometric normal and the material. The primitive methods that give the
 //! renderer its shading point (`cpu::whitted`), on the world-space primitives that placement
-//! made (normals of transformed objects already by the inverse transpose).
+//! made (normals of transformed objects already by the inverse transpose); but spheres and
+//! ellipsoids are taken relative to their centre (`PrimitiveSet::surface_at`).
 
 use super::Committed;
 use crate::geometry::{Hit, Ray};
@@ -28,10 +29,10 @@ impl Committed {
     /// barycentrics). `None` for a miss, or a primitive this commit lacks.
     pub fn hit_surface(&self, ray: &Ray, hit: &Hit) -> Option<HitSurface> {
         let origin = self.origins.get(hit.prim as usize)?;
-        let position = self.prims.hit_point(hit, ray);
+        let (position, normal) = self.prims.surface_at(hit, ray);
         Some(HitSurface {
             position,
-            normal: self.prims.normal(hit.prim, position),
+            normal,
             material: self.object_material[origin.object as usize],
         })
     }
