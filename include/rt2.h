@@ -693,7 +693,9 @@ typedef struct rt2_surface {
   /**
    * The hit point recomputed on the primitive, not `org + t * dir`: from the hit's `u`, `v`
    * on triangles; `org + t * dir` moved onto the sphere, ellipsoid, box face or plane
-   * otherwise (the robust offset's point, README "Precision modes").
+   * otherwise (the robust offset's point, README "Precision modes"; on spheres and
+   * ellipsoids taken relative to the centre, `(org - center) + t * dir`, which keeps the
+   * normal accurate far from the origin).
    */
   float position[3];
   /**

@@ -15,7 +15,9 @@ use crate::scene::{Committed, PrimLookup};
 pub struct rt2_surface {
     /// The hit point recomputed on the primitive, not `org + t * dir`: from the hit's `u`, `v`
     /// on triangles; `org + t * dir` moved onto the sphere, ellipsoid, box face or plane
-    /// otherwise (the robust offset's point, README "Precision modes").
+    /// otherwise (the robust offset's point, README "Precision modes"; on spheres and
+    /// ellipsoids taken relative to the centre, `(org - center) + t * dir`, which keeps the
+    /// normal accurate far from the origin).
     pub position: [f32; 3],
     /// The geometric normal, unit length and not turned towards the ray: outward on spheres,
     /// ellipsoids and boxes; a plane's `normal` as added; on a triangle, the side of
