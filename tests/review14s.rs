@@ -555,3 +555,63 @@ fn box_edges_and_corners() {
     eprintln!("{n} box hits");
     assert!(bad.is_empty(), "{}", bad[..bad.len().min(8)].join("\n"));
 }
+
+/// Thin ellipsoids at the origin: the normal against the f64 one at the f64 hit of the f32 ray.
+#[test]
+fn thin_ellipsoid_normals_against_f64() {
+    for thin in [1e-3f64, 1e-4, 1e-5, 3e-6, 1e-6, 1e-10, 1e-15, 1e-19, 3e-20] {
+        let s = new(Rt2Backend::Cpu);
+        let m = mat(&s);
+        let mut id = 0;
+        let radii = DVec3::new(1.0, 0.5, thin);
+        unsafe { ok(rt2_scene_add_ellipsoid(s.scene, [0.0f32; 3].as_ptr(), radii.as_vec3().to_array().as_ptr(), m, &mut id)) };
+        s.commit();
+        let mut st = 0x7777_2222_3333_4445u64;
+        let mut next = move || {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            (st >> 40) as f64 / (1u64 << 24) as f64 * 2.0 - 1.0
+        };
+        let rays: Vec<rt2_ray> = (0..2000)
+            .map(|_| {
+                let o = DVec3::new(next() * 2.0, next() * 2.0, 3.0 * next().signum());
+                let t = DVec3::new(next() * 0.9, next() * 0.45, 0.0);
+                ray(o.as_vec3().to_array(), (t - o).as_vec3().to_array())
+            })
+            .collect();
+        let h = s.hits(&rays, None);
+        let out = s.surf(&rays, &h);
+        let (mut worst, mut n) = (0.0f64, 0);
+        let mut hist = [0usize; 3];
+        for ((r, h), o) in rays.iter().zip(&h).zip(&out) {
+            if h.object != id {
+                continue;
+            }
+            n += 1;
+            let org = Vec3::from(r.org).as_dvec3();
+            let dir = Vec3::from(r.dir).as_dvec3();
+            let (ou, du) = (org / radii, dir / radii);
+            // Closest approach in unit space (well conditioned), then back by the half chord.
+            let dd = du.dot(du);
+            let tc = -ou.dot(du) / dd;
+            let q = ou + tc * du;
+            let h2 = 1.0 - q.length_squared();
+            if h2 < 1e-6 {
+                continue; // grazing: the rim
+            }
+            let pu = q - (h2 / dd).sqrt() * du;
+            let t = tc - (h2 / dd).sqrt();
+            let p = pu * radii;
+            let want = (pu / radii).normalize();
+            let err = Vec3::from(o.normal).as_dvec3().angle_between(want);
+            if err > 1e-3 && hist[2] < 2 {
+                eprintln!("  ray {r:?} t {} (f64 {t}) -> {o:?}; f64 point {p}, normal {want}", h.t);
+            }
+            worst = worst.max(err);
+            hist[if err < 1e-5 { 0 } else if err < 1e-3 { 1 } else { 2 }] += 1;
+        }
+        eprintln!("thin {thin:e}: {n} hits, normal error <1e-5/<1e-3/more {hist:?}, worst {worst:e}");
+        assert!(n > 1000 && worst < 1e-4, "thin {thin:e}: {n} hits, {hist:?}, worst {worst:e}");
+    }
+}

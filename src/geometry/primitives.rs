@@ -250,7 +250,7 @@ impl PrimitiveSet {
                 (PrimKind::Ellipsoid, k) => {
                     let e = &self.ellipsoids[k];
                     let c = Vec3::from(e.center);
-                    let q = e.on_surface_local((ray.org - c) + hit.t * ray.dir, ray.dir);
+                    let q = e.hit_local(ray, hit.t);
                     if q.is_finite() {
                         return (c + q, e.normal_local(q));
                     }
