@@ -615,3 +615,46 @@ fn thin_ellipsoid_normals_against_f64() {
         assert!(n > 1000 && worst < 1e-4, "thin {thin:e}: {n} hits, {hist:?}, worst {worst:e}");
     }
 }
+
+/// Thin boxes seen from 3 units away, above and below: the face the ray meets.
+#[test]
+fn thin_box_faces() {
+    let mut report = vec![];
+    for thin in [1e-3f32, 1e-5, 1e-6, 1e-7, 1e-9] {
+        let s = new(Rt2Backend::Cpu);
+        let m = mat(&s);
+        let mut id = 0;
+        unsafe { ok(rt2_scene_add_box(s.scene, [-1.0f32, -1.0, 0.0].as_ptr(), [1.0f32, 1.0, thin].as_ptr(), m, &mut id)) };
+        s.commit();
+        let mut st = 0x4242_2222_3333_4445u64;
+        let mut next = move || {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let rays: Vec<rt2_ray> = (0..2000)
+            .map(|_| {
+                let o = Vec3::new(next() * 2.0, next() * 2.0, 3.0 * next().signum());
+                let t = Vec3::new(next() * 0.9, next() * 0.9, 0.0);
+                ray(o.to_array(), (t - o).to_array())
+            })
+            .collect();
+        let h = s.hits(&rays, None);
+        let out = s.surf(&rays, &h);
+        let (mut n, mut wrong) = (0, 0);
+        for ((r, h), o) in rays.iter().zip(&h).zip(&out) {
+            if h.object != id {
+                continue;
+            }
+            n += 1;
+            let want = if r.org[2] > 0.0 { 1.0 } else { -1.0 };
+            if o.normal[2] != want {
+                wrong += 1;
+            }
+        }
+        report.push(format!("thin {thin:e}: {wrong} of {n} hits on the far face"));
+        assert!(n > 1000 && wrong == 0, "{}", report.last().unwrap());
+    }
+    eprintln!("{}", report.join("\n"));
+}

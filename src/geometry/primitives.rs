@@ -247,6 +247,11 @@ impl PrimitiveSet {
                         return (c + s.radius * n, n);
                     }
                 }
+                (PrimKind::Box, k) => {
+                    if let Some(surface) = thin_box_surface(&self.boxes[k], hit, ray) {
+                        return surface;
+                    }
+                }
                 (PrimKind::Ellipsoid, k) => {
                     let e = &self.ellipsoids[k];
                     let c = Vec3::from(e.center);
@@ -272,4 +277,32 @@ impl PrimitiveSet {
             + self.planes.len() * size_of::<Plane>()
             + self.vertices.len() * size_of::<[[f32; 3]; 3]>()
     }
+}
+
+/// The face of a box thinner than the rounding of `org + t dir` across its flat axis (a box
+/// 1e-7 thick seen from 3 units away: the point lands on either face, and ties go to the max
+/// face, so half the hits got the far face's point and normal): the face the ray meets, the
+/// entry if it starts (at `tmin`) outside, else the exit. `None` where the nearest face is
+/// not in doubt ([`box_on_surface`] and [`box_normal`] then).
+fn thin_box_surface(b: &Aabb, hit: &Hit, ray: &Ray) -> Option<(Vec3, Vec3)> {
+    let p = ray.at(hit.t);
+    let n = box_normal(b, p);
+    let axis = (0..3).find(|&a| n[a] != 0.0)?;
+    let tol = (-20f32).exp2()
+        * (ray.org.abs().max_element() + (hit.t * ray.dir).abs().max_element());
+    if !(b.max[axis] - b.min[axis] <= tol) || ray.dir[axis] == 0.0 {
+        return None;
+    }
+    let start = if ray.tmin.is_finite() {
+        ray.org + ray.tmin * ray.dir
+    } else {
+        Vec3::INFINITY
+    };
+    let inside = start.cmpge(b.min).all() && start.cmple(b.max).all();
+    let max = (ray.dir[axis] < 0.0) != inside;
+    let mut q = p.clamp(b.min, b.max);
+    q[axis] = if max { b.max[axis] } else { b.min[axis] };
+    let mut normal = Vec3::ZERO;
+    normal[axis] = if max { 1.0 } else { -1.0 };
+    Some((q, normal))
 }
