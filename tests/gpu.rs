@@ -644,7 +644,10 @@ fn tiny_and_huge_meshes_are_shaded_as_on_the_cpu() {
 #[test]
 fn tiny_and_thin_ellipsoids_are_shaded_as_on_the_cpu() {
     let g = gpu(GpuOptions::default());
-    for (s, radii) in [(1e-20f32, Vec3::new(1.0, 0.7, 0.5)), (1.0, Vec3::new(1.0, 0.7, 3e-20))] {
+    for (s, radii) in [
+        (1e-20f32, Vec3::new(1.0, 0.7, 0.5)),
+        (1.0, Vec3::new(1.0, 0.7, 3e-20)),
+    ] {
         let mut scene = Scene::new();
         let shape = Shape::Ellipsoid {
             center: Vec3::ZERO,

@@ -6,7 +6,9 @@ use std::ffi::CStr;
 use std::ptr::{null, null_mut};
 
 fn last_error() -> String {
-    unsafe { CStr::from_ptr(rt2_last_error_message()) }.to_string_lossy().into_owned()
+    unsafe { CStr::from_ptr(rt2_last_error_message()) }
+        .to_string_lossy()
+        .into_owned()
 }
 fn ok(s: Rt2Status) {
     assert_eq!(s, Rt2Status::Ok, "{}", last_error());
@@ -34,10 +36,21 @@ fn new(backend: Rt2Backend) -> S {
     S { ctx, scene }
 }
 fn ray(o: [f32; 3], d: [f32; 3]) -> rt2_ray {
-    rt2_ray { org: o, tmin: 0.0, dir: d, tmax: f32::INFINITY }
+    rt2_ray {
+        org: o,
+        tmin: 0.0,
+        dir: d,
+        tmax: f32::INFINITY,
+    }
 }
 fn miss() -> rt2_hit {
-    rt2_hit { t: f32::INFINITY, u: 0.0, v: 0.0, object: RT2_INVALID_ID, prim: RT2_INVALID_ID }
+    rt2_hit {
+        t: f32::INFINITY,
+        u: 0.0,
+        v: 0.0,
+        object: RT2_INVALID_ID,
+        prim: RT2_INVALID_ID,
+    }
 }
 impl S {
     fn commit(&self) {
@@ -60,18 +73,34 @@ impl S {
     }
     fn surf(&self, rays: &[rt2_ray], hits: &[rt2_hit]) -> Vec<rt2_surface> {
         let mut out = vec![
-            rt2_surface { position: [-7.0; 3], normal: [-7.0; 3], material: 0xdead };
+            rt2_surface {
+                position: [-7.0; 3],
+                normal: [-7.0; 3],
+                material: 0xdead
+            };
             rays.len()
         ];
         unsafe {
-            ok(rt2_hit_surfaces(self.scene, rays.as_ptr(), hits.as_ptr(), rays.len(), out.as_mut_ptr()))
+            ok(rt2_hit_surfaces(
+                self.scene,
+                rays.as_ptr(),
+                hits.as_ptr(),
+                rays.len(),
+                out.as_mut_ptr(),
+            ))
         };
         out
     }
 }
 fn mat(s: &S) -> u32 {
     let mut m = 0;
-    unsafe { ok(rt2_scene_add_material(s.scene, &rt2_material_default(), &mut m)) };
+    unsafe {
+        ok(rt2_scene_add_material(
+            s.scene,
+            &rt2_material_default(),
+            &mut m,
+        ))
+    };
     m
 }
 
@@ -83,15 +112,24 @@ fn ellipsoid_normals_far_from_unit_size() {
     for (radii, name) in [
         ([1e-20f32, 1e-20, 1e-20], "tiny"),
         ([1.0, 1.0, 1e-20], "thin"),
-        ([1e25, 1e25, 1e25], "huge"), ([1e22, 1e22, 1e22], "huge22"), ([1e-19, 1e-19, 1e-19], "tiny19"), ([1e-30, 1e-30, 1e-30], "tiny30"), ([1.0, 1e-25, 1.0], "thin25"),
+        ([1e25, 1e25, 1e25], "huge"),
+        ([1e22, 1e22, 1e22], "huge22"),
+        ([1e-19, 1e-19, 1e-19], "tiny19"),
+        ([1e-30, 1e-30, 1e-30], "tiny30"),
+        ([1.0, 1e-25, 1.0], "thin25"),
         ([1e-10, 1e-10, 1e-10], "small-ok"),
         ([1e20, 1e20, 1e20], "large-ok"),
     ] {
         let s = new(Rt2Backend::Cpu);
         let m = mat(&s);
         let mut id = 0;
-        let st = unsafe { rt2_scene_add_ellipsoid(s.scene, [0.0; 3].as_ptr(), radii.as_ptr(), m, &mut id) };
-        if st != Rt2Status::Ok { eprintln!("{name}: refused: {}", last_error()); continue; }
+        let st = unsafe {
+            rt2_scene_add_ellipsoid(s.scene, [0.0; 3].as_ptr(), radii.as_ptr(), m, &mut id)
+        };
+        if st != Rt2Status::Ok {
+            eprintln!("{name}: refused: {}", last_error());
+            continue;
+        }
         s.commit();
         let r = [ray([0.0, 0.0, 5.0 * radii[2]], [0.0, 0.0, -1.0])];
         let h = s.hits(&r, None);
@@ -114,14 +152,52 @@ fn surfaces_of_rays_with_long_and_short_directions() {
     let mut ids = [0u32; 5];
     unsafe {
         let p: [f32; 9] = [-1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 0.0, 1.0, 0.0];
-        ok(rt2_scene_add_mesh(s.scene, p.as_ptr(), 3, [0u32, 1, 2].as_ptr(), 1, m, &mut ids[0]));
-        ok(rt2_scene_add_sphere(s.scene, [5.0, 0.0, 0.0].as_ptr(), 1.0, m, &mut ids[1]));
-        ok(rt2_scene_add_ellipsoid(s.scene, [10.0, 0.0, 0.0].as_ptr(), [1.0, 0.5, 0.25].as_ptr(), m, &mut ids[2]));
-        ok(rt2_scene_add_box(s.scene, [14.0, -1.0, -1.0].as_ptr(), [16.0, 1.0, 1.0].as_ptr(), m, &mut ids[3]));
-        ok(rt2_scene_add_plane(s.scene, [0.0, 0.0, 1.0].as_ptr(), -5.0, m, &mut ids[4]));
+        ok(rt2_scene_add_mesh(
+            s.scene,
+            p.as_ptr(),
+            3,
+            [0u32, 1, 2].as_ptr(),
+            1,
+            m,
+            &mut ids[0],
+        ));
+        ok(rt2_scene_add_sphere(
+            s.scene,
+            [5.0, 0.0, 0.0].as_ptr(),
+            1.0,
+            m,
+            &mut ids[1],
+        ));
+        ok(rt2_scene_add_ellipsoid(
+            s.scene,
+            [10.0, 0.0, 0.0].as_ptr(),
+            [1.0, 0.5, 0.25].as_ptr(),
+            m,
+            &mut ids[2],
+        ));
+        ok(rt2_scene_add_box(
+            s.scene,
+            [14.0, -1.0, -1.0].as_ptr(),
+            [16.0, 1.0, 1.0].as_ptr(),
+            m,
+            &mut ids[3],
+        ));
+        ok(rt2_scene_add_plane(
+            s.scene,
+            [0.0, 0.0, 1.0].as_ptr(),
+            -5.0,
+            m,
+            &mut ids[4],
+        ));
     }
     s.commit();
-    let targets = [[0.1f32, 0.2, 0.0], [5.3, 0.2, 0.0], [10.2, 0.1, 0.0], [15.2, 0.3, 0.0], [30.0, 0.0, -5.0]];
+    let targets = [
+        [0.1f32, 0.2, 0.0],
+        [5.3, 0.2, 0.0],
+        [10.2, 0.1, 0.0],
+        [15.2, 0.3, 0.0],
+        [30.0, 0.0, -5.0],
+    ];
     let mut bad = vec![];
     let mut n = 0;
     for (k, tg) in targets.iter().enumerate() {
@@ -146,7 +222,10 @@ fn surfaces_of_rays_with_long_and_short_directions() {
                 let dp = (Vec3::from(o.position) - Vec3::from(sb.position)).length();
                 let dn = (Vec3::from(o.normal) - Vec3::from(sb.normal)).length();
                 if dp > 1e-5 * 20.0 || dn > 1e-5 {
-                    bad.push(format!("target {k} scale {sc:e} tmin {tmin}: {o:?} vs {sb:?} (t {} vs {})", h[0].t, hb[0].t));
+                    bad.push(format!(
+                        "target {k} scale {sc:e} tmin {tmin}: {o:?} vs {sb:?} (t {} vs {})",
+                        h[0].t, hb[0].t
+                    ));
                 }
             }
         }
@@ -164,7 +243,10 @@ fn every_traversal_and_mode_same_surfaces() {
     let n = 24u32;
     for i in 0..=n {
         for j in 0..=n {
-            let (x, y) = (i as f32 / n as f32 * 2.0 - 1.0, j as f32 / n as f32 * 2.0 - 1.0);
+            let (x, y) = (
+                i as f32 / n as f32 * 2.0 - 1.0,
+                j as f32 / n as f32 * 2.0 - 1.0,
+            );
             pos.extend([x, y, 0.3 * (3.0 * x).sin() * (2.0 * y).cos()]);
         }
     }
@@ -175,9 +257,19 @@ fn every_traversal_and_mode_same_surfaces() {
         }
     }
     unsafe {
-        ok(rt2_scene_add_mesh(s.scene, pos.as_ptr(), pos.len() / 3, idx.as_ptr(), idx.len() / 3, m, &mut id));
+        ok(rt2_scene_add_mesh(
+            s.scene,
+            pos.as_ptr(),
+            pos.len() / 3,
+            idx.as_ptr(),
+            idx.len() / 3,
+            m,
+            &mut id,
+        ));
         // mirrored, rotated, scaled
-        let t: [f32; 12] = [-0.8, 0.3, 0.0, 0.2, 0.1, 1.5, 0.2, -0.1, 0.0, 0.2, 0.6, 0.05];
+        let t: [f32; 12] = [
+            -0.8, 0.3, 0.0, 0.2, 0.1, 1.5, 0.2, -0.1, 0.0, 0.2, 0.6, 0.05,
+        ];
         ok(rt2_scene_set_transform(s.scene, id, t.as_ptr()));
     }
     s.commit();
@@ -189,14 +281,23 @@ fn every_traversal_and_mode_same_surfaces() {
         (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
     };
     let rays: Vec<rt2_ray> = (0..4096)
-        .map(|_| ray([next() * 2.0, next() * 2.0, 5.0], [next() * 0.3, next() * 0.3, -1.0]))
+        .map(|_| {
+            ray(
+                [next() * 2.0, next() * 2.0, 5.0],
+                [next() * 0.3, next() * 0.3, -1.0],
+            )
+        })
         .collect();
     let base = s.hits(&rays, None);
     let sb = s.surf(&rays, &base);
     let hits = base.iter().filter(|h| h.object != RT2_INVALID_ID).count();
     assert!(hits > 1000, "{hits}");
     let mut bad = vec![];
-    for mode in [Rt2QueryMode::Single as u32, Rt2QueryMode::Packet as u32, Rt2QueryMode::Stream as u32] {
+    for mode in [
+        Rt2QueryMode::Single as u32,
+        Rt2QueryMode::Packet as u32,
+        Rt2QueryMode::Stream as u32,
+    ] {
         for trav in 0..8u32 {
             let mut o = rt2_query_options_default();
             o.mode = mode;
@@ -204,14 +305,31 @@ fn every_traversal_and_mode_same_surfaces() {
             for isect in 0..2u32 {
                 o.intersector = isect;
                 let mut h = vec![miss(); rays.len()];
-                let st = unsafe { rt2_intersect(s.ctx, s.scene, rays.as_ptr(), rays.len(), h.as_mut_ptr(), &o, null_mut()) };
-                if st != Rt2Status::Ok { eprintln!("mode {mode} trav {trav}: {st:?} {}", last_error()); continue; }
+                let st = unsafe {
+                    rt2_intersect(
+                        s.ctx,
+                        s.scene,
+                        rays.as_ptr(),
+                        rays.len(),
+                        h.as_mut_ptr(),
+                        &o,
+                        null_mut(),
+                    )
+                };
+                if st != Rt2Status::Ok {
+                    eprintln!("mode {mode} trav {trav}: {st:?} {}", last_error());
+                    continue;
+                }
                 let sf = s.surf(&rays, &h);
-                let diff = sf.iter().zip(&sb).filter(|(a, b)| {
-                    (Vec3::from(a.position) - Vec3::from(b.position)).length() > 1e-5
-                        || (Vec3::from(a.normal) - Vec3::from(b.normal)).length() > 1e-5
-                        || a.material != b.material
-                }).count();
+                let diff = sf
+                    .iter()
+                    .zip(&sb)
+                    .filter(|(a, b)| {
+                        (Vec3::from(a.position) - Vec3::from(b.position)).length() > 1e-5
+                            || (Vec3::from(a.normal) - Vec3::from(b.normal)).length() > 1e-5
+                            || a.material != b.material
+                    })
+                    .count();
                 if diff > 0 {
                     bad.push((mode, trav, isect, diff));
                 }
@@ -238,7 +356,10 @@ fn gpu_hits_give_the_cpu_surfaces() {
         let n = 16u32;
         for i in 0..=n {
             for j in 0..=n {
-                let (x, y) = (i as f32 / n as f32 * 2.0 - 1.0, j as f32 / n as f32 * 2.0 - 1.0);
+                let (x, y) = (
+                    i as f32 / n as f32 * 2.0 - 1.0,
+                    j as f32 / n as f32 * 2.0 - 1.0,
+                );
                 pos.extend([x, y, 0.3 * (3.0 * x).sin() * (2.0 * y).cos()]);
             }
         }
@@ -249,13 +370,47 @@ fn gpu_hits_give_the_cpu_surfaces() {
             }
         }
         unsafe {
-            ok(rt2_scene_add_mesh(s.scene, pos.as_ptr(), pos.len() / 3, idx.as_ptr(), idx.len() / 3, m, &mut id));
-            let t: [f32; 12] = [-0.8, 0.3, 0.0, 0.2, 0.1, 1.5, 0.2, -0.1, 0.0, 0.2, 0.6, 0.05];
+            ok(rt2_scene_add_mesh(
+                s.scene,
+                pos.as_ptr(),
+                pos.len() / 3,
+                idx.as_ptr(),
+                idx.len() / 3,
+                m,
+                &mut id,
+            ));
+            let t: [f32; 12] = [
+                -0.8, 0.3, 0.0, 0.2, 0.1, 1.5, 0.2, -0.1, 0.0, 0.2, 0.6, 0.05,
+            ];
             ok(rt2_scene_set_transform(s.scene, id, t.as_ptr()));
-            ok(rt2_scene_add_sphere(s.scene, [1.5, 1.0, 0.5].as_ptr(), 0.4, m, &mut id));
-            ok(rt2_scene_add_ellipsoid(s.scene, [-1.5, 1.0, 0.5].as_ptr(), [0.6, 0.3, 0.1].as_ptr(), m, &mut id));
-            ok(rt2_scene_add_box(s.scene, [-1.5, -1.5, 0.0].as_ptr(), [-1.0, -1.0, 0.5].as_ptr(), m, &mut id));
-            ok(rt2_scene_add_plane(s.scene, [0.0, 0.0, 1.0].as_ptr(), -1.0, m, &mut id));
+            ok(rt2_scene_add_sphere(
+                s.scene,
+                [1.5, 1.0, 0.5].as_ptr(),
+                0.4,
+                m,
+                &mut id,
+            ));
+            ok(rt2_scene_add_ellipsoid(
+                s.scene,
+                [-1.5, 1.0, 0.5].as_ptr(),
+                [0.6, 0.3, 0.1].as_ptr(),
+                m,
+                &mut id,
+            ));
+            ok(rt2_scene_add_box(
+                s.scene,
+                [-1.5, -1.5, 0.0].as_ptr(),
+                [-1.0, -1.0, 0.5].as_ptr(),
+                m,
+                &mut id,
+            ));
+            ok(rt2_scene_add_plane(
+                s.scene,
+                [0.0, 0.0, 1.0].as_ptr(),
+                -1.0,
+                m,
+                &mut id,
+            ));
         }
         s.commit();
         s
@@ -269,7 +424,12 @@ fn gpu_hits_give_the_cpu_surfaces() {
         (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
     };
     let rays: Vec<rt2_ray> = (0..4096)
-        .map(|_| ray([next() * 2.0, next() * 2.0, 5.0], [next() * 0.5, next() * 0.5, -1.0]))
+        .map(|_| {
+            ray(
+                [next() * 2.0, next() * 2.0, 5.0],
+                [next() * 0.5, next() * 0.5, -1.0],
+            )
+        })
         .collect();
     let hc = c.hits(&rays, None);
     let sc = c.surf(&rays, &hc);
@@ -289,13 +449,24 @@ fn gpu_hits_give_the_cpu_surfaces() {
             let dp = (Vec3::from(a.position) - Vec3::from(b.position)).length();
             let dn = (Vec3::from(a.normal) - Vec3::from(b.normal)).length();
             if dp > 1e-4 || dn > 1e-4 || a.material != b.material || sx[i] != sg[i] {
-                bad.push(format!("trav {trav} ray {i}: {:?} {:?} gpu {a:?} cpu {b:?}", hg[i], hc[i]));
+                bad.push(format!(
+                    "trav {trav} ray {i}: {:?} {:?} gpu {a:?} cpu {b:?}",
+                    hg[i], hc[i]
+                ));
             }
         }
-        let same = hg.iter().zip(&hc).filter(|(a, b)| a.object == b.object && a.prim == b.prim).count();
-        eprintln!("trav {trav}: {same}/{} same ids, {} hits", rays.len(), hc.iter().filter(|h| h.object != RT2_INVALID_ID).count());
+        let same = hg
+            .iter()
+            .zip(&hc)
+            .filter(|(a, b)| a.object == b.object && a.prim == b.prim)
+            .count();
+        eprintln!(
+            "trav {trav}: {same}/{} same ids, {} hits",
+            rays.len(),
+            hc.iter().filter(|h| h.object != RT2_INVALID_ID).count()
+        );
     }
-    assert!(bad.len() == 0, "{}", bad[..bad.len().min(10)].join("\n"));
+    assert!(bad.is_empty(), "{}", bad[..bad.len().min(10)].join("\n"));
 }
 
 /// Slivers (largest angle 1e-4..1e-6 rad from straight, above the 2^-21 the tree drops): the
@@ -325,14 +496,30 @@ fn sliver_normals_against_f64() {
         let s = new(Rt2Backend::Cpu);
         let m = mat(&s);
         let mut id = 0;
-        let p: Vec<f32> = [a, b, c].iter().flat_map(|v| v.as_vec3().to_array()).collect();
-        unsafe { ok(rt2_scene_add_mesh(s.scene, p.as_ptr(), 3, [0u32, 1, 2].as_ptr(), 1, m, &mut id)) };
+        let p: Vec<f32> = [a, b, c]
+            .iter()
+            .flat_map(|v| v.as_vec3().to_array())
+            .collect();
+        unsafe {
+            ok(rt2_scene_add_mesh(
+                s.scene,
+                p.as_ptr(),
+                3,
+                [0u32, 1, 2].as_ptr(),
+                1,
+                m,
+                &mut id,
+            ))
+        };
         s.commit();
         let want = (b - a).cross(c - a);
         let sin = want.length() / ((b - a).length() * (c - b).length());
         let want = want.normalize();
         let centroid = (a + b + c) / 3.0;
-        let r = [ray((centroid + want * 3.0).as_vec3().to_array(), (-want).as_vec3().to_array())];
+        let r = [ray(
+            (centroid + want * 3.0).as_vec3().to_array(),
+            (-want).as_vec3().to_array(),
+        )];
         let h = s.hits(&r, None);
         if h[0].object != id {
             continue;
@@ -343,7 +530,15 @@ fn sliver_normals_against_f64() {
         if err > worst.0 {
             worst = (err, sin);
         }
-        hist[if err < 1e-6 { 0 } else if err < 1e-4 { 1 } else if err < 1e-2 { 2 } else { 3 }] += 1;
+        hist[if err < 1e-6 {
+            0
+        } else if err < 1e-4 {
+            1
+        } else if err < 1e-2 {
+            2
+        } else {
+            3
+        }] += 1;
     }
     eprintln!("{count} hit; angle error <1e-6 / <1e-4 / <1e-2 / more: {hist:?}; worst {worst:?} (rad, sin of largest angle)");
     assert!(worst.0 < 1e-4, "{worst:?}");
@@ -365,8 +560,20 @@ fn far_from_origin(off: f64) {
     let ce = DVec3::new(off, 10.0, 0.0);
     let radii = DVec3::new(1.0, 0.7, 0.5);
     unsafe {
-        ok(rt2_scene_add_sphere(s.scene, cs.as_vec3().to_array().as_ptr(), 1.0, m, &mut sid));
-        ok(rt2_scene_add_ellipsoid(s.scene, ce.as_vec3().to_array().as_ptr(), radii.as_vec3().to_array().as_ptr(), m, &mut eid));
+        ok(rt2_scene_add_sphere(
+            s.scene,
+            cs.as_vec3().to_array().as_ptr(),
+            1.0,
+            m,
+            &mut sid,
+        ));
+        ok(rt2_scene_add_ellipsoid(
+            s.scene,
+            ce.as_vec3().to_array().as_ptr(),
+            radii.as_vec3().to_array().as_ptr(),
+            m,
+            &mut eid,
+        ));
     }
     s.commit();
     let mut st = 0x1111_2222_3333_4445u64;
@@ -411,7 +618,10 @@ fn far_from_origin(off: f64) {
             worst_local = worst_local.max(ln.angle_between(want));
         }
         eprintln!("offset {off:e} object {id}: {n} hits, worst normal error {worst:e} rad (local f32 point: {worst_local:e})");
-        assert!(n > 1000 && worst < 1e-4, "offset {off:e} object {id}: {n} hits, worst normal error {worst:e} rad");
+        assert!(
+            n > 1000 && worst < 1e-4,
+            "offset {off:e} object {id}: {n} hits, worst normal error {worst:e} rad"
+        );
     }
 }
 
@@ -424,11 +634,23 @@ fn surfaces_race_commits() {
     let m = mat(&s);
     let mut id = 0;
     unsafe {
-        let p: [f32; 12] = [-1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0];
-        ok(rt2_scene_add_mesh(s.scene, p.as_ptr(), 4, [0u32, 1, 2, 0, 2, 3].as_ptr(), 2, m, &mut id));
+        let p: [f32; 12] = [
+            -1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0,
+        ];
+        ok(rt2_scene_add_mesh(
+            s.scene,
+            p.as_ptr(),
+            4,
+            [0u32, 1, 2, 0, 2, 3].as_ptr(),
+            2,
+            m,
+            &mut id,
+        ));
     }
     s.commit();
-    let rays: Vec<rt2_ray> = (0..64).map(|i| ray([-0.9 + i as f32 * 0.028, 0.1, 5.0], [0.0, 0.0, -1.0])).collect();
+    let rays: Vec<rt2_ray> = (0..64)
+        .map(|i| ray([-0.9 + i as f32 * 0.028, 0.1, 5.0], [0.0, 0.0, -1.0]))
+        .collect();
     let hits = s.hits(&rays, None);
     assert!(hits.iter().all(|h| h.object == id));
     let scene = s.scene as usize;
@@ -440,7 +662,10 @@ fn surfaces_race_commits() {
             let z = if k % 2 == 0 { 0.0f32 } else { 1.0 };
             let t: [f32; 12] = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, z];
             unsafe {
-                assert_eq!(rt2_scene_set_transform(scene as *mut rt2_scene, 0, t.as_ptr()), Rt2Status::Ok);
+                assert_eq!(
+                    rt2_scene_set_transform(scene as *mut rt2_scene, 0, t.as_ptr()),
+                    Rt2Status::Ok
+                );
                 assert_eq!(rt2_scene_commit(scene as *mut rt2_scene), Rt2Status::Ok);
             }
             k += 1;
@@ -450,8 +675,23 @@ fn surfaces_race_commits() {
     let (mut oks, mut stale, mut other) = (0, 0, vec![]);
     let t0 = std::time::Instant::now();
     while t0.elapsed().as_secs_f32() < 3.0 {
-        let mut out = vec![rt2_surface { position: [-7.0; 3], normal: [-7.0; 3], material: 0xdead }; rays.len()];
-        let st = unsafe { rt2_hit_surfaces(s.scene, rays.as_ptr(), hits.as_ptr(), rays.len(), out.as_mut_ptr()) };
+        let mut out = vec![
+            rt2_surface {
+                position: [-7.0; 3],
+                normal: [-7.0; 3],
+                material: 0xdead
+            };
+            rays.len()
+        ];
+        let st = unsafe {
+            rt2_hit_surfaces(
+                s.scene,
+                rays.as_ptr(),
+                hits.as_ptr(),
+                rays.len(),
+                out.as_mut_ptr(),
+            )
+        };
         match st {
             Rt2Status::Ok => {
                 oks += 1;
@@ -481,7 +721,15 @@ fn plane_hit_past_f32_max() {
     let s = new(Rt2Backend::Cpu);
     let m = mat(&s);
     let mut id = 0;
-    unsafe { ok(rt2_scene_add_plane(s.scene, [0.0, 0.0, 1.0].as_ptr(), 0.0, m, &mut id)) };
+    unsafe {
+        ok(rt2_scene_add_plane(
+            s.scene,
+            [0.0, 0.0, 1.0].as_ptr(),
+            0.0,
+            m,
+            &mut id,
+        ))
+    };
     s.commit();
     let mut bad = vec![];
     for (o, d) in [
@@ -498,7 +746,12 @@ fn plane_hit_past_f32_max() {
         }
         let out = s.surf(&r, &h)[0];
         eprintln!("{o:?} {d:?}: t {:e} -> {out:?}", h[0].t);
-        if !out.position.iter().chain(&out.normal).all(|x| x.is_finite()) {
+        if !out
+            .position
+            .iter()
+            .chain(&out.normal)
+            .all(|x| x.is_finite())
+        {
             bad.push((o, d, h[0].t, out));
         }
     }
@@ -512,13 +765,25 @@ fn box_edges_and_corners() {
     let mut bad = vec![];
     let mut n = 0;
     for off in [0.0f32, 1e3, 1e5] {
-        for (lo, hi) in [([-1.0f32, -1.0, -1.0], [1.0f32, 1.0, 1.0]), ([-1.0, -1.0, 0.0], [1.0, 1.0, 0.0]), ([0.0, 0.0, 0.0], [1e-3, 2e-3, 5e-4])] {
+        for (lo, hi) in [
+            ([-1.0f32, -1.0, -1.0], [1.0f32, 1.0, 1.0]),
+            ([-1.0, -1.0, 0.0], [1.0, 1.0, 0.0]),
+            ([0.0, 0.0, 0.0], [1e-3, 2e-3, 5e-4]),
+        ] {
             let lo = Vec3::from(lo) + off;
             let hi = Vec3::from(hi) + off;
             let s = new(Rt2Backend::Cpu);
             let m = mat(&s);
             let mut id = 0;
-            unsafe { ok(rt2_scene_add_box(s.scene, lo.to_array().as_ptr(), hi.to_array().as_ptr(), m, &mut id)) };
+            unsafe {
+                ok(rt2_scene_add_box(
+                    s.scene,
+                    lo.to_array().as_ptr(),
+                    hi.to_array().as_ptr(),
+                    m,
+                    &mut id,
+                ))
+            };
             s.commit();
             let size = (hi - lo).max_element();
             // Targets: the corners, edge midpoints, face centres.
@@ -528,7 +793,12 @@ fn box_edges_and_corners() {
                 targets.push(lo + (hi - lo) * f);
             }
             for tg in targets {
-                for dir in [Vec3::new(-1.0, -0.7, -0.3), Vec3::new(0.3, 0.5, -1.0), Vec3::new(1.0, -1.0, 1.0), Vec3::new(0.0, 0.0, -1.0)] {
+                for dir in [
+                    Vec3::new(-1.0, -0.7, -0.3),
+                    Vec3::new(0.3, 0.5, -1.0),
+                    Vec3::new(1.0, -1.0, 1.0),
+                    Vec3::new(0.0, 0.0, -1.0),
+                ] {
                     let org = tg - dir * 3.0 * size.max(1e-3);
                     let r = [ray(org.to_array(), dir.to_array())];
                     let h = s.hits(&r, None);
@@ -542,11 +812,18 @@ fn box_edges_and_corners() {
                     // On a face: one coordinate at lo or hi, the others inside.
                     let inside = p.cmpge(lo).all() && p.cmple(hi).all();
                     let axis = (0..3).find(|&a| nn[a] != 0.0);
-                    let on_face = axis.map_or(false, |a| p[a] == if nn[a] > 0.0 { hi[a] } else { lo[a] });
+                    let on_face =
+                        axis.is_some_and(|a| p[a] == if nn[a] > 0.0 { hi[a] } else { lo[a] });
                     let unit = (nn.length() - 1.0).abs() < 1e-6;
-                    let near = (p.as_dvec3() - (Vec3::from(r[0].org).as_dvec3() + h[0].t as f64 * dir.as_dvec3())).length() < 1e-5 * (1.0 + org.length() as f64);
+                    let near = (p.as_dvec3()
+                        - (Vec3::from(r[0].org).as_dvec3() + h[0].t as f64 * dir.as_dvec3()))
+                    .length()
+                        < 1e-5 * (1.0 + org.length() as f64);
                     if !(inside && on_face && unit && near) {
-                        bad.push(format!("off {off} box {lo}..{hi} target {tg} dir {dir}: {o:?} t {}", h[0].t));
+                        bad.push(format!(
+                            "off {off} box {lo}..{hi} target {tg} dir {dir}: {o:?} t {}",
+                            h[0].t
+                        ));
                     }
                 }
             }
@@ -564,7 +841,15 @@ fn thin_ellipsoid_normals_against_f64() {
         let m = mat(&s);
         let mut id = 0;
         let radii = DVec3::new(1.0, 0.5, thin);
-        unsafe { ok(rt2_scene_add_ellipsoid(s.scene, [0.0f32; 3].as_ptr(), radii.as_vec3().to_array().as_ptr(), m, &mut id)) };
+        unsafe {
+            ok(rt2_scene_add_ellipsoid(
+                s.scene,
+                [0.0f32; 3].as_ptr(),
+                radii.as_vec3().to_array().as_ptr(),
+                m,
+                &mut id,
+            ))
+        };
         s.commit();
         let mut st = 0x7777_2222_3333_4445u64;
         let mut next = move || {
@@ -606,13 +891,27 @@ fn thin_ellipsoid_normals_against_f64() {
             let want = (pu / radii).normalize();
             let err = Vec3::from(o.normal).as_dvec3().angle_between(want);
             if err > 1e-3 && hist[2] < 2 {
-                eprintln!("  ray {r:?} t {} (f64 {t}) -> {o:?}; f64 point {p}, normal {want}", h.t);
+                eprintln!(
+                    "  ray {r:?} t {} (f64 {t}) -> {o:?}; f64 point {p}, normal {want}",
+                    h.t
+                );
             }
             worst = worst.max(err);
-            hist[if err < 1e-5 { 0 } else if err < 1e-3 { 1 } else { 2 }] += 1;
+            hist[if err < 1e-5 {
+                0
+            } else if err < 1e-3 {
+                1
+            } else {
+                2
+            }] += 1;
         }
-        eprintln!("thin {thin:e}: {n} hits, normal error <1e-5/<1e-3/more {hist:?}, worst {worst:e}");
-        assert!(n > 1000 && worst < 1e-4, "thin {thin:e}: {n} hits, {hist:?}, worst {worst:e}");
+        eprintln!(
+            "thin {thin:e}: {n} hits, normal error <1e-5/<1e-3/more {hist:?}, worst {worst:e}"
+        );
+        assert!(
+            n > 1000 && worst < 1e-4,
+            "thin {thin:e}: {n} hits, {hist:?}, worst {worst:e}"
+        );
     }
 }
 
@@ -624,7 +923,15 @@ fn thin_box_faces() {
         let s = new(Rt2Backend::Cpu);
         let m = mat(&s);
         let mut id = 0;
-        unsafe { ok(rt2_scene_add_box(s.scene, [-1.0f32, -1.0, 0.0].as_ptr(), [1.0f32, 1.0, thin].as_ptr(), m, &mut id)) };
+        unsafe {
+            ok(rt2_scene_add_box(
+                s.scene,
+                [-1.0f32, -1.0, 0.0].as_ptr(),
+                [1.0f32, 1.0, thin].as_ptr(),
+                m,
+                &mut id,
+            ))
+        };
         s.commit();
         let mut st = 0x4242_2222_3333_4445u64;
         let mut next = move || {
@@ -653,7 +960,9 @@ fn thin_box_faces() {
                 wrong += 1;
             }
         }
-        report.push(format!("thin {thin:e}: {wrong} of {n} hits on the far face"));
+        report.push(format!(
+            "thin {thin:e}: {wrong} of {n} hits on the far face"
+        ));
         assert!(n > 1000 && wrong == 0, "{}", report.last().unwrap());
     }
     eprintln!("{}", report.join("\n"));

@@ -288,9 +288,9 @@ impl Ellipsoid {
         let q = oc + t * ray.dir;
         let inv = Mat3::from_cols_array(&self.inv);
         let entering = !ray.tmin.is_finite()
-            || !((inv * (oc + ray.tmin * ray.dir)).length_squared() <= 1.0);
-        let tol = (-20f32).exp2()
-            * (oc.abs().max_element() + (t * ray.dir).abs().max_element());
+            || (inv * (oc + ray.tmin * ray.dir)).length_squared() > 1.0
+            || (inv * (oc + ray.tmin * ray.dir)).length_squared().is_nan();
+        let tol = (-20f32).exp2() * (oc.abs().max_element() + (t * ray.dir).abs().max_element());
         self.on_surface_from(q, q, ray.dir, Some((entering, tol)))
     }
 

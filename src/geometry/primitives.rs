@@ -288,9 +288,10 @@ fn thin_box_surface(b: &Aabb, hit: &Hit, ray: &Ray) -> Option<(Vec3, Vec3)> {
     let p = ray.at(hit.t);
     let n = box_normal(b, p);
     let axis = (0..3).find(|&a| n[a] != 0.0)?;
-    let tol = (-20f32).exp2()
-        * (ray.org.abs().max_element() + (hit.t * ray.dir).abs().max_element());
-    if !(b.max[axis] - b.min[axis] <= tol) || ray.dir[axis] == 0.0 {
+    let tol =
+        (-20f32).exp2() * (ray.org.abs().max_element() + (hit.t * ray.dir).abs().max_element());
+    let extent = b.max[axis] - b.min[axis];
+    if extent > tol || extent.is_nan() || ray.dir[axis] == 0.0 {
         return None;
     }
     let start = if ray.tmin.is_finite() {
