@@ -13,7 +13,8 @@ use glam::Vec3;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HitSurface {
     /// The hit point recomputed on the primitive: from the barycentrics on triangles,
-    /// `org + t·dir` moved onto the surface otherwise (`PrimitiveSet::hit_point`).
+    /// `org + t·dir` moved onto the surface otherwise, on the side the ray meets
+    /// (`PrimitiveSet::surface_at`).
     pub position: Vec3,
     /// Unit geometric normal, not turned towards the ray: outward for spheres, ellipsoids and
     /// boxes, the plane's own normal, the side of `(v1 - v0) × (v2 - v0)` of the mesh's
