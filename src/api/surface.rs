@@ -17,7 +17,8 @@ pub struct rt2_surface {
     /// on triangles; `org + t * dir` moved onto the sphere, ellipsoid, box face or plane
     /// otherwise (the robust offset's point, README "Precision modes"; on spheres and
     /// ellipsoids taken relative to the centre, `(org - center) + t * dir`, which keeps the
-    /// normal accurate far from the origin).
+    /// normal accurate far from the origin). A plane met so far away that the point lies
+    /// beyond the f32 range has infinite coordinates there.
     pub position: [f32; 3],
     /// The geometric normal, unit length and not turned towards the ray: outward on spheres,
     /// ellipsoids and boxes; a plane's `normal` as added; on a triangle, the side of
@@ -36,8 +37,10 @@ const NO_SURFACE: rt2_surface = rt2_surface {
 };
 
 /// The surfaces at `count` hits: `surfaces[i]` for `hits[i]`, the closest hit of `rays[i]` by
-/// `rt2_intersect` (any context, mode or backend) on this scene's current commit: a commit
-/// since then may have renumbered the primitives, which this call cannot tell. A miss
+/// `rt2_intersect` (any context, mode or backend) on this scene's current commit: ids stay
+/// the same across commits, but an object moved or disabled since the query is answered as
+/// it is now (its surface, off the ray; a disabled one's hits refused), which this call
+/// cannot tell from a hit of the current commit. A miss
 /// (`object = prim = RT2_INVALID_ID`) gets zero `position` and `normal` and material
 /// `RT2_INVALID_ID`, not an error.
 ///

@@ -388,8 +388,13 @@ impl Plane {
         (t >= ray.tmin && t < tmax).then_some(t)
     }
 
-    /// `p`, a point near the plane, projected onto it (the normal is unit length).
+    /// `p`, a point near the plane, projected onto it (the normal is unit length). A point
+    /// beyond the f32 range (a grazing hit so far away that `org + t dir` overflows) is kept
+    /// as it is: projecting its infinite coordinates would make them NaN.
     pub fn on_surface(&self, p: Vec3) -> Vec3 {
+        if !p.is_finite() {
+            return p;
+        }
         let n = Vec3::from(self.normal);
         p - (n.dot(p) - self.offset) * n
     }
