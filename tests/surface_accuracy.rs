@@ -979,3 +979,105 @@ fn thin_box_faces() {
     }
     eprintln!("{}", report.join("\n"));
 }
+
+/// Spheres down to 1e-10 across seen from 3 units, at the origin and 2e3 from it: the normal
+/// is that of the f64 entry point of the ray as given, facing the ray (review14f: in f32 the
+/// point `(org - c) + t dir` is off across the ray by about an ULP of 3, so a sphere of radius
+/// 1e-5 had normals 0.05 rad off, 1e-7 a fifth of them facing away).
+#[test]
+fn tiny_sphere_normals_face_the_ray() {
+    let mut report = vec![];
+    let mut worst_all = 0f64;
+    for (c, r) in [0.0f32, 1e3].into_iter().flat_map(|c| {
+        [1e-3f32, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10].map(|r| (Vec3::new(c, -2.0 * c, 0.5 * c), r))
+    }) {
+        unsafe {
+            let (mut ctx, mut scene) = (null_mut(), null_mut());
+            let mut d = rt2_context_desc_default();
+            d.backend = Rt2Backend::Cpu as u32;
+            ok(rt2_context_create(&d, &mut ctx));
+            ok(rt2_scene_create(ctx, &mut scene));
+            ok(rt2_scene_add_sphere(
+                scene,
+                c.to_array().as_ptr(),
+                r,
+                0,
+                null_mut(),
+            ));
+            ok(rt2_scene_commit(scene));
+            let mut st = 0x1234_5678_9abc_def1u64;
+            let mut next = move || {
+                st ^= st << 13;
+                st ^= st >> 7;
+                st ^= st << 17;
+                (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+            };
+            let rays: Vec<rt2_ray> = (0..4000)
+                .map(|_| {
+                    let o = c + Vec3::new(next(), next(), next()).normalize() * 3.0;
+                    let t = c + Vec3::new(next(), next(), next()) * (0.5 * r);
+                    rt2_ray {
+                        org: o.to_array(),
+                        tmin: 0.0,
+                        dir: (t - o).to_array(),
+                        tmax: f32::INFINITY,
+                    }
+                })
+                .collect();
+            let mut hits = vec![std::mem::zeroed::<rt2_hit>(); rays.len()];
+            ok(rt2_intersect(
+                ctx,
+                scene,
+                rays.as_ptr(),
+                rays.len(),
+                hits.as_mut_ptr(),
+                null(),
+                null_mut(),
+            ));
+            let mut out = vec![std::mem::zeroed::<rt2_surface>(); rays.len()];
+            ok(rt2_hit_surfaces(
+                scene,
+                rays.as_ptr(),
+                hits.as_ptr(),
+                rays.len(),
+                out.as_mut_ptr(),
+            ));
+            let (mut n, mut back, mut worst) = (0, 0, 0f64);
+            for ((ray, h), s) in rays.iter().zip(&hits).zip(&out) {
+                if h.prim == RT2_INVALID_ID {
+                    continue;
+                }
+                n += 1;
+                let dir = Vec3::from(ray.dir).as_dvec3();
+                let o = Vec3::from(ray.org).as_dvec3() - c.as_dvec3();
+                let r64 = r as f64;
+                let dd = dir.dot(dir);
+                let tc = -o.dot(dir) / dd;
+                let qp = o + tc * dir;
+                let h2 = r64 * r64 - qp.length_squared();
+                if h2 < 1e-2 * r64 * r64 {
+                    continue;
+                } // grazing
+                let pp = qp - (h2 / dd).sqrt() * dir;
+                let want: DVec3 = pp / r64;
+                let err = Vec3::from(s.normal).as_dvec3().angle_between(want);
+                worst = worst.max(err);
+                if Vec3::from(s.normal).dot(Vec3::from(ray.dir)) > 0.0 {
+                    back += 1;
+                }
+            }
+            worst_all = worst_all.max(worst);
+            report.push(format!(
+                "centre {c}, r {r:e}: {n} hits, {back} normals facing away, worst {worst:e}"
+            ));
+            rt2_scene_destroy(scene);
+            rt2_context_destroy(ctx);
+        }
+    }
+    eprintln!("{}", report.join("\n"));
+    assert!(
+        report.iter().all(|l| l.contains(" 0 normals")),
+        "{report:#?}"
+    );
+    assert!(worst_all < 1e-5, "{report:#?}");
+}
