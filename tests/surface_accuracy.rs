@@ -1081,3 +1081,100 @@ fn tiny_sphere_normals_face_the_ray() {
     );
     assert!(worst_all < 1e-5, "{report:#?}");
 }
+
+/// Ellipsoids down to 1e-7 across seen from 3 units: normals against f64 (review14f: from the
+/// f32 point `(org - c) + t dir`, 0.04 rad off at 1e-5 across, 0.3 rad at 1e-6).
+#[test]
+fn tiny_ellipsoid_normals_against_f64() {
+    let mut report = vec![];
+    let mut worst_all = 0f64;
+    for r in [1e-3f32, 1e-5, 1e-6, 1e-7] {
+        let radii = Vec3::new(1.0, 0.7, 0.5) * r;
+        unsafe {
+            let (mut ctx, mut scene) = (null_mut(), null_mut());
+            let mut d = rt2_context_desc_default();
+            d.backend = Rt2Backend::Cpu as u32;
+            ok(rt2_context_create(&d, &mut ctx));
+            ok(rt2_scene_create(ctx, &mut scene));
+            ok(rt2_scene_add_ellipsoid(
+                scene,
+                [0.0f32; 3].as_ptr(),
+                radii.to_array().as_ptr(),
+                0,
+                null_mut(),
+            ));
+            ok(rt2_scene_commit(scene));
+            let mut st = 0x1234_5678_9abc_def1u64;
+            let mut next = move || {
+                st ^= st << 13;
+                st ^= st >> 7;
+                st ^= st << 17;
+                (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+            };
+            let rays: Vec<rt2_ray> = (0..4000)
+                .map(|_| {
+                    let o = Vec3::new(next(), next(), next()).normalize() * 3.0;
+                    let t = Vec3::new(next(), next(), next()) * (0.3 * r);
+                    rt2_ray {
+                        org: o.to_array(),
+                        tmin: 0.0,
+                        dir: (t - o).to_array(),
+                        tmax: f32::INFINITY,
+                    }
+                })
+                .collect();
+            let mut hits = vec![std::mem::zeroed::<rt2_hit>(); rays.len()];
+            ok(rt2_intersect(
+                ctx,
+                scene,
+                rays.as_ptr(),
+                rays.len(),
+                hits.as_mut_ptr(),
+                null(),
+                null_mut(),
+            ));
+            let mut out = vec![std::mem::zeroed::<rt2_surface>(); rays.len()];
+            ok(rt2_hit_surfaces(
+                scene,
+                rays.as_ptr(),
+                hits.as_ptr(),
+                rays.len(),
+                out.as_mut_ptr(),
+            ));
+            let rd = radii.as_dvec3();
+            let (mut n, mut back, mut worst) = (0, 0, 0f64);
+            for ((ray, h), s) in rays.iter().zip(&hits).zip(&out) {
+                if h.prim == RT2_INVALID_ID {
+                    continue;
+                }
+                let o = Vec3::from(ray.org).as_dvec3() / rd;
+                let dir = Vec3::from(ray.dir).as_dvec3() / rd;
+                let dd = dir.dot(dir);
+                let tc = -o.dot(dir) / dd;
+                let qp = o + tc * dir;
+                let h2 = 1.0 - qp.length_squared();
+                if h2 < 1e-2 {
+                    continue;
+                }
+                n += 1;
+                let pu = qp - (h2 / dd).sqrt() * dir;
+                let want: DVec3 = (pu / rd).normalize();
+                worst = worst.max(Vec3::from(s.normal).as_dvec3().angle_between(want));
+                if Vec3::from(s.normal).dot(Vec3::from(ray.dir)) > 0.0 {
+                    back += 1;
+                }
+            }
+            worst_all = worst_all.max(worst);
+            report.push(format!(
+                "radii {radii}: {n} hits, {back} facing away, worst {worst:e}"
+            ));
+            rt2_scene_destroy(scene);
+            rt2_context_destroy(ctx);
+        }
+    }
+    eprintln!("{}", report.join("\n"));
+    assert!(
+        worst_all < 1e-5 && report.iter().all(|l| l.contains(" 0 facing")),
+        "{report:#?}"
+    );
+}
