@@ -309,7 +309,7 @@ fn sphere_hit_normal(s: &super::Sphere, hit: &Hit, ray: &Ray) -> Option<Vec3> {
         let (s0, s1) = ((-b - h) / a, (-b + h) / a);
         let ulp_t = (hit.t.abs() * f32::EPSILON) as f64 * 4.0;
         let start = oc + ray.tmin as f64 * d;
-        let entering = !ray.tmin.is_finite() || !(start.length_squared() <= r * r);
+        let entering = !ray.tmin.is_finite() || start.length_squared() > r * r || start.is_nan();
         let s = if s1 - s0 <= ulp_t {
             if entering {
                 s0
@@ -352,7 +352,7 @@ fn ellipsoid_hit_surface(e: &super::Ellipsoid, hit: &Hit, ray: &Ray) -> Option<(
         let (s0, s1) = ((-b - h) / a, (-b + h) / a);
         let ulp_t = (hit.t.abs() * f32::EPSILON) as f64 * 4.0;
         let start = inv * (oc + ray.tmin as f64 * d);
-        let entering = !ray.tmin.is_finite() || !(start.length_squared() <= 1.0);
+        let entering = !ray.tmin.is_finite() || start.length_squared() > 1.0 || start.is_nan();
         if s1 - s0 <= ulp_t {
             if entering {
                 s0
