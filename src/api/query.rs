@@ -221,8 +221,9 @@ unsafe fn run_query<T>(
         let (q, exclude) = query_options(opt)?;
         let rays = slice(rays, count, "rays")?;
         // The outputs checked now (NULL, size, alignment), the hits borrowed below once the
-        // exclusions are read.
-        slice_mut(out, count, out_name)?;
+        // exclusions are read (and only once they are known not to overlap the rays: a `&mut`
+        // over the rays while `rays` is borrowed would be undefined behaviour, even unused).
+        slice(out as *const T, count, out_name)?;
         // The hits are written while the rays are read (one step at a time).
         check_disjoint((out, count, out_name), (rays.as_ptr(), count, "rays"))?;
         if !stats.is_null() {
