@@ -77,6 +77,9 @@ fn box_on_surface(b: Aabb, p: vec3<f32>) -> vec3<f32> {
 // `Triangle::unit_normal`: e1 × e2 normalised. Where its square leaves the normal range (edges
 // below about 1e-10 or above about 1e10) each edge is first scaled by a power of two, which
 // keeps the direction, and the product divided by its largest component (`geometry::unit`).
+// The CPU takes those, and slivers (sin² of the angle between the edges below 2^-12), in f64;
+// WGSL has no f64, so a sliver's normal here keeps the f32 cancellation (about 2^-23 / sin θ
+// rad: 0.02 rad at sin θ = 2e-6) and may differ from the CPU's by that much.
 fn triangle_normal(t: Triangle) -> vec3<f32> {
     let n = cross(v3(t.e1), v3(t.e2));
     let l2 = bitcast<u32>(dot(n, n)) & 0x7fffffffu;

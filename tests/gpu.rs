@@ -588,8 +588,8 @@ fn robust_offsets_seen_from_far_away_match_the_cpu() {
 }
 
 /// Meshes 1e-12 and 1e11 across, where `e1 × e2` squared under- or overflows: the kernels'
-/// `triangle_normal` scales the edges as `Triangle::unit_normal` does, so the faces are lit as
-/// on the CPU (with the plain normalisation both had zero normals: a black mesh).
+/// `triangle_normal` scales the edges by powers of two (`Triangle::unit_normal` takes them in
+/// f64), so the faces are lit as on the CPU (with the plain normalisation both had zero normals: a black mesh).
 #[test]
 fn tiny_and_huge_meshes_are_shaded_as_on_the_cpu() {
     let Some(g) = gpu(GpuOptions::default()) else {
