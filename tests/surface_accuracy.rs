@@ -10,6 +10,8 @@ use rt2::error::Rt2Status;
 use std::ffi::CStr;
 use std::ptr::{null, null_mut};
 
+mod support;
+
 fn last_error() -> String {
     unsafe { CStr::from_ptr(rt2_last_error_message()) }
         .to_string_lossy()
@@ -988,9 +990,12 @@ fn thin_box_faces() {
 fn tiny_sphere_normals_face_the_ray() {
     let mut report = vec![];
     let mut worst_all = 0f64;
-    for (c, r) in [0.0f32, 1e3].into_iter().flat_map(|c| {
-        [1e-3f32, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10].map(|r| (Vec3::new(c, -2.0 * c, 0.5 * c), r))
-    }) {
+    let far = Vec3::new(1e3, -2e3, 5e2);
+    let cases = [1e-3f32, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10]
+        .map(|r| (Vec3::ZERO, r))
+        .into_iter()
+        .chain([(far, 1e-2), (far, 1e-3)]);
+    for (c, r) in cases {
         unsafe {
             let (mut ctx, mut scene) = (null_mut(), null_mut());
             let mut d = rt2_context_desc_default();
@@ -1005,25 +1010,11 @@ fn tiny_sphere_normals_face_the_ray() {
                 null_mut(),
             ));
             ok(rt2_scene_commit(scene));
-            let mut st = 0x1234_5678_9abc_def1u64;
-            let mut next = move || {
-                st ^= st << 13;
-                st ^= st >> 7;
-                st ^= st << 17;
-                (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-            };
-            let rays: Vec<rt2_ray> = (0..4000)
-                .map(|_| {
-                    let o = c + Vec3::new(next(), next(), next()).normalize() * 3.0;
-                    let t = c + Vec3::new(next(), next(), next()) * (0.5 * r);
-                    rt2_ray {
-                        org: o.to_array(),
-                        tmin: 0.0,
-                        dir: (t - o).to_array(),
-                        tmax: f32::INFINITY,
-                    }
-                })
-                .collect();
+            let rays: Vec<rt2_ray> =
+                support::rays_around(c, 3.0, 0.5 * r, 4000, 0x1234_5678_9abc_def1)
+                    .into_iter()
+                    .map(|(o, d)| ray(o.to_array(), d.to_array()))
+                    .collect();
             let mut hits = vec![std::mem::zeroed::<rt2_hit>(); rays.len()];
             ok(rt2_intersect(
                 ctx,
@@ -1104,25 +1095,11 @@ fn tiny_ellipsoid_normals_against_f64() {
                 null_mut(),
             ));
             ok(rt2_scene_commit(scene));
-            let mut st = 0x1234_5678_9abc_def1u64;
-            let mut next = move || {
-                st ^= st << 13;
-                st ^= st >> 7;
-                st ^= st << 17;
-                (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-            };
-            let rays: Vec<rt2_ray> = (0..4000)
-                .map(|_| {
-                    let o = Vec3::new(next(), next(), next()).normalize() * 3.0;
-                    let t = Vec3::new(next(), next(), next()) * (0.3 * r);
-                    rt2_ray {
-                        org: o.to_array(),
-                        tmin: 0.0,
-                        dir: (t - o).to_array(),
-                        tmax: f32::INFINITY,
-                    }
-                })
-                .collect();
+            let rays: Vec<rt2_ray> =
+                support::rays_around(Vec3::ZERO, 3.0, 0.3 * r, 4000, 0x1234_5678_9abc_def1)
+                    .into_iter()
+                    .map(|(o, d)| ray(o.to_array(), d.to_array()))
+                    .collect();
             let mut hits = vec![std::mem::zeroed::<rt2_hit>(); rays.len()];
             ok(rt2_intersect(
                 ctx,
