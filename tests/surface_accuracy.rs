@@ -280,13 +280,8 @@ fn every_traversal_and_mode_same_surfaces() {
         ok(rt2_scene_set_transform(s.scene, id, t.as_ptr()));
     }
     s.commit();
-    let mut st = 0x1234_5678_9abc_def1u64;
-    let mut next = move || {
-        st ^= st << 13;
-        st ^= st >> 7;
-        st ^= st << 17;
-        (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    };
+    let mut uniform = support::uniform(0x1234_5678_9abc_def1u64);
+    let mut next = move || uniform() as f32;
     let rays: Vec<rt2_ray> = (0..4096)
         .map(|_| {
             ray(
@@ -343,9 +338,7 @@ fn every_traversal_and_mode_same_surfaces() {
             }
         }
     }
-    // Reference: f64 normal of the mirrored mesh: inverse transpose of the object normal.
     assert!(bad.is_empty(), "{bad:?}");
-    let _ = DVec3::ZERO;
 }
 
 /// GPU hits (lavapipe): the same surfaces as the CPU's hits, per traversal, on a mirrored
@@ -433,13 +426,8 @@ fn gpu_hits_give_the_cpu_surfaces() {
         s
     };
     let (c, g) = (build(Rt2Backend::Cpu), build(Rt2Backend::Gpu));
-    let mut st = 0x9876_5432_1abc_def1u64;
-    let mut next = move || {
-        st ^= st << 13;
-        st ^= st >> 7;
-        st ^= st << 17;
-        (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    };
+    let mut uniform = support::uniform(0x9876_5432_1abc_def1u64);
+    let mut next = move || uniform() as f32;
     let rays: Vec<rt2_ray> = (0..4096)
         .map(|_| {
             ray(
@@ -491,13 +479,7 @@ fn gpu_hits_give_the_cpu_surfaces() {
 /// corners.
 #[test]
 fn sliver_normals_against_f64() {
-    let mut st = 0x5151_2323_abab_0101u64;
-    let mut next = move || {
-        st ^= st << 13;
-        st ^= st >> 7;
-        st ^= st << 17;
-        (st >> 40) as f64 / (1u64 << 24) as f64 * 2.0 - 1.0
-    };
+    let mut next = support::uniform(0x5151_2323_abab_0101u64);
     let mut worst = (0.0f64, 0.0f64);
     let mut hist = [0usize; 4];
     let mut count = 0;
@@ -593,13 +575,7 @@ fn far_from_origin(off: f64) {
         ));
     }
     s.commit();
-    let mut st = 0x1111_2222_3333_4445u64;
-    let mut next = move || {
-        st ^= st << 13;
-        st ^= st >> 7;
-        st ^= st << 17;
-        (st >> 40) as f64 / (1u64 << 24) as f64 * 2.0 - 1.0
-    };
+    let mut next = support::uniform(0x1111_2222_3333_4445u64);
     for (id, c) in [(sid, cs), (eid, ce)] {
         let rays: Vec<rt2_ray> = (0..2000)
             .map(|_| {
@@ -865,13 +841,7 @@ fn thin_ellipsoid_normals_against_f64() {
             ))
         };
         s.commit();
-        let mut st = 0x7777_2222_3333_4445u64;
-        let mut next = move || {
-            st ^= st << 13;
-            st ^= st >> 7;
-            st ^= st << 17;
-            (st >> 40) as f64 / (1u64 << 24) as f64 * 2.0 - 1.0
-        };
+        let mut next = support::uniform(0x7777_2222_3333_4445u64);
         let rays: Vec<rt2_ray> = (0..2000)
             .map(|_| {
                 let o = DVec3::new(next() * 2.0, next() * 2.0, 3.0 * next().signum());
@@ -947,13 +917,8 @@ fn thin_box_faces() {
             ))
         };
         s.commit();
-        let mut st = 0x4242_2222_3333_4445u64;
-        let mut next = move || {
-            st ^= st << 13;
-            st ^= st >> 7;
-            st ^= st << 17;
-            (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut uniform = support::uniform(0x4242_2222_3333_4445u64);
+        let mut next = move || uniform() as f32;
         let rays: Vec<rt2_ray> = (0..2000)
             .map(|_| {
                 let o = Vec3::new(next() * 2.0, next() * 2.0, 3.0 * next().signum());

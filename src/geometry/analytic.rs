@@ -238,13 +238,8 @@ impl Ellipsoid {
     }
 
     pub fn normal(&self, p: Vec3) -> Vec3 {
-        self.normal_local(p - Vec3::from(self.center))
-    }
-
-    /// [`Self::normal`] at `q` relative to the centre (`p - center`).
-    pub fn normal_local(&self, q: Vec3) -> Vec3 {
         let inv = Mat3::from_cols_array(&self.inv);
-        let s = inv * q;
+        let s = inv * (p - Vec3::from(self.center));
         // `inv` is about 1 / the semi-axis: below about 5e-20 the gradient's square overflows
         // (normalize_or_zero gave zero); `unit` divides by the largest component first.
         // Elsewhere the plain normalisation, bit for bit.
@@ -265,40 +260,8 @@ impl Ellipsoid {
     /// power of two first (the point `p + t d` does not change), so that `M⁻¹ d` is about 1.
     /// A ray that does not meet the surface from `p` (a grazing one) keeps `p`.
     pub fn on_surface(&self, p: Vec3, d: Vec3) -> Vec3 {
-        self.on_surface_from(p, p - Vec3::from(self.center), d, None)
-    }
-
-    /// [`Self::on_surface`] for `q` relative to the centre: `q` moved onto the surface, still
-    /// relative to the centre. Far from the origin `p - center` is rounded to `p`'s grid (an
-    /// ULP of the centre's coordinates), while `(org - center) + t dir` of a ray from nearby
-    /// is not: the normal at that point stays accurate (`Committed::hit_surface`).
-    pub fn on_surface_local(&self, q: Vec3, d: Vec3) -> Vec3 {
-        self.on_surface_from(q, q, d, None)
-    }
-
-    /// The point of `ray`'s hit at `t` on this ellipsoid, relative to the centre and moved
-    /// onto the surface ([`Self::on_surface_local`]), on the side the ray meets: where the two
-    /// roots lie within rounding of `org + t dir` (a thin ellipsoid: from 3 units away one
-    /// 1e-6 thick has both sheets at the same `f32` t), the root nearest that point is either
-    /// sheet, and a quarter of the hits on ellipsoids 1e-10 thick got the far sheet's point
-    /// and normal. There the entry is taken if the ray starts (at `tmin`) outside, else the
-    /// exit: the root the query must have found.
-    pub fn hit_local(&self, ray: &Ray, t: f32) -> Vec3 {
-        let oc = ray.org - Vec3::from(self.center);
-        let q = oc + t * ray.dir;
         let inv = Mat3::from_cols_array(&self.inv);
-        let entering = !ray.tmin.is_finite()
-            || (inv * (oc + ray.tmin * ray.dir)).length_squared() > 1.0
-            || (inv * (oc + ray.tmin * ray.dir)).length_squared().is_nan();
-        let tol = (-20f32).exp2() * (oc.abs().max_element() + (t * ray.dir).abs().max_element());
-        self.on_surface_from(q, q, ray.dir, Some((entering, tol)))
-    }
-
-    /// `p` moved along `d` by the root nearest it of the ray from `q` (= `p - center`); with
-    /// `side`, by the entry (`true`) or the exit where the chord is shorter than its length.
-    fn on_surface_from(&self, p: Vec3, q: Vec3, d: Vec3, side: Option<(bool, f32)>) -> Vec3 {
-        let inv = Mat3::from_cols_array(&self.inv);
-        let u = inv * q;
+        let u = inv * (p - Vec3::from(self.center));
         let du = inv * d;
         let Some(k) = power_of_two_scale(du.abs().max_element()) else {
             return p;
@@ -307,19 +270,7 @@ impl Ellipsoid {
         let Some((t0, t1)) = sphere_roots(u, du, Line::Projected, du.length_squared(), 1.0) else {
             return p;
         };
-        let chord = (t1 - t0).abs() * d.abs().max_element();
-        let t = match side {
-            Some((entering, tol)) if chord <= tol => {
-                if entering {
-                    t0
-                } else {
-                    t1
-                }
-            }
-            _ if t1.abs() < t0.abs() => t1,
-            _ => t0,
-        };
-        let moved = p + t * d;
+        let moved = p + if t1.abs() < t0.abs() { t1 } else { t0 } * d;
         if moved.is_finite() {
             moved
         } else {

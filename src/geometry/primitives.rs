@@ -9,7 +9,7 @@ use super::{
     Ray, Sphere, Triangle, TriangleTest,
 };
 use crate::precision::Intersector;
-use glam::Vec3;
+use glam::{DMat3, DVec3, Mat3, Vec3};
 
 /// What the intersection core needs per ray besides the ray itself, prepared once per ray:
 /// the triangle test with its per-ray set-up, and the primitive to ignore (the one a
@@ -231,45 +231,31 @@ impl PrimitiveSet {
     }
 
     /// [`Self::hit_point`] and [`Self::normal`] there, for callers that want the surface of
-    /// one hit (`Committed::hit_surface`). A sphere's or ellipsoid's point is taken relative
-    /// to its centre, `(org - center) + t dir`, and moved onto the surface there: from the
-    /// rounded world point `org + t dir` (on a grid of an ULP of the centre's coordinates)
-    /// the normal of a unit sphere 1e4 from the origin was 5e-4 rad off, of an ellipsoid
-    /// 7e-3 (1e-6 relative to the centre, for a ray from nearby). That point is taken in f64
-    /// ([`sphere_hit_normal`], [`ellipsoid_hit_surface`]): in f32 its rounding across the ray
-    /// put the normals of shapes 1e-5 across seen from 3 units 0.05 rad off.
+    /// one hit (`Committed::hit_surface`). A sphere's or ellipsoid's point is recomputed in
+    /// f64 relative to its centre ([`quadric_surface`]): from the rounded world point
+    /// `org + t dir`, as the renderer takes it, the normal of a unit sphere 1e4 from the
+    /// origin was 5e-4 rad off and of an ellipsoid 7e-3, and in f32 even relative to the
+    /// centre the normals of shapes 1e-5 across seen from 3 units were 0.05 rad off. A box
+    /// thinner than rounding takes the face the ray meets ([`thin_box_surface`]).
     pub fn surface_at(&self, hit: &Hit, ray: &Ray) -> (Vec3, Vec3) {
         let i = hit.prim as usize;
-        if i < self.len() {
-            match self.locate(i) {
-                (PrimKind::Sphere, k) => {
-                    let s = &self.spheres[k];
-                    let c = Vec3::from(s.center);
-                    if let Some(n) = sphere_hit_normal(s, hit, ray) {
-                        return (c + s.radius * n, n);
-                    }
-                }
-                (PrimKind::Box, k) => {
-                    if let Some(surface) = thin_box_surface(&self.boxes[k], hit, ray) {
-                        return surface;
-                    }
-                }
-                (PrimKind::Ellipsoid, k) => {
-                    let e = &self.ellipsoids[k];
-                    let c = Vec3::from(e.center);
-                    if let Some((q, n)) = ellipsoid_hit_surface(e, hit, ray) {
-                        return (c + q, n);
-                    }
-                    let q = e.hit_local(ray, hit.t);
-                    if q.is_finite() {
-                        return (c + q, e.normal_local(q));
-                    }
-                }
-                _ => {}
+        let exact = match (i < self.len()).then(|| self.locate(i)) {
+            Some((PrimKind::Sphere, k)) => {
+                let s = &self.spheres[k];
+                let inv = DMat3::from_diagonal(DVec3::splat(1.0 / s.radius as f64));
+                quadric_surface(inv, s.center, hit, ray)
             }
-        }
-        let p = self.hit_point(hit, ray);
-        (p, self.normal(hit.prim, p))
+            Some((PrimKind::Ellipsoid, k)) => {
+                let e = &self.ellipsoids[k];
+                quadric_surface(Mat3::from_cols_array(&e.inv).as_dmat3(), e.center, hit, ray)
+            }
+            Some((PrimKind::Box, k)) => thin_box_surface(&self.boxes[k], hit, ray),
+            _ => None,
+        };
+        exact.unwrap_or_else(|| {
+            let p = self.hit_point(hit, ray);
+            (p, self.normal(hit.prim, p))
+        })
     }
 
     /// Bytes held by each kind's array, for the memory report.
@@ -284,59 +270,17 @@ impl PrimitiveSet {
     }
 }
 
-/// The outward normal of sphere `s` at `ray`'s hit at `hit.t`, in f64: `(org - center) + t dir`
-/// is exact there (in f32 its rounding, about an ULP of `org - center`, is across the ray as
-/// much as along it: a sphere of radius 1e-5 seen from 3 units had normals 0.05 rad off, one
-/// of 1e-7 a fifth of them facing away from the ray), then moved along the ray onto the
-/// sphere by the root nearest it; where the chord is within the rounding of `t` (a sphere
-/// smaller than an ULP of the distance), by the entry if the ray starts (at `tmin`) outside,
-/// else the exit. `None` where that fails (the caller's f32 path then).
-fn sphere_hit_normal(s: &super::Sphere, hit: &Hit, ray: &Ray) -> Option<Vec3> {
-    let c = Vec3::from(s.center).as_dvec3();
-    let oc = ray.org.as_dvec3() - c;
-    let d = ray.dir.as_dvec3();
-    let q = oc + hit.t as f64 * d;
-    let r = s.radius as f64;
-    let a = d.length_squared();
-    if !(a > 0.0 && a.is_finite() && q.is_finite()) {
-        return None;
-    }
-    let b = q.dot(d);
-    let l2 = (q - (b / a) * d).length_squared();
-    let disc = a * (r * r - l2);
-    let p = if disc >= 0.0 {
-        let h = disc.sqrt();
-        let (s0, s1) = ((-b - h) / a, (-b + h) / a);
-        let ulp_t = (hit.t.abs() * f32::EPSILON) as f64 * 4.0;
-        let start = oc + ray.tmin as f64 * d;
-        let entering = !ray.tmin.is_finite() || start.length_squared() > r * r || start.is_nan();
-        let s = if s1 - s0 <= ulp_t {
-            if entering {
-                s0
-            } else {
-                s1
-            }
-        } else if s1.abs() < s0.abs() {
-            s1
-        } else {
-            s0
-        };
-        q + s * d
-    } else {
-        // Grazing (the f32 t of a ray past the rim): the rim point nearest the line.
-        q - (b / a) * d
-    };
-    let len = p.length();
-    (len > 0.0 && len.is_finite()).then(|| (p / len).as_vec3())
-}
-
-/// [`sphere_hit_normal`] for an ellipsoid, in its unit space (`M⁻¹ x`, in f64): the point
-/// relative to the centre and the outward unit normal (`M⁻ᵀ M⁻¹ q`). In f32 the rounding of
-/// `(org - center) + t dir` across the ray put the normals of ellipsoids 1e-5 across seen from
-/// 3 units 0.04 rad off, 1e-6 across 0.3 rad.
-fn ellipsoid_hit_surface(e: &super::Ellipsoid, hit: &Hit, ray: &Ray) -> Option<(Vec3, Vec3)> {
-    let inv = glam::Mat3::from_cols_array(&e.inv).as_dmat3();
-    let oc = ray.org.as_dvec3() - Vec3::from(e.center).as_dvec3();
+/// The point and outward unit normal of `ray`'s hit at `hit.t` on the quadric `|M⁻¹ (x - c)| = 1`
+/// (`inv` = `M⁻¹`: a sphere's is `I / r`), in f64, where `(org - c) + t dir` is exact (in f32
+/// its rounding, about an ULP of `org - c`, lies across the ray as much as along it: spheres
+/// of radius 1e-7 seen from 3 units had a fifth of their normals facing away from the ray).
+/// The point is moved along the ray onto the surface by the root nearest it, or, where the
+/// chord is within the rounding of `t` (a shape thinner than an ULP of the distance: either
+/// sheet is at the same f32 `t`), by the entry if the ray starts (at `tmin`) outside, else
+/// the exit: the root the query must have found. A grazing ray (an f32 `t` just past the rim)
+/// takes the point of the line nearest the surface. `None` where a step is not finite.
+fn quadric_surface(inv: DMat3, center: [f32; 3], hit: &Hit, ray: &Ray) -> Option<(Vec3, Vec3)> {
+    let oc = ray.org.as_dvec3() - Vec3::from(center).as_dvec3();
     let d = ray.dir.as_dvec3();
     let q = oc + hit.t as f64 * d;
     let (u, du) = (inv * q, inv * d);
@@ -345,35 +289,27 @@ fn ellipsoid_hit_surface(e: &super::Ellipsoid, hit: &Hit, ray: &Ray) -> Option<(
         return None;
     }
     let b = u.dot(du);
-    let l2 = (u - (b / a) * du).length_squared();
-    let disc = a * (1.0 - l2);
+    let disc = a * (1.0 - (u - (b / a) * du).length_squared());
     let s = if disc >= 0.0 {
         let h = disc.sqrt();
         let (s0, s1) = ((-b - h) / a, (-b + h) / a);
-        let ulp_t = (hit.t.abs() * f32::EPSILON) as f64 * 4.0;
-        let start = inv * (oc + ray.tmin as f64 * d);
-        let entering = !ray.tmin.is_finite() || start.length_squared() > 1.0 || start.is_nan();
-        if s1 - s0 <= ulp_t {
-            if entering {
-                s0
-            } else {
-                s1
-            }
-        } else if s1.abs() < s0.abs() {
-            s1
-        } else {
-            s0
+        let rounding = 4.0 * (hit.t.abs() * f32::EPSILON) as f64;
+        let start = (inv * (oc + ray.tmin as f64 * d)).length_squared();
+        let entering = !ray.tmin.is_finite() || start > 1.0 || start.is_nan();
+        match s1 - s0 <= rounding {
+            true if entering => s0,
+            true => s1,
+            false if s1.abs() < s0.abs() => s1,
+            false => s0,
         }
     } else {
-        // Grazing: the rim point nearest the line.
         -b / a
     };
-    let (p, pu) = (q + s * d, u + s * du);
-    let g = inv.transpose() * pu;
+    let p = (q + s * d).as_vec3();
+    let g = inv.transpose() * (u + s * du);
     let len = g.length();
-    let n = (len > 0.0 && len.is_finite()).then(|| (g / len).as_vec3())?;
-    let p = p.as_vec3();
-    p.is_finite().then_some((p, n))
+    (len > 0.0 && len.is_finite() && p.is_finite())
+        .then(|| (p + Vec3::from(center), (g / len).as_vec3()))
 }
 
 /// The face of a box thinner than the rounding of `org + t dir` across its flat axis (a box
