@@ -95,10 +95,4 @@ mod tests {
         assert_eq!(super::id(), std::process::id());
         assert_eq!(super::id(), std::process::id());
     }
-
-    #[cfg(target_os = "linux")]
-    #[test]
-    fn the_page_is_had_on_linux() {
-        assert!(super::kept().is_some(), "MADV_WIPEONFORK refused");
-    }
 }

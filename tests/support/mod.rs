@@ -1,7 +1,8 @@
 //! Shared by the integration tests: for those that compile C against `include/rt2.h` or load
 //! the built shared library, where the library is and a `cc` compiler configured outside
 //! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`; the
-//! fork tests' wait for a child; the C API tests' smallest scene; rays around a target.
+//! fork tests' wait for a child; the C API tests' smallest scene; rays around a target and the
+//! sequence behind them.
 
 #![allow(dead_code)]
 
@@ -181,13 +182,8 @@ pub fn rays_around(
     seed: u64,
 ) -> Vec<(glam::Vec3, glam::Vec3)> {
     use glam::Vec3;
-    let mut state = seed;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    };
+    let mut uniform = uniform(seed);
+    let mut next = move || uniform() as f32;
     (0..n)
         .map(|_| {
             let from = Vec3::new(next(), next(), next()).normalize_or(Vec3::X) * dist;
@@ -195,4 +191,16 @@ pub fn rays_around(
             (target + from, to - from)
         })
         .collect()
+}
+
+/// A xorshift sequence seeded by `seed` (not 0), uniform in [-1, 1) on a grid of 2^-23: every
+/// value is exact in f32 as well.
+pub fn uniform(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f64 / (1u64 << 24) as f64 * 2.0 - 1.0
+    }
 }
