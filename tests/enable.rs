@@ -13,6 +13,8 @@ use rt2::error::Rt2Status;
 use std::ffi::CStr;
 use std::ptr::{null, null_mut};
 
+mod support;
+
 fn last_error() -> String {
     unsafe { CStr::from_ptr(rt2_last_error_message()) }
         .to_string_lossy()
@@ -643,19 +645,9 @@ fn every_subset_traces_and_renders_as_a_scene_without_it() {
 /// `RT2_REQUIRE_GPU=1` (CI runs it on lavapipe).
 #[test]
 fn every_subset_on_the_gpu() {
-    let mut desc = rt2_context_desc_default();
-    desc.backend = Rt2Backend::Gpu as u32;
-    let mut probe = null_mut();
-    if unsafe { rt2_context_create(&desc, &mut probe) } != Rt2Status::Ok {
-        let why = last_error();
-        assert!(
-            std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
-            "RT2_REQUIRE_GPU=1 but no GPU: {why}"
-        );
-        eprintln!("SKIPPED (no GPU adapter): {why}");
+    if !support::c_gpu_or_skip() {
         return;
     }
-    unsafe { rt2_context_destroy(probe) };
     let mut opts = Vec::new();
     for traversal in 0..=7 {
         let mut o = rt2_query_options_default();

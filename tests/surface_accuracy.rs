@@ -240,14 +240,10 @@ fn surfaces_of_rays_with_long_and_short_directions() {
     assert!(bad.is_empty(), "{n} rays:\n{}", bad.join("\n"));
 }
 
-/// Every traversal and mode: the same surfaces.
-#[test]
-fn every_traversal_and_mode_same_surfaces() {
-    let s = new(Rt2Backend::Cpu);
-    let m = mat(&s);
-    let mut id = 0;
+/// Adds a wavy grid of `n` × `n` quads (two triangles each) of material `m`, placed by a
+/// mirroring, rotating, non-uniformly scaling transform.
+fn wavy_grid(s: &S, m: u32, n: u32) {
     let (mut pos, mut idx) = (vec![], vec![]);
-    let n = 24u32;
     for i in 0..=n {
         for j in 0..=n {
             let (x, y) = (
@@ -263,6 +259,10 @@ fn every_traversal_and_mode_same_surfaces() {
             idx.extend([a, a + 1, a + n + 2, a, a + n + 2, a + n + 1]);
         }
     }
+    let mut id = 0;
+    let t: [f32; 12] = [
+        -0.8, 0.3, 0.0, 0.2, 0.1, 1.5, 0.2, -0.1, 0.0, 0.2, 0.6, 0.05,
+    ];
     unsafe {
         ok(rt2_scene_add_mesh(
             s.scene,
@@ -273,12 +273,16 @@ fn every_traversal_and_mode_same_surfaces() {
             m,
             &mut id,
         ));
-        // mirrored, rotated, scaled
-        let t: [f32; 12] = [
-            -0.8, 0.3, 0.0, 0.2, 0.1, 1.5, 0.2, -0.1, 0.0, 0.2, 0.6, 0.05,
-        ];
         ok(rt2_scene_set_transform(s.scene, id, t.as_ptr()));
     }
+}
+
+/// Every traversal and mode: the same surfaces.
+#[test]
+fn every_traversal_and_mode_same_surfaces() {
+    let s = new(Rt2Backend::Cpu);
+    let m = mat(&s);
+    wavy_grid(&s, m, 24);
     s.commit();
     let mut uniform = support::uniform(0x1234_5678_9abc_def1u64);
     let mut next = move || uniform() as f32;
@@ -345,54 +349,15 @@ fn every_traversal_and_mode_same_surfaces() {
 /// mesh and analytic shapes.
 #[test]
 fn gpu_hits_give_the_cpu_surfaces() {
-    let mut desc = rt2_context_desc_default();
-    desc.backend = Rt2Backend::Gpu as u32;
-    let mut probe = null_mut();
-    if unsafe { rt2_context_create(&desc, &mut probe) } != Rt2Status::Ok {
-        let why = last_error();
-        assert!(
-            std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
-            "RT2_REQUIRE_GPU=1 but no GPU: {why}"
-        );
-        eprintln!("SKIPPED (no GPU adapter): {why}");
+    if !support::c_gpu_or_skip() {
         return;
     }
-    unsafe { rt2_context_destroy(probe) };
     let build = |b: Rt2Backend| {
         let s = new(b);
         let m = mat(&s);
-        let mut id = 0;
-        let (mut pos, mut idx) = (vec![], vec![]);
-        let n = 16u32;
-        for i in 0..=n {
-            for j in 0..=n {
-                let (x, y) = (
-                    i as f32 / n as f32 * 2.0 - 1.0,
-                    j as f32 / n as f32 * 2.0 - 1.0,
-                );
-                pos.extend([x, y, 0.3 * (3.0 * x).sin() * (2.0 * y).cos()]);
-            }
-        }
-        for i in 0..n {
-            for j in 0..n {
-                let a = i * (n + 1) + j;
-                idx.extend([a, a + 1, a + n + 2, a, a + n + 2, a + n + 1]);
-            }
-        }
+        wavy_grid(&s, m, 16);
         unsafe {
-            ok(rt2_scene_add_mesh(
-                s.scene,
-                pos.as_ptr(),
-                pos.len() / 3,
-                idx.as_ptr(),
-                idx.len() / 3,
-                m,
-                &mut id,
-            ));
-            let t: [f32; 12] = [
-                -0.8, 0.3, 0.0, 0.2, 0.1, 1.5, 0.2, -0.1, 0.0, 0.2, 0.6, 0.05,
-            ];
-            ok(rt2_scene_set_transform(s.scene, id, t.as_ptr()));
+            let mut id = 0;
             ok(rt2_scene_add_sphere(
                 s.scene,
                 [1.5, 1.0, 0.5].as_ptr(),

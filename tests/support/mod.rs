@@ -2,7 +2,7 @@
 //! the built shared library, where the library is and a `cc` compiler configured outside
 //! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`; the
 //! fork tests' wait for a child; the C API tests' smallest scene; rays around a target and the
-//! sequence behind them.
+//! sequence behind them; whether a GPU context can be had.
 
 #![allow(dead_code)]
 
@@ -203,4 +203,27 @@ pub fn uniform(seed: u64) -> impl FnMut() -> f64 {
         state ^= state << 17;
         (state >> 40) as f64 / (1u64 << 24) as f64 * 2.0 - 1.0
     }
+}
+
+/// Whether a GPU context can be made through the C API. Without one it prints SKIPPED and
+/// returns false, or fails under `RT2_REQUIRE_GPU=1` (CI runs the GPU tests on lavapipe).
+pub fn c_gpu_or_skip() -> bool {
+    use rt2::api::*;
+    let mut desc = rt2_context_desc_default();
+    desc.backend = Rt2Backend::Gpu as u32;
+    let mut probe = std::ptr::null_mut();
+    // SAFETY: a default descriptor and an out pointer to a local; the context is destroyed.
+    unsafe {
+        if rt2_context_create(&desc, &mut probe) == rt2::error::Rt2Status::Ok {
+            rt2_context_destroy(probe);
+            return true;
+        }
+        let why = std::ffi::CStr::from_ptr(rt2_last_error_message()).to_string_lossy();
+        assert!(
+            std::env::var("RT2_REQUIRE_GPU").as_deref() != Ok("1"),
+            "RT2_REQUIRE_GPU=1 but no GPU: {why}"
+        );
+        eprintln!("SKIPPED (no GPU adapter): {why}");
+    }
+    false
 }
