@@ -926,43 +926,25 @@ fn tiny_sphere_normals_face_the_ray() {
         .into_iter()
         .chain([(far, 1e-2), (far, 1e-3)]);
     for (c, r) in cases {
+        let sc = new(Rt2Backend::Cpu);
         unsafe {
-            let (mut ctx, mut scene) = (null_mut(), null_mut());
-            let mut d = rt2_context_desc_default();
-            d.backend = Rt2Backend::Cpu as u32;
-            ok(rt2_context_create(&d, &mut ctx));
-            ok(rt2_scene_create(ctx, &mut scene));
+            let centre = c.to_array();
             ok(rt2_scene_add_sphere(
-                scene,
-                c.to_array().as_ptr(),
+                sc.scene,
+                centre.as_ptr(),
                 r,
                 0,
                 null_mut(),
             ));
-            ok(rt2_scene_commit(scene));
-            let rays: Vec<rt2_ray> =
-                support::rays_around(c, 3.0, 0.5 * r, 4000, 0x1234_5678_9abc_def1)
-                    .into_iter()
-                    .map(|(o, d)| ray(o.to_array(), d.to_array()))
-                    .collect();
-            let mut hits = vec![std::mem::zeroed::<rt2_hit>(); rays.len()];
-            ok(rt2_intersect(
-                ctx,
-                scene,
-                rays.as_ptr(),
-                rays.len(),
-                hits.as_mut_ptr(),
-                null(),
-                null_mut(),
-            ));
-            let mut out = vec![std::mem::zeroed::<rt2_surface>(); rays.len()];
-            ok(rt2_hit_surfaces(
-                scene,
-                rays.as_ptr(),
-                hits.as_ptr(),
-                rays.len(),
-                out.as_mut_ptr(),
-            ));
+        }
+        sc.commit();
+        let rays: Vec<rt2_ray> = support::rays_around(c, 3.0, 0.5 * r, 4000, 0x1234_5678_9abc_def1)
+            .into_iter()
+            .map(|(o, d)| ray(o.to_array(), d.to_array()))
+            .collect();
+        let hits = sc.hits(&rays, None);
+        let out = sc.surf(&rays, &hits);
+        {
             let (mut n, mut back, mut worst) = (0, 0, 0f64);
             for ((ray, h), s) in rays.iter().zip(&hits).zip(&out) {
                 if h.prim == RT2_INVALID_ID {
@@ -991,8 +973,6 @@ fn tiny_sphere_normals_face_the_ray() {
             report.push(format!(
                 "centre {c}, r {r:e}: {n} hits, {back} normals facing away, worst {worst:e}"
             ));
-            rt2_scene_destroy(scene);
-            rt2_context_destroy(ctx);
         }
     }
     eprintln!("{}", report.join("\n"));
@@ -1011,43 +991,26 @@ fn tiny_ellipsoid_normals_against_f64() {
     let mut worst_all = 0f64;
     for r in [1e-3f32, 1e-5, 1e-6, 1e-7] {
         let radii = Vec3::new(1.0, 0.7, 0.5) * r;
+        let sc = new(Rt2Backend::Cpu);
         unsafe {
-            let (mut ctx, mut scene) = (null_mut(), null_mut());
-            let mut d = rt2_context_desc_default();
-            d.backend = Rt2Backend::Cpu as u32;
-            ok(rt2_context_create(&d, &mut ctx));
-            ok(rt2_scene_create(ctx, &mut scene));
+            let (centre, radii) = ([0.0f32; 3], radii.to_array());
             ok(rt2_scene_add_ellipsoid(
-                scene,
-                [0.0f32; 3].as_ptr(),
-                radii.to_array().as_ptr(),
+                sc.scene,
+                centre.as_ptr(),
+                radii.as_ptr(),
                 0,
                 null_mut(),
             ));
-            ok(rt2_scene_commit(scene));
-            let rays: Vec<rt2_ray> =
-                support::rays_around(Vec3::ZERO, 3.0, 0.3 * r, 4000, 0x1234_5678_9abc_def1)
-                    .into_iter()
-                    .map(|(o, d)| ray(o.to_array(), d.to_array()))
-                    .collect();
-            let mut hits = vec![std::mem::zeroed::<rt2_hit>(); rays.len()];
-            ok(rt2_intersect(
-                ctx,
-                scene,
-                rays.as_ptr(),
-                rays.len(),
-                hits.as_mut_ptr(),
-                null(),
-                null_mut(),
-            ));
-            let mut out = vec![std::mem::zeroed::<rt2_surface>(); rays.len()];
-            ok(rt2_hit_surfaces(
-                scene,
-                rays.as_ptr(),
-                hits.as_ptr(),
-                rays.len(),
-                out.as_mut_ptr(),
-            ));
+        }
+        sc.commit();
+        let rays: Vec<rt2_ray> =
+            support::rays_around(Vec3::ZERO, 3.0, 0.3 * r, 4000, 0x1234_5678_9abc_def1)
+                .into_iter()
+                .map(|(o, d)| ray(o.to_array(), d.to_array()))
+                .collect();
+        let hits = sc.hits(&rays, None);
+        let out = sc.surf(&rays, &hits);
+        {
             let rd = radii.as_dvec3();
             let (mut n, mut back, mut worst) = (0, 0, 0f64);
             for ((ray, h), s) in rays.iter().zip(&hits).zip(&out) {
@@ -1075,8 +1038,6 @@ fn tiny_ellipsoid_normals_against_f64() {
             report.push(format!(
                 "radii {radii}: {n} hits, {back} facing away, worst {worst:e}"
             ));
-            rt2_scene_destroy(scene);
-            rt2_context_destroy(ctx);
         }
     }
     eprintln!("{}", report.join("\n"));
