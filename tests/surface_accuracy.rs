@@ -277,6 +277,21 @@ fn wavy_grid(s: &S, m: u32, n: u32) {
     }
 }
 
+/// 4096 rays down from the square `[-2, 2]²` at height 5, their directions leaning up to
+/// `lean` in x and y (a xorshift sequence seeded by `seed`).
+fn downward_rays(seed: u64, lean: f32) -> Vec<rt2_ray> {
+    let mut uniform = support::uniform(seed);
+    let mut next = move || uniform() as f32;
+    (0..4096)
+        .map(|_| {
+            ray(
+                [next() * 2.0, next() * 2.0, 5.0],
+                [next() * lean, next() * lean, -1.0],
+            )
+        })
+        .collect()
+}
+
 /// Every traversal and mode: the same surfaces.
 #[test]
 fn every_traversal_and_mode_same_surfaces() {
@@ -284,16 +299,7 @@ fn every_traversal_and_mode_same_surfaces() {
     let m = mat(&s);
     wavy_grid(&s, m, 24);
     s.commit();
-    let mut uniform = support::uniform(0x1234_5678_9abc_def1u64);
-    let mut next = move || uniform() as f32;
-    let rays: Vec<rt2_ray> = (0..4096)
-        .map(|_| {
-            ray(
-                [next() * 2.0, next() * 2.0, 5.0],
-                [next() * 0.3, next() * 0.3, -1.0],
-            )
-        })
-        .collect();
+    let rays = downward_rays(0x1234_5678_9abc_def1u64, 0.3);
     let base = s.hits(&rays, None);
     let sb = s.surf(&rays, &base);
     let hits = base.iter().filter(|h| h.object != RT2_INVALID_ID).count();
@@ -391,16 +397,7 @@ fn gpu_hits_give_the_cpu_surfaces() {
         s
     };
     let (c, g) = (build(Rt2Backend::Cpu), build(Rt2Backend::Gpu));
-    let mut uniform = support::uniform(0x9876_5432_1abc_def1u64);
-    let mut next = move || uniform() as f32;
-    let rays: Vec<rt2_ray> = (0..4096)
-        .map(|_| {
-            ray(
-                [next() * 2.0, next() * 2.0, 5.0],
-                [next() * 0.5, next() * 0.5, -1.0],
-            )
-        })
-        .collect();
+    let rays = downward_rays(0x9876_5432_1abc_def1u64, 0.5);
     let hc = c.hits(&rays, None);
     let sc = c.surf(&rays, &hc);
     let mut bad = vec![];
