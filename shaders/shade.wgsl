@@ -82,12 +82,24 @@ fn box_on_surface(b: Aabb, p: vec3<f32>) -> vec3<f32> {
 // rad: 0.02 rad at sin θ = 2e-6) and may differ from the CPU's by that much.
 fn triangle_normal(t: Triangle) -> vec3<f32> {
     let n = cross(v3(t.e1), v3(t.e2));
-    let l2 = bitcast<u32>(dot(n, n)) & 0x7fffffffu;
-    if (l2 >= 0x00800000u && l2 < 0x7f800000u) { return normalize_or_zero(n); }
-    let m = cross(scaled_edge(v3(t.e1)), scaled_edge(v3(t.e2)));
-    let k = max3(abs(m));
+    if (square_is_normal(n)) { return normalize_or_zero(n); }
+    return unit_or_zero(cross(scaled_edge(v3(t.e1)), scaled_edge(v3(t.e2))));
+}
+
+// Whether |v|² is a normal float: `normalize_or_zero` is then exact to rounding.
+fn square_is_normal(v: vec3<f32>) -> bool {
+    let l2 = bitcast<u32>(dot(v, v)) & 0x7fffffffu;
+    return l2 >= 0x00800000u && l2 < 0x7f800000u;
+}
+
+// `v` normalised, or zero for a zero or non-finite vector: plainly where its square is a
+// normal float (`normalize_or_zero`'s bits), else divided by its largest component first
+// (`geometry::unit`), as the square under- or overflows.
+fn unit_or_zero(v: vec3<f32>) -> vec3<f32> {
+    if (square_is_normal(v)) { return normalize_or_zero(v); }
+    let k = max3(abs(v));
     if (!(k > 0.0) || (bitcast<u32>(k) & 0x7fffffffu) >= 0x7f800000u) { return vec3<f32>(0.0); }
-    return normalize_or_zero(m / k);
+    return normalize_or_zero(v / k);
 }
 
 // An edge scaled by the power of two that brings its largest component near 1 (kept as it is
@@ -109,14 +121,8 @@ fn prim_normal(i: u32, p: vec3<f32>) -> vec3<f32> {
     if (k < params.n_ell) {
         let e = ellipsoids[k];
         let m = m3(e.inv);
-        // `Ellipsoid::normal` (`geometry::unit`): divided by its largest component before
-        // normalising, as the gradient's square overflows for semi-axes below about 5e-20.
-        let g = transpose(m) * (m * (p - v3(e.center)));
-        let l2 = bitcast<u32>(dot(g, g)) & 0x7fffffffu;
-        if (l2 >= 0x00800000u && l2 < 0x7f800000u) { return normalize_or_zero(g); }
-        let k = max3(abs(g));
-        if (!(k > 0.0) || (bitcast<u32>(k) & 0x7fffffffu) >= 0x7f800000u) { return vec3<f32>(0.0); }
-        return normalize_or_zero(g / k);
+        // `Ellipsoid::normal`: the gradient's square overflows for semi-axes below about 5e-20.
+        return unit_or_zero(transpose(m) * (m * (p - v3(e.center))));
     }
     return box_normal(boxes[k - params.n_ell], p);
 }
