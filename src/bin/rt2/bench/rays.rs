@@ -5,7 +5,7 @@ use super::{embree_rows, model_scene, shared, time_ms, Args};
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
-use rt2::error::{Error, Result};
+use rt2::error::{Error, Result, Rt2Status};
 use rt2::geometry::{Hit, Ray};
 use rt2::rayset::{self, HitRecord};
 use std::ffi::CString;
@@ -40,6 +40,7 @@ pub(super) fn rays(a: &Args) -> Result<String> {
             &sets,
             a.runs,
         );
+        let c_scene = CScene::load(&shared().join("models").join(format!("{model}.ply")))?;
         for set in &sets {
             let rays: Vec<Ray> = rayset::read_rays(set)?;
             let stem = set
@@ -82,8 +83,7 @@ pub(super) fn rays(a: &Args) -> Result<String> {
             // One C call per ray, as Embree's `intersect1` rows are and as a user porting a
             // loop of `rtcIntersect1` would write it: the C boundary's and the dispatch layer's
             // cost per call on top of the ray.
-            let model_path = shared().join("models").join(format!("{model}.ply"));
-            let mrays = c_call_per_ray(&model_path, &rays, a.runs)?;
+            let mrays = c_scene.calls_per_ray(&rays, a.runs)?;
             writeln!(
                 out,
                 "| {model} {stem} | RT2 default options, a C call per ray | {mrays:.2} | | | | | |"
@@ -107,71 +107,98 @@ pub(super) fn rays(a: &Args) -> Result<String> {
     Ok(out)
 }
 
-/// Mrays/s of `rays` traced with one `rt2_intersect` call each (default options, a CPU context
-/// of one thread), the median of `runs` passes.
-fn c_call_per_ray(model: &Path, rays: &[Ray], runs: usize) -> Result<f64> {
-    use rt2::api::*;
-    use rt2::error::Rt2Status;
-    let fail = |what: &str, s: Rt2Status| {
-        // SAFETY: the library's last error message is a NUL-terminated string it owns.
-        let why = unsafe { std::ffi::CStr::from_ptr(rt2_last_error_message()) };
-        Error::new(s, format!("bench: {what}: {}", why.to_string_lossy()))
-    };
-    let path = CString::new(model.as_os_str().as_encoded_bytes())
-        .map_err(|e| Error::invalid_argument(format!("{}: {e}", model.display())))?;
-    let c_rays: Vec<rt2_ray> = rays
-        .iter()
-        .map(|r| rt2_ray {
-            org: r.org.to_array(),
-            tmin: r.tmin,
-            dir: r.dir.to_array(),
-            tmax: r.tmax,
-        })
-        .collect();
-    let mut desc = rt2_context_desc_default();
-    desc.backend = Rt2Backend::Cpu as u32;
-    desc.threads = 1;
-    let (mut ctx, mut scene) = (std::ptr::null_mut(), std::ptr::null_mut());
-    // SAFETY: every pointer passed is a live local or a handle these calls made; the handles
-    // are destroyed before returning, on every path.
-    unsafe {
-        let s = rt2_context_create(&desc, &mut ctx);
-        if s != Rt2Status::Ok {
-            return Err(fail("rt2_context_create", s));
-        }
-        let mut traced = || -> Result<f64> {
-            let s = rt2_scene_create(ctx, &mut scene);
-            if s != Rt2Status::Ok {
-                return Err(fail("rt2_scene_create", s));
-            }
-            let s = rt2_scene_load_file(scene, path.as_ptr(), 0, std::ptr::null_mut());
-            if s != Rt2Status::Ok {
-                return Err(fail("rt2_scene_load_file", s));
-            }
-            let s = rt2_scene_commit(scene);
-            if s != Rt2Status::Ok {
-                return Err(fail("rt2_scene_commit", s));
-            }
-            let opts = rt2_query_options_default();
-            let mut hit = std::mem::zeroed::<rt2_hit>();
-            // A failed call would be timed as a traced ray: the last failure is reported.
-            let mut status = Rt2Status::Ok;
-            let ms = time_ms(runs, || {
-                for r in &c_rays {
-                    let s = rt2_intersect(ctx, scene, r, 1, &mut hit, &opts, std::ptr::null_mut());
-                    if s != Rt2Status::Ok {
-                        status = s;
-                    }
-                }
-            });
-            if status != Rt2Status::Ok {
-                return Err(fail("rt2_intersect", status));
-            }
-            Ok(c_rays.len() as f64 / ms / 1e3)
+/// A model loaded and committed through the C API on a CPU context of one thread, for the
+/// row of one C call per ray; destroyed on drop.
+struct CScene {
+    ctx: *mut rt2::api::rt2_context,
+    scene: *mut rt2::api::rt2_scene,
+}
+
+impl CScene {
+    fn load(model: &Path) -> Result<Self> {
+        use rt2::api::*;
+        let path = CString::new(model.as_os_str().as_encoded_bytes())
+            .map_err(|e| Error::invalid_argument(format!("{}: {e}", model.display())))?;
+        let mut desc = rt2_context_desc_default();
+        desc.backend = Rt2Backend::Cpu as u32;
+        desc.threads = 1;
+        let mut s = CScene {
+            ctx: std::ptr::null_mut(),
+            scene: std::ptr::null_mut(),
         };
-        let mrays = traced();
-        rt2_scene_destroy(scene);
-        rt2_context_destroy(ctx);
-        mrays
+        // SAFETY: pointers to live locals and the handles these calls make, which `s` destroys
+        // on drop (NULL ones too) on every path.
+        unsafe {
+            c_status("rt2_context_create", rt2_context_create(&desc, &mut s.ctx))?;
+            c_status("rt2_scene_create", rt2_scene_create(s.ctx, &mut s.scene))?;
+            let st = rt2_scene_load_file(s.scene, path.as_ptr(), 0, std::ptr::null_mut());
+            c_status("rt2_scene_load_file", st)?;
+            c_status("rt2_scene_commit", rt2_scene_commit(s.scene))?;
+        }
+        Ok(s)
     }
+
+    /// Mrays/s of `rays` traced with one `rt2_intersect` call each (default options), the
+    /// median of `runs` passes.
+    fn calls_per_ray(&self, rays: &[Ray], runs: usize) -> Result<f64> {
+        use rt2::api::*;
+        let c_rays: Vec<rt2_ray> = rays
+            .iter()
+            .map(|r| rt2_ray {
+                org: r.org.to_array(),
+                tmin: r.tmin,
+                dir: r.dir.to_array(),
+                tmax: r.tmax,
+            })
+            .collect();
+        let opts = rt2_query_options_default();
+        // SAFETY: a plain C struct of numbers.
+        let mut hit = unsafe { std::mem::zeroed::<rt2_hit>() };
+        // A failed call would be timed as a traced ray: the last failure is reported.
+        let mut status = Rt2Status::Ok;
+        let ms = time_ms(runs, || {
+            for r in &c_rays {
+                // SAFETY: live handles, one ray and one hit.
+                let s = unsafe {
+                    rt2_intersect(
+                        self.ctx,
+                        self.scene,
+                        r,
+                        1,
+                        &mut hit,
+                        &opts,
+                        std::ptr::null_mut(),
+                    )
+                };
+                if s != Rt2Status::Ok {
+                    status = s;
+                }
+            }
+        });
+        c_status("rt2_intersect", status)?;
+        Ok(c_rays.len() as f64 / ms / 1e3)
+    }
+}
+
+impl Drop for CScene {
+    fn drop(&mut self) {
+        // SAFETY: handles made by `load` (or NULL, which both calls accept).
+        unsafe {
+            rt2::api::rt2_scene_destroy(self.scene);
+            rt2::api::rt2_context_destroy(self.ctx);
+        }
+    }
+}
+
+/// An error for a failed C call `what`, with the library's message.
+fn c_status(what: &str, s: Rt2Status) -> Result<()> {
+    if s == Rt2Status::Ok {
+        return Ok(());
+    }
+    // SAFETY: the library's last error message is a NUL-terminated string it owns.
+    let why = unsafe { std::ffi::CStr::from_ptr(rt2::api::rt2_last_error_message()) };
+    Err(Error::new(
+        s,
+        format!("bench: {what}: {}", why.to_string_lossy()),
+    ))
 }
