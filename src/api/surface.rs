@@ -82,6 +82,9 @@ pub unsafe extern "C" fn rt2_hit_surfaces(
         let out = slice_mut(surfaces, count, "surfaces")?;
         let named = hits.iter().any(|h| !h.is_miss());
         s.with_lookup(named, |c, lookup| {
+            // Every entry checked before any is written, then converted again while writing:
+            // a lookup and a few comparisons each, where keeping the converted hits would
+            // allocate per call.
             for (i, (r, h)) in rays.iter().zip(hits).enumerate() {
                 library_hit(c, lookup, i, r, h)?;
             }
