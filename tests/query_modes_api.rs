@@ -287,6 +287,71 @@ fn a_query_longer_than_one_step_answers_every_ray_in_place() {
 /// +x through `y + z > 1` misses everything: root and both leaves (3 nodes, 2 leaves, 12
 /// tests). One through `y + z < 1` hits A's first triangle, before leaving A's leaf: 2 nodes,
 /// 1 leaf, 5 tests. Along -x, the same with B first (7 tests).
+/// Calls of 1 to 20 rays (staged on the stack up to a limit, on the heap beyond it) answer
+/// every ray as the unit sphere says, in every mode: ray i passes at height `x_i` beside its
+/// centre, a hit at `t = 10 - sqrt(1 - x_i^2)` where `|x_i| < 1`.
+#[test]
+fn small_calls_answer_every_ray() {
+    unsafe {
+        let (ctx, scene, ids) = sphere_scene(std::iter::once(([0.0; 3], 1.0)));
+        let heights: Vec<f32> = (0..60).map(|i| (i as f32 - 29.5) / 20.0).collect();
+        let rays: Vec<rt2_ray> = heights
+            .iter()
+            .map(|&x| rt2_ray {
+                org: [x, 0.0, 10.0],
+                tmin: 0.0,
+                dir: [0.0, 0.0, -1.0],
+                tmax: f32::INFINITY,
+            })
+            .collect();
+        for mode in [
+            Rt2QueryMode::Single,
+            Rt2QueryMode::Packet,
+            Rt2QueryMode::Stream,
+        ] {
+            let mut opt = rt2_query_options_default();
+            opt.mode = mode as u32;
+            for size in 1..=20 {
+                for (k, (rays, heights)) in rays.chunks(size).zip(heights.chunks(size)).enumerate()
+                {
+                    let miss = rt2_hit {
+                        t: -1.0,
+                        u: 0.0,
+                        v: 0.0,
+                        object: 7,
+                        prim: 7,
+                    };
+                    let mut hits = vec![miss; rays.len()];
+                    let mut occ = vec![9u8; rays.len()];
+                    assert_eq!(
+                        intersect_all(ctx, scene, rays, &mut hits, &opt),
+                        Rt2Status::Ok
+                    );
+                    assert_eq!(
+                        occluded_all(ctx, scene, rays, &mut occ, &opt),
+                        Rt2Status::Ok
+                    );
+                    for ((h, o), &x) in hits.iter().zip(&occ).zip(heights) {
+                        let what = format!("{mode:?}, call {k} of {size} rays, height {x}");
+                        let inside = x.abs() < 1.0;
+                        assert_eq!(*o, inside as u8, "{what}");
+                        match inside {
+                            true => {
+                                let t = 10.0 - (1.0 - (x as f64).powi(2)).sqrt();
+                                assert!((h.t as f64 - t).abs() < 1e-5, "{what}: t {}", h.t);
+                                assert_eq!(h.object, ids[0], "{what}");
+                            }
+                            false => assert_eq!(h.object, RT2_INVALID_ID, "{what}"),
+                        }
+                    }
+                }
+            }
+        }
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
 #[test]
 fn query_statistics_count_the_nodes_leaves_and_tests_of_each_ray() {
     let (na, nb) = (5usize, 7usize);
