@@ -75,8 +75,9 @@ pub struct rt2_query_options {
     /// NULL (default), or one hit per ray: ray i ignores the primitive `exclude[i]` names by
     /// its `object` and `prim` (`t`, `u`, `v` are not read), e.g. the hit a secondary ray
     /// leaves (the exclude-prim offset of renders). A miss (both `RT2_INVALID_ID`) excludes
-    /// nothing, nor does a primitive of a disabled object (`rt2_scene_set_enabled`); any other
-    /// id the scene lacks is an INVALID_ARGUMENT. Every mode and the GPU honour it. It may be
+    /// nothing, nor does a primitive of a disabled object (`rt2_scene_set_enabled`); a removed
+    /// object's id (`rt2_scene_remove`, said so in the message) and any other id the scene
+    /// lacks is an INVALID_ARGUMENT. Every mode and the GPU honour it. It may be
     /// the call's own `hits` array (read whole before any hit is written). The first use
     /// builds a lookup of 4 bytes per primitive. A sphere, ellipsoid or box is one primitive,
     /// excluded whole: a ray that starts on a sphere and excludes it does not find the
@@ -171,7 +172,8 @@ fn excluded_all(
 
 /// The global index of the primitive that hit `h` (not a miss), entry `i` of the caller's
 /// array `what`, names: `INVALID` for a primitive of a disabled object (the id is the
-/// scene's; the committed scene left it out); an error naming the entry if the scene lacks it.
+/// scene's; the committed scene left it out); an error naming the entry if the scene lacks it,
+/// saying so when its object was removed.
 pub(crate) fn named_prim(
     lookup: &PrimLookup,
     what: &str,
@@ -179,6 +181,12 @@ pub(crate) fn named_prim(
     h: &rt2_hit,
 ) -> crate::error::Result<PrimIndex> {
     lookup.get(h.object, h.prim).ok_or_else(|| {
+        if lookup.removed(h.object) {
+            return Error::invalid_argument(format!(
+                "{what}[{i}] names object {}, which was removed (rt2_scene_remove)",
+                h.object
+            ));
+        }
         Error::invalid_argument(format!(
             "{what}[{i}] names object {} primitive {}, which the scene lacks (a miss has \
              both ids RT2_INVALID_ID)",

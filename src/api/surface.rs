@@ -40,13 +40,15 @@ const NO_SURFACE: rt2_surface = rt2_surface {
 /// `rt2_intersect` (any context, mode or backend) on this scene's current commit. Ids stay
 /// the same across commits, but an object moved since the query is answered as it is now
 /// (its surface, off the ray), which this call cannot tell from a hit of the current commit;
-/// a hit on an object disabled since is refused. A miss (`object = prim = RT2_INVALID_ID`)
-/// gets zero `position` and `normal` and material `RT2_INVALID_ID`, not an error.
+/// a hit on an object disabled or removed since is refused. A miss (`object = prim =
+/// RT2_INVALID_ID`) gets zero `position` and `normal` and material `RT2_INVALID_ID`, not an
+/// error.
 ///
 /// Every entry is checked before anything is written; on any error `surfaces` is untouched:
 /// INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks (a
-/// disabled object's too), a hit with a non-finite `t`, `u` or `v` or a ray with a
-/// non-finite `org` or `dir` (a query never returns such a hit), NULL arrays when
+/// disabled object's too, and a removed one's, which the message says), a hit with a
+/// non-finite `t`, `u` or `v` or a ray with a non-finite `org` or `dir` (a query never
+/// returns such a hit), NULL arrays when
 /// `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad handle; INVALID_OPERATION
 /// for a scene never committed or edited since its commit. `count = 0` with NULL arrays is
 /// fine (the scene is still checked, as `rt2_intersect` does). Runs on the calling thread

@@ -2,9 +2,9 @@
 //! committed form (world-space primitive set + kd-tree) that the backends trace.
 //!
 //! Every edit validates first and changes nothing on error. Edits mark what they made stale;
-//! `commit` rebuilds the tree after objects, transforms, the objects' enabled state or build
-//! options changed (the RT² per-frame rebuild when objects move), and only what changed
-//! otherwise.
+//! `commit` rebuilds the tree after objects were added or removed, transforms, the objects'
+//! enabled state or build options changed (the RT² per-frame rebuild when objects move), and
+//! only what changed otherwise.
 
 pub mod builtin;
 pub mod loaders;
@@ -32,7 +32,10 @@ use std::time::Instant;
 pub struct Scene {
     materials: Vec<Material>,
     lights: Vec<PointLight>,
-    objects: Vec<Object>,
+    /// By id; `None` where the object was removed ([`Scene::remove`]): ids are never reused,
+    /// so a removed object leaves its slot here (`size_of::<Option<Object>>()`, 128 bytes) and
+    /// an entry in the committed per-object arrays.
+    objects: Vec<Option<Object>>,
     /// Primitives of all objects, kept so that adding an object is O(1) (summing over the
     /// objects made the 1.2 M spheres of Spheres1 quadratic: minutes to build the scene).
     prim_count: usize,
@@ -49,8 +52,8 @@ enum Stale {
     /// Materials or lights were added: a commit replaces their arrays and keeps the placed
     /// primitives, the tree and what was built on it (ropes, exact corners, the lookup).
     Shading,
-    /// Objects, transforms, enabled state or build options: a commit places and builds
-    /// everything again.
+    /// Objects added or removed, transforms, enabled state or build options: a commit places
+    /// and builds everything again.
     Geometry,
 }
 
@@ -63,9 +66,11 @@ pub struct Committed {
     pub origins: Vec<PrimOrigin>,
     /// The inverse of `origins`, empty until asked for (`Scene::ensure_prim_lookup`).
     pub lookup: PrimLookup,
+    /// Each object's material, by object id (a removed id's entry is 0, and no primitive
+    /// names it).
     pub object_material: Vec<u32>,
-    /// Whether each object's transform mirrors ([`object::Object::mirrors`]): its triangles'
-    /// hits have `u` and `v` swapped.
+    /// Whether each object's transform mirrors ([`object::Object::mirrors`]; false for a
+    /// removed id): its triangles' hits have `u` and `v` swapped.
     pub object_mirrors: Vec<bool>,
     pub materials: Vec<Material>,
     pub lights: Vec<PointLight>,
@@ -274,8 +279,14 @@ impl Scene {
         &self.materials
     }
 
-    pub fn objects(&self) -> &[Object] {
+    /// The objects by id, `None` where one was removed.
+    pub fn objects(&self) -> &[Option<Object>] {
         &self.objects
+    }
+
+    /// How many objects the scene holds: those added and not removed, disabled ones too.
+    pub fn object_count(&self) -> usize {
+        self.objects.iter().flatten().count()
     }
 
     pub fn lights(&self) -> &[PointLight] {
@@ -322,24 +333,31 @@ impl Scene {
         }
         object::check(&shape, &Affine3A::IDENTITY)?;
         self.prim_count += shape.prim_count();
-        self.objects.push(Object {
+        self.objects.push(Some(Object {
             shape,
             material,
             transform: Affine3A::IDENTITY,
             enabled: true,
-        });
+        }));
         self.stale = Stale::Geometry;
         Ok(self.objects.len() as u32 - 1)
     }
 
-    /// Object `object`, or an error naming the id the scene lacks.
+    /// Object `object`, or an error saying whether the id was removed or never given.
     fn object(&self, object: u32) -> Result<&Object> {
-        self.objects.get(object as usize).ok_or_else(|| {
-            Error::invalid_argument(format!(
-                "object is {object}, but the scene has {} objects",
-                self.objects.len()
-            ))
-        })
+        match self.objects.get(object as usize) {
+            Some(Some(o)) => Ok(o),
+            slot => Err(no_object(object, self.objects.len(), slot.is_some())),
+        }
+    }
+
+    /// [`Self::object`], mutable.
+    fn object_mut(&mut self, object: u32) -> Result<&mut Object> {
+        let issued = self.objects.len();
+        match self.objects.get_mut(object as usize) {
+            Some(Some(o)) => Ok(o),
+            slot => Err(no_object(object, issued, slot.is_some())),
+        }
     }
 
     /// Sets an object's object-to-world transform (replacing the previous one), whether the
@@ -358,7 +376,7 @@ impl Scene {
         // Placement refuses what a shape cannot take (a box turned off its axes, one that
         // leaves f32), as a commit would.
         object::check(&obj.shape, &t)?;
-        self.objects[object as usize].transform = t;
+        self.object_mut(object)?.transform = t;
         self.stale = Stale::Geometry;
         Ok(())
     }
@@ -370,10 +388,25 @@ impl Scene {
     /// the state an object already has is no edit: the next commit keeps what it would have
     /// kept.
     pub fn set_enabled(&mut self, object: u32, enabled: bool) -> Result<()> {
-        if self.object(object)?.enabled != enabled {
-            self.objects[object as usize].enabled = enabled;
+        let obj = self.object_mut(object)?;
+        if obj.enabled != enabled {
+            obj.enabled = enabled;
             self.stale = Stale::Geometry;
         }
+        Ok(())
+    }
+
+    /// Removes an object (Embree's `rtcDetachGeometry`): its shape (a mesh's vertices and
+    /// triangles) is freed now; its placed primitives, tree entries and lookup entries at the
+    /// next commit, which builds the scene without it (until then the last commit stays, as
+    /// after any edit, and a commit that fails keeps it). Its id is never given again, and
+    /// every call naming it is refused saying it was removed; other ids stay as they were. A
+    /// disabled object can be removed too.
+    pub fn remove(&mut self, object: u32) -> Result<()> {
+        let prims = self.object(object)?.shape.prim_count();
+        self.objects[object as usize] = None;
+        self.prim_count -= prims;
+        self.stale = Stale::Geometry;
         Ok(())
     }
 
@@ -410,7 +443,10 @@ impl Scene {
     /// and what the benchmarks time as a build. Fails as [`Self::commit`] does.
     pub fn rebuild(&mut self) -> Result<()> {
         let start = Instant::now();
-        let enabled = || self.objects.iter().enumerate().filter(|(_, o)| o.enabled);
+        let enabled = || {
+            let objects = self.objects.iter().enumerate();
+            objects.filter_map(|(id, o)| Some((id, o.as_ref().filter(|o| o.enabled)?)))
+        };
         // Room for the triangles, known exactly, taken before placing (growing by doubling
         // could take twice as much); the other kinds grow as they are placed.
         let triangles: usize = enabled()
@@ -442,8 +478,16 @@ impl Scene {
             tree,
             origins,
             lookup: PrimLookup::default(),
-            object_material: fallible::collect(self.objects.iter().map(|o| o.material))?,
-            object_mirrors: fallible::collect(self.objects.iter().map(Object::mirrors))?,
+            object_material: fallible::collect(
+                self.objects
+                    .iter()
+                    .map(|o| o.as_ref().map_or(0, |o| o.material)),
+            )?,
+            object_mirrors: fallible::collect(
+                self.objects
+                    .iter()
+                    .map(|o| o.as_ref().is_some_and(Object::mirrors)),
+            )?,
             materials: fallible::collect(self.materials.iter().cloned())?,
             lights: fallible::collect(self.lights.iter().cloned())?,
             commit_ms: start.elapsed().as_secs_f32() * 1e3,
@@ -472,14 +516,19 @@ impl Scene {
         if let Some(c) = &mut self.committed {
             if c.prims.vertices.len() != c.prims.triangles.len() {
                 // The corners come in placement order (object by object, file order; disabled
-                // objects place none); the committed triangles are renumbered (`locality`):
+                // or removed objects place none); the committed triangles are renumbered (`locality`):
                 // their origins say where each one was placed.
                 let corners = object::triangle_corners(&self.objects)?;
                 let mut first = fallible::with_capacity(self.objects.len())?;
                 let mut placed = 0;
                 for obj in &self.objects {
                     first.push(placed);
-                    if let (true, Shape::Mesh { triangles, .. }) = (obj.enabled, &obj.shape) {
+                    if let Some(Object {
+                        enabled: true,
+                        shape: Shape::Mesh { triangles, .. },
+                        ..
+                    }) = obj
+                    {
                         placed += triangles.len();
                     }
                 }
@@ -505,7 +554,10 @@ impl Scene {
         if !c.lookup.is_empty() {
             return f(c, &c.lookup);
         }
-        let counts = self.objects.iter().map(|o| o.shape.prim_count());
+        let counts = self
+            .objects
+            .iter()
+            .map(|o| Some(o.as_ref()?.shape.prim_count()));
         let lookup = PrimLookup::new(&c.origins, counts)?;
         let r = f(c, &lookup)?;
         self.committed_mut()?.lookup = lookup;
@@ -527,6 +579,15 @@ impl Scene {
             (committed, _) => Err(not_committed(committed.is_some())),
         }
     }
+}
+
+/// The error for an `object` id that names no object: removed, or past the `issued` ids.
+fn no_object(object: u32, issued: usize, removed: bool) -> Error {
+    Error::invalid_argument(if removed {
+        format!("object is {object}, which was removed (rt2_scene_remove): ids are not reused")
+    } else {
+        format!("object is {object}, but the scene has given only {issued} object ids")
+    })
 }
 
 /// Why a scene has no current commit: never committed, or edited since.

@@ -111,11 +111,11 @@ fn world_corners(positions: &[Vec3], tri: &[u32; 3], t: &Affine3A, mirrors: bool
     }
 }
 
-/// The exact corners of every triangle of the enabled `objects`, in the order [`place`] gives
-/// the triangles (`PrimitiveSet::vertices`, for the watertight test).
-pub fn triangle_corners(objects: &[Object]) -> Fallible<Vec<[[f32; 3]; 3]>> {
+/// The exact corners of every triangle of the enabled `objects` (`None`: removed), in the
+/// order [`place`] gives the triangles (`PrimitiveSet::vertices`, for the watertight test).
+pub fn triangle_corners(objects: &[Option<Object>]) -> Fallible<Vec<[[f32; 3]; 3]>> {
     let mut out = Vec::new();
-    for obj in objects.iter().filter(|o| o.enabled) {
+    for obj in objects.iter().flatten().filter(|o| o.enabled) {
         if let Shape::Mesh {
             positions,
             triangles,

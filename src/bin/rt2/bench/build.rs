@@ -27,7 +27,9 @@ pub(super) fn build(a: &Args) -> Result<String> {
             continue;
         };
         let mut scene = scene;
-        let tris = scene.objects()[0].shape.prim_count();
+        let tris = scene.objects()[0]
+            .as_ref()
+            .map_or(0, |o| o.shape.prim_count());
         let mut sah_ms = f64::NAN;
         for builder in [Builder::Sah, Builder::Midpoint] {
             scene.set_build_options(BuildOptions {
