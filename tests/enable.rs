@@ -6,7 +6,8 @@
 //! of every kind, disabled one toggle per commit (a Gray code), traces and renders bit for bit
 //! as a scene built from the enabled objects alone on the CPU (every third subset of that
 //! order on the GPU, both render paths), also with mirrored meshes and while another thread
-//! queries.
+//! queries. `rt2_scene_remove` likewise: after removals (and adds), a scene traces and renders
+//! as one built without the removed objects; a removed id is refused everywhere, saying so.
 
 use rt2::api::*;
 use rt2::error::Rt2Status;
@@ -668,15 +669,10 @@ fn every_subset_on_the_gpu() {
     );
 }
 
-fn subsets(
-    backend: Rt2Backend,
-    opts: &[rt2_query_options],
-    renders: &[(u32, u32, u32, u32)],
-    step: u32,
-) {
-    let ctx = context(backend);
-    let objs = objects();
-    let scene = unsafe {
+/// A committed scene of `objs` under one light, `objs[k]` of a translucent red material when
+/// `ids[k]` (its id in the scene compared with) is even, else of material 0.
+fn lit_scene(ctx: *mut rt2_context, objs: &[Obj], ids: &[u32]) -> *mut rt2_scene {
+    unsafe {
         let mut scene = null_mut();
         ok(rt2_scene_create(ctx, &mut scene), "scene");
         let mut red = rt2_material_default();
@@ -684,8 +680,9 @@ fn subsets(
         red.transparency = 0.3;
         let mut m = 0;
         ok(rt2_scene_add_material(scene, &red, &mut m), "material");
-        for (i, o) in objs.iter().enumerate() {
-            add(scene, o, if i % 2 == 0 { m } else { 0 });
+        assert_eq!(m, RED, "the first material added");
+        for (o, &id) in objs.iter().zip(ids) {
+            add(scene, o, material(id));
         }
         let light = [0.5f32, 3.0, 9.0];
         let white = [1.0f32; 3];
@@ -695,7 +692,30 @@ fn subsets(
         );
         ok(rt2_scene_commit(scene), "commit");
         scene
-    };
+    }
+}
+
+/// [`lit_scene`]'s translucent red material.
+const RED: u32 = 1;
+
+/// The material of [`lit_scene`]'s object `id`.
+fn material(id: u32) -> u32 {
+    if id.is_multiple_of(2) {
+        RED
+    } else {
+        0
+    }
+}
+
+fn subsets(
+    backend: Rt2Backend,
+    opts: &[rt2_query_options],
+    renders: &[(u32, u32, u32, u32)],
+    step: u32,
+) {
+    let ctx = context(backend);
+    let objs = objects();
+    let scene = lit_scene(ctx, &objs, &(0..objs.len() as u32).collect::<Vec<_>>());
     let rays = rays();
     let mut enabled = vec![true; objs.len()];
     // Gray-code order: one object toggles per step (up to `step` per commit when steps are
@@ -714,26 +734,7 @@ fn subsets(
             ok(rt2_scene_commit(scene), "commit");
         }
         let (kept, ids) = without(&objs, &off);
-        let reference = unsafe {
-            let mut r = null_mut();
-            ok(rt2_scene_create(ctx, &mut r), "scene");
-            let mut red = rt2_material_default();
-            red.color = [0.9, 0.2, 0.2];
-            red.transparency = 0.3;
-            let mut m = 0;
-            ok(rt2_scene_add_material(r, &red, &mut m), "material");
-            for (o, &id) in kept.iter().zip(&ids) {
-                add(r, o, if id % 2 == 0 { m } else { 0 });
-            }
-            let light = [0.5f32, 3.0, 9.0];
-            let white = [1.0f32; 3];
-            ok(
-                rt2_scene_add_point_light(r, light.as_ptr(), white.as_ptr(), 1.0, null_mut()),
-                "light",
-            );
-            ok(rt2_scene_commit(r), "commit");
-            r
-        };
+        let reference = lit_scene(ctx, &kept, &ids);
         for opt in opts {
             let (hits, occ) = trace(ctx, scene, &rays, opt);
             let (want, want_occ) = trace(ctx, reference, &rays, opt);
@@ -947,6 +948,337 @@ fn mirrored_meshes_with_every_subset_disabled() {
     eprintln!("{checked} comparisons of {} rays", rays.len());
     unsafe {
         rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// Objects removed from one scene in steps, with objects added in between: the sphere, the
+/// box (disabled first) and the second mesh; then, after two adds, the first mesh (whose
+/// removal renumbers the exact corners of the watertight test) and a new object; then one
+/// more added and one removed in the same commit. After each commit, the hits (ids mapped)
+/// and occlusion under every option in `opts`, also excluding the first hits, and the renders
+/// in `renders` equal those of a scene built from the objects left alone; the objects removed
+/// were hit before, adds get new ids, and `object_count` counts the objects left.
+fn removals(backend: Rt2Backend, opts: &[rt2_query_options], renders: &[(u32, u32, u32, u32)]) {
+    let ctx = context(backend);
+    // Every object ever added, by id, and the ids the scene holds.
+    let mut objs = objects();
+    let mut live: Vec<u32> = (0..objs.len() as u32).collect();
+    let scene = lit_scene(ctx, &objs, &live);
+    let rays = rays();
+    unsafe {
+        ok(rt2_scene_set_enabled(scene, 3, 0), "disable the box");
+        ok(rt2_scene_commit(scene), "commit");
+    }
+    let added = [
+        Obj::Sphere([0.8, -0.5, 0.5], 0.6),
+        grid(4, -2.5, 2.0, 0.8),
+        Obj::Ellipsoid([-1.0, 1.5, 1.0], [0.7, 0.4, 0.5]),
+    ];
+    let steps: [(&[Obj], &[u32]); 4] = [
+        (&[], &[1, 3, 5]),
+        (&added[..2], &[]),
+        (&[], &[0, 6]),
+        (&added[2..], &[7]),
+    ];
+    for (new, gone) in steps {
+        let hit_before = trace(ctx, scene, &rays, &opts[0]).0;
+        unsafe {
+            for o in new {
+                let id = add(scene, o, material(objs.len() as u32));
+                assert_eq!(id, objs.len() as u32, "not a new id");
+                objs.push(o.clone());
+                live.push(id);
+            }
+            for &o in gone {
+                ok(rt2_scene_remove(scene, o), "remove");
+                live.retain(|&l| l != o);
+            }
+            ok(rt2_scene_commit(scene), "commit");
+        }
+        let step = format!("removed {gone:?} (left {live:?})");
+        for &o in gone.iter().filter(|&&o| o != 3) {
+            assert!(on(&hit_before, &[o]) > 20, "{step}: few rays met {o}");
+        }
+        let kept: Vec<Obj> = live.iter().map(|&o| objs[o as usize].clone()).collect();
+        // The box stays disabled in the reference while the scene holds it.
+        let reference = lit_scene(ctx, &kept, &live);
+        if let Some(k) = live.iter().position(|&o| o == 3) {
+            ok(
+                unsafe { rt2_scene_set_enabled(reference, k as u32, 0) },
+                "disable",
+            );
+            ok(unsafe { rt2_scene_commit(reference) }, "commit");
+        }
+        for opt in opts {
+            let what = format!("{step}, {}", name(opt));
+            let (hits, occ) = trace(ctx, scene, &rays, opt);
+            let (want, want_occ) = trace(ctx, reference, &rays, opt);
+            let want = renamed(want, &live);
+            same_trace(&(hits.clone(), occ), &(want.clone(), want_occ), &what);
+            let (mut o2, mut o3) = (*opt, *opt);
+            o2.exclude = hits.as_ptr();
+            let mut want_ex = want.clone();
+            for h in &mut want_ex {
+                if h.object != RT2_INVALID_ID {
+                    h.object = live.iter().position(|&o| o == h.object).unwrap() as u32;
+                }
+            }
+            o3.exclude = want_ex.as_ptr();
+            same(
+                &trace(ctx, scene, &rays, &o2).0,
+                &renamed(trace(ctx, reference, &rays, &o3).0, &live),
+                &format!("{what}, excluding the first hits"),
+            );
+        }
+        for &(schedule, offset_mode, transparency, gpu_path) in renders {
+            let mut opt = rt2_render_options_default();
+            (opt.schedule, opt.offset_mode) = (schedule, offset_mode);
+            (opt.transparency, opt.gpu_path) = (transparency, gpu_path);
+            same(
+                &render(ctx, scene, &opt),
+                &render(ctx, reference, &opt),
+                &format!("{step}, render {schedule} {offset_mode} {transparency} {gpu_path}"),
+            );
+        }
+        assert_eq!(stats(scene).object_count, live.len() as u32, "{step}");
+        assert_eq!(stats(reference).object_count, live.len() as u32, "{step}");
+        unsafe { rt2_scene_destroy(reference) };
+    }
+    unsafe {
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// [`removals`] on the CPU: every query mode, intersector and traversal; renders in both
+/// schedules, every offset mode and both transparency modes.
+#[test]
+fn removed_objects_trace_as_a_scene_built_without_them() {
+    removals(
+        Rt2Backend::Cpu,
+        &query_options(),
+        &[
+            (0, 0, 0, 0),
+            (1, 0, 1, 0),
+            (0, 1, 1, 0),
+            (0, 2, 0, 0),
+            (1, 2, 1, 0),
+        ],
+    );
+}
+
+/// [`removals`] under one GPU context: every traversal, renders of both paths. Without an
+/// adapter it prints SKIPPED and passes, unless `RT2_REQUIRE_GPU=1`.
+#[test]
+fn removed_objects_on_the_gpu() {
+    if !support::c_gpu_or_skip() {
+        return;
+    }
+    let opts: Vec<_> = (0..=7)
+        .map(|traversal| rt2_query_options {
+            traversal,
+            ..rt2_query_options_default()
+        })
+        .collect();
+    removals(
+        Rt2Backend::Gpu,
+        &opts,
+        &[(0, 0, 0, 1), (0, 2, 1, 1), (0, 0, 0, 2), (0, 1, 0, 2)],
+    );
+}
+
+/// Asserts that `status` is INVALID_ARGUMENT with a message containing `want` (and saying
+/// "removed" only if `removed`).
+#[track_caller]
+fn refused(status: Rt2Status, want: &str, removed: bool, what: &str) {
+    let msg = last_error();
+    assert_eq!(status, Rt2Status::InvalidArgument, "{what}: {msg}");
+    assert!(msg.contains(want), "{what}: {msg}");
+    assert_eq!(msg.contains("removed"), removed, "{what}: {msg}");
+}
+
+/// A removed id is refused by every call that names one, saying it was removed, and an id
+/// never given is refused as unknown; neither changes the scene: it stays committed (queries
+/// run without a new commit), with the same hits, statistics and surfaces.
+#[test]
+fn removed_ids_are_refused_everywhere_and_change_nothing() {
+    let ctx = context(Rt2Backend::Cpu);
+    let objs = objects();
+    let scene = scene_of(ctx, &objs);
+    let rays = rays();
+    let opt = rt2_query_options_default();
+    let m = [
+        1.0f32, 0.0, 0.0, 0.5, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0,
+    ];
+    unsafe {
+        ok(rt2_scene_remove(scene, 1), "remove the sphere");
+        // Stale until committed, and the id is refused at once.
+        let mut hits = vec![MISS; rays.len()];
+        let (r, n, h) = (rays.as_ptr(), rays.len(), hits.as_mut_ptr());
+        let st = rt2_intersect(ctx, scene, r, n, h, &opt, null_mut());
+        assert_eq!(st, Rt2Status::InvalidOperation, "queried a stale scene");
+        let st = rt2_scene_set_enabled(scene, 1, 0);
+        refused(st, "object is 1", true, "before the commit");
+        ok(rt2_scene_commit(scene), "commit");
+    }
+    let before = trace(ctx, scene, &rays, &opt);
+    let surfaces_of = |hits: &[rt2_hit]| {
+        let mut out = vec![
+            rt2_surface {
+                position: [7.0; 3],
+                normal: [7.0; 3],
+                material: 7
+            };
+            hits.len()
+        ];
+        let st = unsafe {
+            rt2_hit_surfaces(
+                scene,
+                rays.as_ptr(),
+                hits.as_ptr(),
+                hits.len(),
+                out.as_mut_ptr(),
+            )
+        };
+        (st, out)
+    };
+    let (st, surfaces) = surfaces_of(&before.0);
+    ok(st, "surfaces");
+    // Excluding the first hits builds the lookup, which the refused calls must not change.
+    let mut ex = rt2_query_options_default();
+    ex.exclude = before.0.as_ptr();
+    let excluded = trace(ctx, scene, &rays, &ex);
+    let stats_before = stats(scene);
+    let unknown = objs.len() as u32;
+    for (id, removed) in [(1, true), (unknown, false), (RT2_INVALID_ID - 1, false)] {
+        let want = format!("object is {id}");
+        unsafe {
+            let st = rt2_scene_set_transform(scene, id, m.as_ptr());
+            refused(st, &want, removed, "set_transform");
+            refused(
+                rt2_scene_set_enabled(scene, id, 1),
+                &want,
+                removed,
+                "enable",
+            );
+            refused(
+                rt2_scene_set_enabled(scene, id, 0),
+                &want,
+                removed,
+                "disable",
+            );
+            refused(rt2_scene_remove(scene, id), &want, removed, "remove");
+        }
+        // A hit naming the id, among valid ones.
+        let mut named = before.0.clone();
+        named[5] = rt2_hit {
+            object: id,
+            prim: 0,
+            ..named[5]
+        };
+        let mut hits = vec![MISS; rays.len()];
+        let mut o = opt;
+        o.exclude = named.as_ptr();
+        let st = unsafe {
+            let (r, n, h) = (rays.as_ptr(), rays.len(), hits.as_mut_ptr());
+            rt2_intersect(ctx, scene, r, n, h, &o, null_mut())
+        };
+        refused(st, "opt.exclude[5]", removed, "exclude");
+        assert!(
+            hits.iter().all(|h| h.t == MISS.t && h.object == 7),
+            "hits written"
+        );
+        named[5].t = 1.0;
+        let (st, out) = surfaces_of(&named);
+        refused(st, "hits[5]", removed, "hit_surfaces");
+        assert!(out.iter().all(|s| s.material == 7), "surfaces written");
+    }
+    unsafe {
+        refused(
+            rt2_scene_remove(null_mut(), 0),
+            "scene",
+            false,
+            "NULL scene",
+        );
+    }
+    let what = "after the refused calls";
+    same_trace(&trace(ctx, scene, &rays, &opt), &before, what);
+    same_trace(&trace(ctx, scene, &rays, &ex), &excluded, what);
+    let (st, again) = surfaces_of(&before.0);
+    ok(st, "surfaces");
+    let key = |s: &rt2_surface| (s.position, s.normal, s.material);
+    let (a, b): (Vec<_>, Vec<_>) = (
+        again.iter().map(key).collect(),
+        surfaces.iter().map(key).collect(),
+    );
+    same(&a, &b, what);
+    let after = stats(scene);
+    assert_eq!(
+        (after.object_count, after.bytes_prim_lookup),
+        (stats_before.object_count, stats_before.bytes_prim_lookup),
+        "{what}"
+    );
+    assert_eq!(after.object_count, objs.len() as u32 - 1);
+    unsafe {
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// After removals and a commit, the placed primitives, the tree and its arrays are those of
+/// a scene built without the removed objects, byte for byte; the primitive lookup too, but
+/// for the slot each removed id keeps (a `size_t` and 4 bytes).
+#[test]
+fn removal_frees_what_the_scene_built_without_it_lacks() {
+    let ctx = context(Rt2Backend::Cpu);
+    let objs = objects();
+    let scene = scene_of(ctx, &objs);
+    let gone = [0u32, 2];
+    unsafe {
+        for o in gone {
+            ok(rt2_scene_remove(scene, o), "remove");
+        }
+        ok(rt2_scene_commit(scene), "commit");
+    }
+    let (kept, _) = without(&objs, &gone);
+    let reference = scene_of(ctx, &kept);
+    // Build both lookups: exclude one of the second mesh's triangles from every ray.
+    let rays = rays();
+    for (s, object) in [(scene, 5), (reference, 3)] {
+        let ex = vec![
+            rt2_hit {
+                object,
+                prim: 0,
+                ..MISS
+            };
+            rays.len()
+        ];
+        let mut opt = rt2_query_options_default();
+        opt.exclude = ex.as_ptr();
+        trace(ctx, s, &rays, &opt);
+    }
+    let bytes = |s: &rt2_scene_statistics| {
+        [
+            s.bytes_nodes,
+            s.bytes_leaf_lists,
+            s.bytes_leaf_boxes,
+            s.bytes_primitives,
+            s.object_count as u64,
+            s.triangle_count as u64,
+        ]
+    };
+    let (a, b) = (stats(scene), stats(reference));
+    assert_eq!(bytes(&a), bytes(&b));
+    assert_eq!(a.triangle_count, 18, "the second mesh's 3 × 3 quads alone");
+    let slot = std::mem::size_of::<usize>() as u64 + 4;
+    assert_eq!(
+        a.bytes_prim_lookup,
+        b.bytes_prim_lookup + gone.len() as u64 * slot
+    );
+    unsafe {
+        rt2_scene_destroy(scene);
+        rt2_scene_destroy(reference);
         rt2_context_destroy(ctx);
     }
 }
