@@ -6,7 +6,7 @@
 # the whole crate rebuilt with nightly -Zsanitizer=address, valgrind checks the real build.
 # "Definitely", "indirectly" and "possibly" lost count as leaks, and every memcheck error
 # fails; "still reachable" (process-lifetime allocations of the Rust runtime) does not.
-# scripts/valgrind.supp holds the one suppression, with its reason.
+# scripts/valgrind.supp holds the suppressions, each with its reason.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 examples=${RT2_C_EXAMPLES:-c_examples}

@@ -6,7 +6,8 @@
 //! next to the crate); if that file is absent the case says so and is skipped.
 //!
 //! Set `RT2_SANITIZE=valgrind` to run every example under
-//! `valgrind --error-exitcode=99 --leak-check=full --errors-for-leak-kinds=definite,indirect`:
+//! `valgrind --error-exitcode=99 --leak-check=full --errors-for-leak-kinds=definite,indirect`
+//! with `scripts/valgrind.supp` (reports that are not RT2's, each with its reason):
 //! a memory error or a definite/indirect leak then makes the example exit with 99 and the test
 //! fail with valgrind's report. "Possibly lost" blocks are not counted: they are the stacks,
 //! TLS and crossbeam-epoch records of the context's rayon workers, which a destroyed context
@@ -77,6 +78,12 @@ fn run_with(exe: &Path, args: &[&std::ffi::OsStr], env: &[(&str, &str)]) -> Outp
                 "--errors-for-leak-kinds=definite,indirect",
                 "--quiet",
             ])
+            .arg(format!(
+                "--suppressions={}",
+                support::manifest_dir()
+                    .join("scripts/valgrind.supp")
+                    .display()
+            ))
             .arg(exe);
             c
         }
