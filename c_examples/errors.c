@@ -430,6 +430,40 @@ int main(int argc, char **argv) {
     report(written && strstr(props.auto_choice, "traversal standard: ") != NULL, "  ... AUTO's traversal and why",
            written ? props.auto_choice : NULL);
 
+    /* ---- A removed object: gone at the next commit; its id is refused from then on, saying
+     * so, and changes nothing; ids are not reused ---- */
+    const uint32_t removed = id;
+    must(rt2_scene_remove(scene, removed), "rt2_scene_remove (the third sphere)");
+    expect(rt2_render(ctx, scene, camera, NULL, frame), RT2_STATUS_INVALID_OPERATION, "commit",
+           "rt2_render after a removal without commit");
+    must(rt2_scene_commit(scene), "rt2_scene_commit (after the removal)");
+    expect(rt2_scene_remove(scene, removed), RT2_STATUS_INVALID_ARGUMENT, "removed", "rt2_scene_remove(removed object)");
+    expect(rt2_scene_set_enabled(scene, removed, 1), RT2_STATUS_INVALID_ARGUMENT, "removed",
+           "rt2_scene_set_enabled(removed object)");
+    expect(rt2_scene_set_transform(scene, removed, ident), RT2_STATUS_INVALID_ARGUMENT, "removed",
+           "rt2_scene_set_transform(removed object)");
+    {
+        const rt2_ray ray = {{0.0f, 0.0f, 5.0f}, 0.0f, {0.0f, 0.0f, -1.0f}, INFINITY};
+        const rt2_hit gone = {1.0f, 0.0f, 0.0f, removed, 0u};
+        rt2_hit hit = {0.0f, 0.0f, 0.0f, 7u, 7u};
+        rt2_query_options q = rt2_query_options_default();
+        q.exclude = &gone;
+        expect(rt2_intersect(ctx, scene, &ray, 1, &hit, &q, NULL), RT2_STATUS_INVALID_ARGUMENT, "removed",
+               "rt2_intersect(excluding a removed object's primitive)");
+        rt2_surface surface = {{7.0f, 7.0f, 7.0f}, {7.0f, 7.0f, 7.0f}, 7u};
+        expect(rt2_hit_surfaces(scene, &ray, &gone, 1, &surface), RT2_STATUS_INVALID_ARGUMENT, "removed",
+               "rt2_hit_surfaces(a hit on a removed object)");
+        report(hit.object == 7u && surface.material == 7u, "  ... hit and surface untouched", NULL);
+    }
+    expect(rt2_scene_remove(scene, 99), RT2_STATUS_INVALID_ARGUMENT, "object", "rt2_scene_remove(object 99 does not exist)");
+    expect(rt2_scene_remove(NULL, 0), RT2_STATUS_INVALID_ARGUMENT, "scene", "rt2_scene_remove(NULL)");
+    expect(rt2_render(ctx, scene, camera, NULL, frame), RT2_STATUS_OK, NULL, "rt2_render after the refused calls");
+    expect(rt2_scene_stats(scene, &st2), RT2_STATUS_OK, NULL, "rt2_scene_stats after the removal");
+    report(same_stats(&st, &st2), "  ... the scene is the one before the third sphere was added", NULL);
+    must(rt2_scene_add_sphere(scene, light, 0.1f, 0, &id), "rt2_scene_add_sphere (after the removal)");
+    report(id == removed + 1, "  ... a new id, not the removed one", NULL);
+    must(rt2_scene_commit(scene), "rt2_scene_commit (after the add)");
+
     /* ---- destroy(NULL) is a no-op; the process survives and later calls still work ---- */
     rt2_context_destroy(NULL);
     rt2_scene_destroy(NULL);
