@@ -1732,6 +1732,35 @@ fn as_reported(c: &Committed, hits: &[Hit], ids: &[u32]) -> Vec<Reported> {
         .collect()
 }
 
+/// [`enable_shapes`]' rays: a grid of 32 × 32 from +z, slightly slanted.
+fn enable_rays() -> Vec<Ray> {
+    (0..1024)
+        .map(|k| {
+            let org = Vec3::new(
+                (k % 32) as f32 / 8.0 - 2.0,
+                (k / 32) as f32 / 8.0 - 2.0,
+                5.0,
+            );
+            Ray::new(org, Vec3::new(0.01, -0.02, -1.0), 0.0, f32::INFINITY)
+        })
+        .collect()
+}
+
+/// The GPU's hits of `rays` on `s`'s commit and its 32 × 32 render from +z.
+fn enable_trace(g: &Context, s: &Scene, rays: &[Ray]) -> (Vec<Hit>, Vec<u8>) {
+    let mut cam = rt2::camera::Camera::default();
+    cam.look_at(Vec3::new(0.0, 0.0, 6.0), Vec3::ZERO, Vec3::Y)
+        .unwrap();
+    let mut hits = vec![Hit::MISS; rays.len()];
+    let c = s.committed().unwrap();
+    g.intersect(c, rays, &mut hits, &QueryOptions::default())
+        .unwrap();
+    let mut f = Frame::new(32, 32).unwrap();
+    g.render(c, &cam, &RenderOptions::default(), &mut f)
+        .unwrap();
+    (hits, f.pixels().to_vec())
+}
+
 /// Objects disabled and enabled again under one GPU context, which must notice each commit:
 /// disabled ones are missed by every traversal (the CPU's hits of the same commit, with and
 /// without exclusions), the hits and the render are those of a scene built without them, all
@@ -1743,38 +1772,8 @@ fn disabled_objects_vanish_on_the_gpu() {
     };
     let shapes = enable_shapes();
     let mut s = enable_scene(&shapes);
-    let rays: Vec<Ray> = (0..1024)
-        .map(|k| {
-            let org = Vec3::new(
-                (k % 32) as f32 / 8.0 - 2.0,
-                (k / 32) as f32 / 8.0 - 2.0,
-                5.0,
-            );
-            Ray::new(org, Vec3::new(0.01, -0.02, -1.0), 0.0, f32::INFINITY)
-        })
-        .collect();
-    let mut cam = rt2::camera::Camera::default();
-    cam.look_at(Vec3::new(0.0, 0.0, 6.0), Vec3::ZERO, Vec3::Y)
-        .unwrap();
-    let trace = |s: &Scene| {
-        let mut hits = vec![Hit::MISS; rays.len()];
-        g.intersect(
-            s.committed().unwrap(),
-            &rays,
-            &mut hits,
-            &QueryOptions::default(),
-        )
-        .unwrap();
-        let mut f = Frame::new(32, 32).unwrap();
-        g.render(
-            s.committed().unwrap(),
-            &cam,
-            &RenderOptions::default(),
-            &mut f,
-        )
-        .unwrap();
-        (hits, f.pixels().to_vec())
-    };
+    let rays = enable_rays();
+    let trace = |s: &Scene| enable_trace(&g, s, &rays);
     let all: Vec<u32> = (0..shapes.len() as u32).collect();
     let first = trace(&s);
     let first_reported = as_reported(s.committed().unwrap(), &first.0, &all);
@@ -1832,4 +1831,63 @@ fn disabled_objects_vanish_on_the_gpu() {
     )
     .unwrap();
     assert!(occ.iter().all(|o| !o), "all disabled: occluded");
+}
+
+/// Objects removed under one GPU context, which must notice each commit: after each removal
+/// and commit, the hits (ids mapped) and the render are those of a scene built without the
+/// removed objects, and the CPU's of the same commit for every traversal, with and without
+/// exclusions. An object added after removals gets a new id (5), is hit under it (checked
+/// before it is removed in turn), and is removed in the same commit as one of the first.
+#[test]
+fn removed_objects_vanish_on_the_gpu() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let mut shapes = enable_shapes();
+    let mut s = enable_scene(&shapes);
+    let rays = enable_rays();
+    let mut live: Vec<u32> = (0..shapes.len() as u32).collect();
+    let extra = Shape::Ellipsoid {
+        center: Vec3::new(-1.0, -1.0, 0.5),
+        radii: Vec3::new(0.8, 0.5, 0.6),
+    };
+    for (gone, add) in [(&[0u32, 4][..], None), (&[3], Some(extra)), (&[1, 5], None)] {
+        let before = trace_reported(&g, &s, &rays);
+        for &o in gone {
+            let on_o = before
+                .iter()
+                .filter(|h| h.3.is_some_and(|(obj, _)| obj == o));
+            assert!(on_o.count() > 10, "few rays meet object {o}");
+            s.remove(o).unwrap();
+            live.retain(|&l| l != o);
+        }
+        if let Some(shape) = add {
+            let id = s.add_object(shape.clone(), 1).unwrap();
+            assert_eq!(id as usize, shapes.len(), "not a new id");
+            shapes.push(shape);
+            live.push(id);
+        }
+        s.commit().unwrap();
+        let kept: Vec<Shape> = live.iter().map(|&o| shapes[o as usize].clone()).collect();
+        let reference = enable_scene(&kept);
+        let (hits, pixels) = enable_trace(&g, &s, &rays);
+        let (want, want_pixels) = enable_trace(&g, &reference, &rays);
+        let got = as_reported(
+            s.committed().unwrap(),
+            &hits,
+            &(0..shapes.len() as u32).collect::<Vec<_>>(),
+        );
+        assert!(
+            got == as_reported(reference.committed().unwrap(), &want, &live),
+            "{gone:?} removed: not the hits of a scene built without them"
+        );
+        assert!(pixels == want_pixels, "{gone:?} removed: another image");
+        compare_queries(&format!("{gone:?} removed"), &g, &s, &rays);
+    }
+}
+
+/// The GPU's hits of `rays` on `s` as the API reports them, under the scene's own ids.
+fn trace_reported(g: &Context, s: &Scene, rays: &[Ray]) -> Vec<Reported> {
+    let ids: Vec<u32> = (0..s.objects().len() as u32).collect();
+    as_reported(s.committed().unwrap(), &enable_trace(g, s, rays).0, &ids)
 }
