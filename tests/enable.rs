@@ -953,9 +953,10 @@ fn mirrored_meshes_with_every_subset_disabled() {
 }
 
 /// Objects removed from one scene in steps, with objects added in between: the sphere, the
-/// box (disabled first) and the second mesh; then, after two adds, the first mesh (whose
-/// removal renumbers the exact corners of the watertight test) and a new object; then one
-/// more added and one removed in the same commit. After each commit, the hits (ids mapped)
+/// box (disabled first) and the second mesh; then, after two adds (the second a mirrored
+/// mesh: hits report its `u`, `v` swapped back by object id), the first mesh (whose removal
+/// renumbers the exact corners of the watertight test) and a new object; then one more added
+/// and the mirrored mesh removed in the same commit. After each commit, the hits (ids mapped)
 /// and occlusion under every option in `opts`, also excluding the first hits, and the renders
 /// in `renders` equal those of a scene built from the objects left alone; the objects removed
 /// were hit before, adds get new ids, and `object_count` counts the objects left.
@@ -966,8 +967,11 @@ fn removals(backend: Rt2Backend, opts: &[rt2_query_options], renders: &[(u32, u3
     let mut live: Vec<u32> = (0..objs.len() as u32).collect();
     let scene = lit_scene(ctx, &objs, &live);
     let rays = rays();
+    // Object 3 (the box) stays disabled, object 7 (added) is mirrored.
+    let (disabled, mirrored) = (3, 7);
+    let mirror: [f32; 12] = [-1.0, 0.0, 0.0, 0.1, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
     unsafe {
-        ok(rt2_scene_set_enabled(scene, 3, 0), "disable the box");
+        ok(rt2_scene_set_enabled(scene, disabled, 0), "disable the box");
         ok(rt2_scene_commit(scene), "commit");
     }
     let added = [
@@ -989,6 +993,12 @@ fn removals(backend: Rt2Backend, opts: &[rt2_query_options], renders: &[(u32, u3
                 assert_eq!(id, objs.len() as u32, "not a new id");
                 objs.push(o.clone());
                 live.push(id);
+                if id == mirrored {
+                    ok(
+                        rt2_scene_set_transform(scene, id, mirror.as_ptr()),
+                        "mirror",
+                    );
+                }
             }
             for &o in gone {
                 ok(rt2_scene_remove(scene, o), "remove");
@@ -997,18 +1007,21 @@ fn removals(backend: Rt2Backend, opts: &[rt2_query_options], renders: &[(u32, u3
             ok(rt2_scene_commit(scene), "commit");
         }
         let step = format!("removed {gone:?} (left {live:?})");
-        for &o in gone.iter().filter(|&&o| o != 3) {
+        for &o in gone.iter().filter(|&&o| o != disabled) {
             assert!(on(&hit_before, &[o]) > 20, "{step}: few rays met {o}");
         }
         let kept: Vec<Obj> = live.iter().map(|&o| objs[o as usize].clone()).collect();
-        // The box stays disabled in the reference while the scene holds it.
+        // The reference's objects in the same states as the scene's.
         let reference = lit_scene(ctx, &kept, &live);
-        if let Some(k) = live.iter().position(|&o| o == 3) {
-            ok(
-                unsafe { rt2_scene_set_enabled(reference, k as u32, 0) },
-                "disable",
-            );
-            ok(unsafe { rt2_scene_commit(reference) }, "commit");
+        unsafe {
+            if let Some(k) = live.iter().position(|&o| o == disabled) {
+                ok(rt2_scene_set_enabled(reference, k as u32, 0), "disable");
+            }
+            if let Some(k) = live.iter().position(|&o| o == mirrored) {
+                let st = rt2_scene_set_transform(reference, k as u32, mirror.as_ptr());
+                ok(st, "mirror");
+            }
+            ok(rt2_scene_commit(reference), "commit");
         }
         for opt in opts {
             let what = format!("{step}, {}", name(opt));
