@@ -464,6 +464,114 @@ fn query_statistics_count_the_nodes_leaves_and_tests_of_each_ray() {
 /// the lower grid at t = 11; one that ignores a triangle it does not hit is unchanged. The same
 /// in every query mode with either intersector, for closest and any hits. Names the scene
 /// lacks are refused before any output is written.
+/// An any-hit query counts, for each ray, the primitives tested until the first in its way,
+/// in every mode: six overlapping spheres, and twelve stacked triangles (tested in SIMD
+/// blocks), each scene in one leaf; rays through all of its primitives (one test: the first
+/// of the leaf ends the search) and rays past them all (every primitive). Streams counted
+/// every primitive of the leaf for every ray before, and blocks counted whole.
+#[test]
+fn any_hit_statistics_stop_at_the_first_primitive_in_the_way() {
+    unsafe {
+        let spheres = (0..6).map(|k| ([0.2 * k as f32, 0.0, 0.0], 1.0));
+        let (ctx, scene, _) = sphere_scene(spheres);
+        // Within 0.5 of every centre.
+        any_hit_counts(ctx, scene, [0.5, 0.0], 6);
+        rt2_scene_destroy(scene);
+        let mut scene = null_mut();
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let positions: Vec<f32> = (0..12)
+            .flat_map(|k| {
+                let z = 0.1 * k as f32;
+                [-1.0, -1.0, z, 2.0, -1.0, z, -1.0, 1.0, z]
+            })
+            .collect();
+        let indices: Vec<u32> = (0..36).collect();
+        let status = rt2_scene_add_mesh(
+            scene,
+            positions.as_ptr(),
+            36,
+            indices.as_ptr(),
+            12,
+            0,
+            null_mut(),
+        );
+        assert_eq!(status, Rt2Status::Ok);
+        // Inside every triangle (the long edge crosses y = 0 at x = 0.5).
+        any_hit_counts(ctx, scene, [0.0, 0.0], 12);
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// The any-hit statistics of rays along -z through `through` (in all `prims` primitives) and
+/// through (1.9, 0.9), inside the scene's box but past every primitive, with `scene` built
+/// as one leaf: one test for each ray of the first kind, `prims` for the others.
+unsafe fn any_hit_counts(
+    ctx: *const rt2_context,
+    scene: *mut rt2_scene,
+    through: [f32; 2],
+    prims: u64,
+) {
+    let mut b = rt2_build_options_default();
+    b.max_depth = 0;
+    assert_eq!(rt2_scene_set_build_options(scene, &b), Rt2Status::Ok);
+    assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+    let past = [1.9, 0.9];
+    let rays: Vec<rt2_ray> = (0..64)
+        .map(|i| {
+            let [x, y] = if i % 3 == 0 { past } else { through };
+            rt2_ray {
+                org: [x, y, 5.0],
+                tmin: 0.0,
+                dir: [0.0, 0.0, -1.0],
+                tmax: f32::INFINITY,
+            }
+        })
+        .collect();
+    let missing = rays.iter().filter(|r| r.org[0] == past[0]).count() as u64;
+    let want = rays.len() as u64 - missing + prims * missing;
+    for mode in [
+        Rt2QueryMode::Single,
+        Rt2QueryMode::Packet,
+        Rt2QueryMode::Stream,
+    ] {
+        let mut opt = rt2_query_options_default();
+        opt.traversal = Rt2Traversal::Standard as u32;
+        opt.mode = mode as u32;
+        let mut occ = vec![9u8; rays.len()];
+        let mut stats = rt2_query_stats {
+            nodes_visited: 99,
+            leaves_visited: 99,
+            prim_tests: 99,
+        };
+        let st = rt2_occluded(
+            ctx,
+            scene,
+            rays.as_ptr(),
+            rays.len(),
+            occ.as_mut_ptr(),
+            &opt,
+            &mut stats,
+        );
+        assert_eq!(st, Rt2Status::Ok);
+        let blocked = occ.iter().filter(|&&o| o == 1).count() as u64;
+        assert_eq!(
+            blocked,
+            rays.len() as u64 - missing,
+            "{mode:?}, {prims} primitives"
+        );
+        assert_eq!(
+            stats.leaves_visited,
+            rays.len() as u64,
+            "{mode:?}, {prims} primitives"
+        );
+        assert_eq!(
+            stats.prim_tests, want,
+            "{mode:?}: tests among {prims} primitives"
+        );
+    }
+}
+
 #[test]
 fn excluded_primitives_are_ignored_in_every_mode() {
     unsafe {

@@ -92,10 +92,11 @@ versioned!(rt2_query_options);
 /// ray: a packet or stream step counts one node visit for each of its active rays. A
 /// closest-hit query (`rt2_intersect`) in PACKET or STREAM mode therefore reports what SINGLE
 /// reports with the standard traversal, and one on the GPU what the CPU reports with the same
-/// traversal; other traversals visit other nodes. An any-hit query (`rt2_occluded`) counts the
-/// same nodes and leaves, but its `prim_tests` may differ by about 1% between modes and
-/// backends: the CPU tests a leaf's triangles in groups (SIMD) and counts a whole group when
-/// one of its triangles ends the search.
+/// traversal; other traversals visit other nodes. An any-hit query (`rt2_occluded`) counts,
+/// in every mode and on the GPU, the same nodes and leaves and, for each ray, the primitives
+/// of a leaf up to the first in its way (equal on the shared bunny and dragon ray sets), but
+/// for leaves that hold triangles and other primitives together: PACKET and STREAM may test
+/// such a leaf's triangles first, and stop at another primitive than SINGLE.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct rt2_query_stats {

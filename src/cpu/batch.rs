@@ -13,7 +13,8 @@ use super::simd::{
     self, lanes_less, lanes_less_eq, prefetch, Isa, Kernel, PreparedLeaf, RayLanes, Width,
 };
 use super::traverse::{
-    any_among, any_in_subtree, clip_lanes, closest_among, closest_in_subtree, scene_box, Entry,
+    any_among, any_in_subtree, clip_lanes, closest_among, closest_in_subtree, scene_box,
+    tested_until, Entry,
 };
 use crate::geometry::{Hit, PrimIndex, PrimitiveSet, Ray, RayTest, TraversalStats, INVALID};
 use crate::kdtree::KdTree;
@@ -106,7 +107,8 @@ pub(crate) trait Answer {
     ) -> bool;
     /// Tests the rays `ids` (lanes `live`, their tests `tests`) against a leaf's primitives
     /// `leaf`, N rays per triangle, primitives in leaf order as the single-ray test; `t_exit`
-    /// is where each ray leaves the leaf. Returns the lanes that are finished.
+    /// is where each ray leaves the leaf. Returns the lanes that are finished, and counts in
+    /// `stats` the primitive tests each ray needed, as the single-ray test counts them.
     #[allow(clippy::too_many_arguments)]
     fn leaf_rays<const N: usize>(
         &mut self,
@@ -118,6 +120,7 @@ pub(crate) trait Answer {
         ids: &[u32; N],
         live: u32,
         t_exit: &[f32; N],
+        stats: &mut TraversalStats,
     ) -> u32;
     /// Ray `i` through the subtree `start` alone, with the standard single-ray traversal.
     /// True when the ray is finished.
@@ -183,7 +186,10 @@ impl Answer for Closest<'_> {
         ids: &[u32; N],
         live: u32,
         t_exit: &[f32; N],
+        stats: &mut TraversalStats,
     ) -> u32 {
+        // A closest hit tests every primitive of the leaf.
+        stats.prim_tests += live.count_ones() as u64 * leaf.len() as u64;
         let lanes = RayLanes::gather(rays, ids);
         let lane_tests = lanes.tests(tests.intersector);
         // Each lane's closest `t` so far and its `Hit::bound`, kept beside the hits and updated
@@ -268,10 +274,14 @@ impl Answer for AnyHit<'_> {
         _t_exit: f32,
         stats: &mut TraversalStats,
     ) -> bool {
-        // The blocks' triangles here; the rest are counted by the single-ray leaf test.
-        stats.prim_tests += (leaf.count - leaf.others.len()) as u64;
-        let found = leaf.blocks.iter().any(|b| b.occludes(isa, ray, test))
-            || any_among(prims, ray, test, leaf.others, stats);
+        // The blocks' triangles here, up to the one that ends the search; the rest are counted
+        // by the single-ray leaf test.
+        let triangles = leaf.count - leaf.others.len();
+        let found = leaf.blocks.iter().enumerate().any(|(k, b)| {
+            let stop = b.occluders(isa, ray, test);
+            stats.prim_tests += tested_until(stop, (triangles - k * N).min(N));
+            stop != 0
+        }) || any_among(prims, ray, test, leaf.others, stats);
         self.0[i] = found;
         found
     }
@@ -287,11 +297,19 @@ impl Answer for AnyHit<'_> {
         ids: &[u32; N],
         live: u32,
         _t_exit: &[f32; N],
+        stats: &mut TraversalStats,
     ) -> u32 {
         let lanes = RayLanes::gather(rays, ids);
         let lane_tests = lanes.tests(tests.intersector);
         let mut found = 0u32;
         for &p in leaf {
+            // A ray stops at the first primitive in its way, as the single-ray test does;
+            // counted so (every primitive for every ray was up to 44% more on spheres).
+            let searching = live & !found;
+            if searching == 0 {
+                break;
+            }
+            stats.prim_tests += searching.count_ones() as u64;
             if (p as usize) < prims.triangles.len() {
                 let rows = prims.triangle_rows(p as usize, tests.intersector);
                 let (t, _, _) = lanes.triangle(rows, &lane_tests, &lanes.tmax);
@@ -484,9 +502,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         live: u32,
         t_exit: &[f32; N],
     ) {
-        let n = live.count_ones() as u64;
-        self.stats.leaves_visited += n;
-        self.stats.prim_tests += n * leaf.len() as u64;
+        self.stats.leaves_visited += live.count_ones() as u64;
         let done = self.answer.leaf_rays(
             isa,
             self.prims,
@@ -496,6 +512,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
             ids,
             live,
             t_exit,
+            &mut self.stats,
         );
         for_lanes(live, |l| self.done[ids[l] as usize] = done >> l & 1 == 1);
         self.finished += done.count_ones() as usize;

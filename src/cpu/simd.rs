@@ -195,11 +195,12 @@ impl<const N: usize> TriBlock<N> {
         });
     }
 
-    /// Any-hit test: whether some lane is hit in `[tmin, tmax)`.
+    /// Any-hit test: the mask of the lanes hit in `[tmin, tmax)` (0: none). The lowest one is
+    /// where a search in leaf order stops, for the statistics.
     #[inline(always)]
-    pub fn occludes(&self, isa: Isa<N>, ray: &Ray, test: &RayTest) -> bool {
+    pub fn occluders(&self, isa: Isa<N>, ray: &Ray, test: &RayTest) -> u32 {
         let (t, _, _) = self.lanes(ray, test, ray.tmax);
-        lanes_less(isa, &t, &[f32::INFINITY; N]) != 0
+        lanes_less(isa, &t, &[f32::INFINITY; N])
     }
 
     /// The test `test` asks for on every lane; `t = inf` marks a miss, and the excluded
@@ -802,7 +803,7 @@ mod tests {
                              excluding {}: block {simd:?}, scalar {want:?}",
                             test.exclude
                         );
-                        assert_eq!(block.occludes(isa, &ray, &test), want.is_hit());
+                        assert_eq!(block.occluders(isa, &ray, &test) != 0, want.is_hit());
                     }
                     hits += want.is_hit() as usize;
 

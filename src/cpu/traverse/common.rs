@@ -234,9 +234,9 @@ pub(crate) fn closest_among(
     }
     impl GroupTest for Offer<'_> {
         #[inline(always)]
-        fn block(&mut self, b: &TriBlock<BLOCK>, test: &RayTest) -> bool {
+        fn block(&mut self, b: &TriBlock<BLOCK>, test: &RayTest) -> u32 {
             b.intersect(Isa::baseline(), self.ray, test, self.hit);
-            false
+            0
         }
         #[inline(always)]
         fn one(&mut self, p: u32) -> bool {
@@ -269,8 +269,8 @@ pub(crate) fn any_among(
     }
     impl GroupTest for Any<'_> {
         #[inline(always)]
-        fn block(&mut self, b: &TriBlock<BLOCK>, test: &RayTest) -> bool {
-            b.occludes(Isa::baseline(), self.ray, test)
+        fn block(&mut self, b: &TriBlock<BLOCK>, test: &RayTest) -> u32 {
+            b.occluders(Isa::baseline(), self.ray, test)
         }
         #[inline(always)]
         fn one(&mut self, p: u32) -> bool {
@@ -288,8 +288,9 @@ const BLOCK: usize = 4;
 /// What a leaf test does with its groups of primitives; each returns true to stop. A trait
 /// rather than a closure, so that both are inlined into every traversal.
 trait GroupTest {
-    /// Up to [`BLOCK`] triangles at once, with the ray's test `test`.
-    fn block(&mut self, b: &TriBlock<BLOCK>, test: &RayTest) -> bool;
+    /// Up to [`BLOCK`] triangles at once, with the ray's test `test`: the mask of the lanes
+    /// that end the search (0: it goes on).
+    fn block(&mut self, b: &TriBlock<BLOCK>, test: &RayTest) -> u32;
     /// One primitive alone.
     fn one(&mut self, p: u32) -> bool;
 }
@@ -321,6 +322,16 @@ fn test_groups(
     }
 }
 
+/// Primitive tests a search in leaf order makes in a block of `len` triangles whose lanes
+/// `stop` end it: up to the first of them, else all (as one at a time, and as the GPU counts).
+#[inline(always)]
+pub(crate) fn tested_until(stop: u32, len: usize) -> u64 {
+    match stop {
+        0 => len as u64,
+        _ => stop.trailing_zeros() as u64 + 1,
+    }
+}
+
 /// [`test_groups`] for one intersector.
 #[inline(always)]
 fn test_groups_with(
@@ -334,8 +345,9 @@ fn test_groups_with(
     let intersector = test.triangle.intersector();
     for group in prims.chunks(BLOCK) {
         if group.iter().all(|&p| (p as usize) < triangles) {
-            stats.prim_tests += group.len() as u64;
-            if t.block(&TriBlock::from_prims(set, group, intersector), test) {
+            let stop = t.block(&TriBlock::from_prims(set, group, intersector), test);
+            stats.prim_tests += tested_until(stop, group.len());
+            if stop != 0 {
                 return true;
             }
         } else {

@@ -15,7 +15,7 @@ mod ropes;
 mod standard;
 
 pub use common::MAX_SHORT_STACK;
-pub(crate) use common::{any_among, clip, clip_lanes, closest_among, Entry, TRay};
+pub(crate) use common::{any_among, clip, clip_lanes, closest_among, tested_until, Entry, TRay};
 
 use crate::geometry::{Aabb, Hit, PrimIndex, PrimitiveSet, Ray, RayTest, TraversalStats, INVALID};
 use crate::kdtree::KdTree;
