@@ -422,7 +422,8 @@ typedef struct rt2_material {
    */
   float transparency;
   /**
-   * Index of refraction (> 0), used with `RT2_TRANSPARENCY_REFRACT`.
+   * Index of refraction (> 0, with a finite reciprocal: at least about 2.94e-39), used with
+   * `RT2_TRANSPARENCY_REFRACT`.
    */
   float ior;
   /**

@@ -35,7 +35,7 @@ struct Params {
     count: u32, width: u32, height: u32, row0: u32,
     samples: u32, sample: u32, max_depth: u32, refract: u32,
     has_mask: u32, rope_bits: u32, excluding: u32, offset_mode: u32,
-    scale: f32, pad1: u32, pad2: u32, pad3: u32,
+    scale: f32, min_weight: f32, pad2: u32, pad3: u32,
 }
 
 // Group 0: the committed scene, uploaded once per commit (src/gpu/scene.rs). Empty arrays

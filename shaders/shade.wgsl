@@ -40,9 +40,10 @@ fn schlick(cos_i: f32, eta: f32) -> f32 {
 }
 
 fn phong(m: Material, base: vec3<f32>, p: vec3<f32>, n: vec3<f32>, view: vec3<f32>, light: Light) -> vec3<f32> {
-    let l = normalize_or_zero(v3(light.position) - p);
+    let l = unit_or_zero(v3(light.position) - p);
     let ndotl = dot(n, l);
-    if (ndotl <= 0.0) { return vec3<f32>(0.0); }
+    // `shading::phong`: a light of intensity 0 adds nothing, even where the colours overflow.
+    if (ndotl <= 0.0 || light.intensity == 0.0) { return vec3<f32>(0.0); }
     let r = reflect_dir(-l, n);
     let spec = powf(max(dot(r, view), 0.0), m.shininess);
     return (m.diffuse * ndotl * base + vec3<f32>(m.specular * spec)) * v3(light.color) * light.intensity;
@@ -100,6 +101,15 @@ fn unit_or_zero(v: vec3<f32>) -> vec3<f32> {
     let k = max3(abs(v));
     if (!(k > 0.0) || (bitcast<u32>(k) & 0x7fffffffu) >= 0x7f800000u) { return vec3<f32>(0.0); }
     return normalize_or_zero(v / k);
+}
+
+// `shading::distance`: |v|, also where its square leaves the normal range (a light 2e19
+// away squared to infinity).
+fn distance_of(v: vec3<f32>) -> f32 {
+    if (square_is_normal(v)) { return length(v); }
+    let k = max3(abs(v));
+    if (!(k > 0.0) || (bitcast<u32>(k) & 0x7fffffffu) >= 0x7f800000u) { return k; }
+    return k * length(v / k);
 }
 
 // An edge scaled by the power of two that brings its largest component near 1 (kept as it is
@@ -226,7 +236,7 @@ struct Child { ok: bool, org: vec3<f32>, dir: vec3<f32>, w: vec3<f32>, skip: u32
 struct Shaded { color: vec3<f32>, transmitted: Child, mirror: Child }
 
 fn child(o: Origin, dir: vec3<f32>, w: vec3<f32>) -> Child {
-    return Child(max(w.x, max(w.y, w.z)) >= MIN_WEIGHT, o.org, dir, w, o.skip);
+    return Child(max(w.x, max(w.y, w.z)) >= params.min_weight, o.org, dir, w, o.skip);
 }
 
 fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
@@ -255,8 +265,10 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
         for (var k = 0u; k < params.n_lights; k++) {
             let light = lights[k];
             let to_light = v3(light.position) - above.org;
-            let d = length(to_light);
-            let shadow = Ray(above.org, to_light / d, 0.0, d, above.skip);
+            // `Tracer::shadow_rays`: a light beyond ~1.8e19 squares to infinity.
+            let d = distance_of(to_light);
+            let dir = select(unit_or_zero(to_light), to_light / d, square_is_normal(to_light));
+            let shadow = Ray(above.org, dir, 0.0, d, above.skip);
             if (d > 0.0 && !occluded(shadow, &st)) {
                 local += phong(m, base, p, n, -r.dir, light);
             }
@@ -315,7 +327,11 @@ fn side_of(n: u32) -> u32 {
 
 fn pixel_offset(x: u32, y: u32, s: u32, n: u32) -> vec2<f32> {
     if (n == 1u) { return vec2<f32>(0.5, 0.5); }
-    return stratified(x, y, s, s, side_of(n), 0u);
+    let k = side_of(n);
+    if (k * k == n) { return stratified(x, y, s, s, k, 0u); }
+    // n-rooks for counts that are not squares (whitted.rs `pixel_offset`).
+    let col = permute(s, n, mix(x, y, 0u, 0x68e31da4u));
+    return stratified(x, y, s, s * n + col, n, 0x68e31da4u);
 }
 
 fn permute(index: u32, l: u32, p: u32) -> u32 {

@@ -88,15 +88,24 @@ impl Frame {
 
     /// Writes the frame as a PNG at `path`, which [`check_png_path`] must accept.
     pub fn save_png(&self, path: &Path) -> Result<()> {
+        use image::ImageEncoder;
         check_png_path(path)?;
-        image::save_buffer(
-            path,
-            &self.pixels,
-            self.width,
-            self.height,
-            image::ExtendedColorType::Rgba8,
-        )
-        .map_err(|e| Error::io(format!("cannot write {}: {e}", path.display())))
+        let io =
+            |e: &dyn std::fmt::Display| Error::io(format!("cannot write {}: {e}", path.display()));
+        let file = std::fs::File::create(path).map_err(|e| io(&e))?;
+        let mut out = std::io::BufWriter::new(file);
+        image::codecs::png::PngEncoder::new(&mut out)
+            .write_image(
+                &self.pixels,
+                self.width,
+                self.height,
+                image::ExtendedColorType::Rgba8,
+            )
+            .map_err(|e| io(&e))?;
+        // `image::save_buffer` let the BufWriter flush on drop, which discards the error: a
+        // PNG under 8 KiB written to a full disk returned OK. Flush and check it here.
+        out.into_inner().map_err(|e| io(e.error()))?;
+        Ok(())
     }
 }
 

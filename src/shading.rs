@@ -7,14 +7,40 @@ use glam::Vec3;
 /// Phong contribution of one light at point `p` with unit normal `n` facing the viewer,
 /// `view` the unit direction from `p` towards the viewer, `base` the material colour there.
 pub fn phong(m: &Material, base: Vec3, p: Vec3, n: Vec3, view: Vec3, light: &PointLight) -> Vec3 {
-    let l = (light.position - p).normalize_or_zero();
+    let l = direction_to(light.position - p);
     let ndotl = n.dot(l);
-    if ndotl <= 0.0 {
+    // A light switched off (intensity 0) adds nothing, even where the product of the colours
+    // overflows (a colour of 1e30 under a light of 1e10 made inf · 0 = NaN: a black pixel).
+    if ndotl <= 0.0 || light.intensity == 0.0 {
         return Vec3::ZERO;
     }
     let r = reflect(-l, n);
     let spec = r.dot(view).max(0.0).powf(m.shininess);
     (m.diffuse * ndotl * base + Vec3::splat(m.specular * spec)) * light.color * light.intensity
+}
+
+/// `v` normalised as `normalize_or_zero` does where `|v|²` is a normal float (bit for bit the
+/// GPU's `unit_or_zero`), else divided by its largest component first: a light 2e19 away
+/// squared to infinity and lit nothing.
+pub fn direction_to(v: Vec3) -> Vec3 {
+    if v.length_squared().is_normal() {
+        v.normalize_or_zero()
+    } else {
+        crate::geometry::unit(v).unwrap_or(Vec3::ZERO)
+    }
+}
+
+/// `|v|`, also where `|v|²` leaves the normal range (a light 2e19 away).
+pub fn distance(v: Vec3) -> f32 {
+    let l2 = v.length_squared();
+    if l2.is_normal() {
+        return l2.sqrt();
+    }
+    let m = v.abs().max_element();
+    if !(m > 0.0 && m.is_finite()) {
+        return m;
+    }
+    m * (v / m).length()
 }
 
 /// Mirror direction of `d` about the unit normal `n`.

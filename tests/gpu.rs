@@ -489,6 +489,34 @@ fn images_match_the_cpu_on_the_builtin_scenes() {
     }
 }
 
+/// The shading extremes of `support::shading_cases` (a light 1e30 away, a faint mirror of a
+/// bright background, sample counts that are not squares, a light switched off over a colour
+/// of 1e30) on both render paths, against the images worked out by hand, as on the CPU
+/// (`tests/shading_extremes.rs`).
+#[test]
+fn extreme_lights_colours_and_sample_counts_render_as_on_the_cpu() {
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let mut failures = Vec::new();
+    for case in support::shading_cases::cases() {
+        for path in [GpuPathRequest::Megakernel, GpuPathRequest::Wavefront] {
+            let mut frame = Frame::new(case.size.0, case.size.1).unwrap();
+            let opts = RenderOptions {
+                gpu_path: path,
+                ..case.opts
+            };
+            let committed = case.scene.committed().unwrap();
+            g.render(committed, &case.camera, &opts, &mut frame)
+                .unwrap();
+            if let Err(e) = (case.check)(&frame) {
+                failures.push(format!("{} ({path:?}): {e}", case.name));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
 /// The robust and exclude-prim offsets of secondary rays on the GPU, with straight and refracted
 /// transparency (refraction into the glass sphere takes the robust offset under exclude-prim):
 /// the CPU's images, both render paths.

@@ -261,7 +261,8 @@ pub struct rt2_material {
     pub reflectivity: f32,
     /// Fraction of light carried by the transmitted ray.
     pub transparency: f32,
-    /// Index of refraction (> 0), used with `RT2_TRANSPARENCY_REFRACT`.
+    /// Index of refraction (> 0, with a finite reciprocal: at least about 2.94e-39), used with
+    /// `RT2_TRANSPARENCY_REFRACT`.
     pub ior: f32,
     /// Non-zero: a world-space checkerboard of `color` and `checker_color`.
     pub checker: u32,

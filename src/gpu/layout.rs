@@ -183,8 +183,9 @@ pub struct GpuParams {
     pub offset_mode: u32,
     /// The scene diagonal, for the robust offset near the origin (`Tracer::scale`).
     pub scale: f32,
+    /// Rays of smaller weight are not traced (`cpu::whitted::min_weight`).
+    pub min_weight: f32,
     // Scalars, not an array: uniform arrays need a 16-byte stride.
-    pub pad1: u32,
     pub pad2: u32,
     pub pad3: u32,
 }
@@ -306,7 +307,7 @@ mod tests {
                 excluding,
                 offset_mode,
                 scale,
-                pad1,
+                min_weight,
                 pad2,
                 pad3
             ]

@@ -79,6 +79,7 @@ pub(crate) fn render(
             OffsetMode::ExcludePrim => 2,
         },
         scale: scene.scale(),
+        min_weight: crate::cpu::whitted::min_weight(scene, opts),
         short_stack: opts.short_stack_size as u32,
         ..GpuParams::default()
     };

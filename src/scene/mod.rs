@@ -188,9 +188,10 @@ impl Material {
                 self.shininess
             )));
         }
-        if !(self.ior.is_finite() && self.ior > 0.0) {
+        // The refraction divides by it: an ior of 1e-45 made the ratio infinite (black pixels).
+        if !(self.ior.is_finite() && self.ior > 0.0 && self.ior.recip().is_finite()) {
             return Err(Error::invalid_argument(format!(
-                "material.ior is {:?} (must be > 0)",
+                "material.ior is {:?} (must be > 0, with a finite reciprocal)",
                 self.ior
             )));
         }
@@ -611,4 +612,57 @@ pub(crate) fn unit_sphere() -> Scene {
     s.add_object(sphere, 0).expect("a valid sphere");
     s.commit().expect("a one-sphere commit");
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each field out of its range is refused, and the scene keeps only its default material.
+    #[test]
+    fn materials_out_of_range_are_refused() {
+        let bad = [
+            Material {
+                ior: 1e-45,
+                ..Material::default()
+            },
+            Material {
+                ior: 0.0,
+                ..Material::default()
+            },
+            Material {
+                ior: f32::INFINITY,
+                ..Material::default()
+            },
+            Material {
+                diffuse: 1.5,
+                ..Material::default()
+            },
+            Material {
+                shininess: f32::NAN,
+                ..Material::default()
+            },
+            Material {
+                reflectivity: 0.6,
+                transparency: 0.6,
+                ..Material::default()
+            },
+        ];
+        let mut s = Scene::new();
+        for m in bad {
+            let e = s.add_material(m).unwrap_err();
+            assert_eq!(e.status, crate::error::Rt2Status::InvalidArgument, "{m:?}");
+        }
+        assert_eq!(s.materials().len(), 1);
+        // The smallest normal float is accepted (its reciprocal is 8.5e37).
+        let ior = f32::MIN_POSITIVE;
+        assert_eq!(
+            s.add_material(Material {
+                ior,
+                ..Material::default()
+            })
+            .unwrap(),
+            1
+        );
+    }
 }

@@ -2,9 +2,12 @@
 //! the built shared library, where the library is and a `cc` compiler configured outside
 //! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`; the
 //! fork tests' wait for a child; the C API tests' smallest scene; rays around a target and the
-//! sequence behind them; whether a GPU context can be had.
+//! sequence behind them; whether a GPU context can be had; renders of shading extremes
+//! (`shading_cases`).
 
 #![allow(dead_code)]
+
+pub mod shading_cases;
 
 use std::path::{Path, PathBuf};
 
