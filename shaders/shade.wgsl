@@ -129,12 +129,75 @@ fn prim_normal(i: u32, p: vec3<f32>) -> vec3<f32> {
     if (k < params.n_sph) { return normalize_or_zero(p - v3(spheres[k].center)); }
     k -= params.n_sph;
     if (k < params.n_ell) {
-        let e = ellipsoids[k];
-        let m = m3(e.inv);
-        // `Ellipsoid::normal`: the gradient's square overflows for semi-axes below about 5e-20.
-        return unit_or_zero(transpose(m) * (m * (p - v3(e.center))));
+        let m = m3(ellipsoids[k].inv);
+        return quadric_normal(m, m * (p - v3(ellipsoids[k].center)));
     }
     return box_normal(boxes[k - params.n_ell], p);
+}
+
+// `quadric_normal`: the gradient M⁻ᵀ u of the quadric |M⁻¹ x| = 1 at unit-space point u,
+// normalised (its square overflows for semi-axes below about 5e-20: `unit_or_zero`).
+fn quadric_normal(m: mat3x3<f32>, u: vec3<f32>) -> vec3<f32> {
+    return unit_or_zero(transpose(m) * u);
+}
+
+// A shading point and geometric normal; ok is false where a re-solve failed.
+struct Surface { ok: bool, p: vec3<f32>, n: vec3<f32> }
+
+// `resolve_quadric` of src/geometry/analytic.rs, operation for operation (its doc says why):
+// the hit at t of the ray oc + s d (oc relative to the centre) on |M⁻¹ x| = 1, re-solved from
+// q = oc + t d in unit space, not from the rounded world point; the point relative to the
+// centre and the normal from the unit-space point. `sphere_roots` scales the direction by the
+// power of two k and scales the roots back, as the CPU does.
+fn resolve_quadric(m: mat3x3<f32>, oc: vec3<f32>, d: vec3<f32>, t: f32, tmin: f32) -> Surface {
+    let no = Surface(false, vec3<f32>(0.0), vec3<f32>(0.0));
+    let q = oc + t * d;
+    let u = m * q;
+    let du = m * d;
+    let k = pow2_scale(max3(abs(du)));
+    if (k == 0.0) { return no; }
+    let dk = du * k;
+    let roots = sphere_roots(u, du, -1.0, 1.0);
+    var s = -(dot(u, dk) / dot(dk, dk)) * k;
+    if (roots.hit) {
+        // f32::EPSILON = 2^-23.
+        if (roots.t1 - roots.t0 <= 4.0 * abs(t) * 1.1920929e-7) {
+            let start = m * (oc + tmin * d);
+            let l = dot(start, start);
+            let entering = (bitcast<u32>(tmin) & 0x7fffffffu) >= 0x7f800000u || l > 1.0 || is_nan(l);
+            s = select(roots.t1, roots.t0, entering);
+        } else {
+            s = select(roots.t0, roots.t1, abs(roots.t1) < abs(roots.t0));
+        }
+    }
+    let point = q + s * d;
+    let n = quadric_normal(m, u + s * du);
+    if (!finite3(point) || all(n == vec3<f32>(0.0))) { return no; }
+    return Surface(true, point, n);
+}
+
+// `PrimitiveSet::quadric_surface_f32`: `resolve_quadric` for a sphere (M⁻¹ = I / r) or an
+// ellipsoid, in world space; not ok for other kinds.
+fn quadric_surface(h: Hit, r: Ray) -> Surface {
+    let no = Surface(false, vec3<f32>(0.0), vec3<f32>(0.0));
+    if (h.prim < params.n_tri || h.prim >= n_bounded()) { return no; }
+    var k = h.prim - params.n_tri;
+    var m: mat3x3<f32>;
+    var c: vec3<f32>;
+    if (k < params.n_sph) {
+        let i = 1.0 / spheres[k].radius;
+        m = mat3x3<f32>(i, 0.0, 0.0, 0.0, i, 0.0, 0.0, 0.0, i);
+        c = v3(spheres[k].center);
+    } else {
+        k -= params.n_sph;
+        if (k >= params.n_ell) { return no; }
+        m = m3(ellipsoids[k].inv);
+        c = v3(ellipsoids[k].center);
+    }
+    let s = resolve_quadric(m, r.org - c, r.dir, h.t, r.tmin);
+    let p = c + s.p;
+    if (!s.ok || !finite3(p)) { return no; }
+    return Surface(true, p, s.n);
 }
 
 // `Material::color_at`: the checkerboard by the parity of floor(p / scale) summed.
@@ -175,11 +238,22 @@ fn finite3(v: vec3<f32>) -> bool {
     return all((bitcast<vec3<u32>>(v) & vec3<u32>(0x7fffffffu)) < vec3<u32>(0x7f800000u));
 }
 
-// `PrimitiveSet::hit_point`: the hit recomputed on the surface, from the barycentrics for
-// triangles; `org + t·dir` projected onto a plane, snapped onto a box face, moved along the
-// line from the centre onto a sphere, along the ray onto an ellipsoid.
-fn hit_point(h: Hit, r: Ray) -> vec3<f32> {
+// `PrimitiveSet::shading_surface`: the point (`org + t·dir`, or recomputed on the surface
+// where on_surface) and geometric normal the render shades; a sphere's or ellipsoid's
+// re-solved relative to its centre.
+fn shading_surface(h: Hit, r: Ray, on_surface: bool) -> Surface {
     let p = ray_at(r, h.t);
+    let quad = quadric_surface(h, r);
+    if (quad.ok) { return Surface(true, select(p, quad.p, on_surface), quad.n); }
+    var q = p;
+    if (on_surface) { q = flat_point(h, p); }
+    return Surface(true, q, prim_normal(h.prim, q));
+}
+
+// `PrimitiveSet::flat_point`: p (`org + t·dir`) recomputed on the surface, from the
+// barycentrics for triangles; projected onto a plane, snapped onto a box face; kept for a
+// sphere or ellipsoid.
+fn flat_point(h: Hit, p: vec3<f32>) -> vec3<f32> {
     let nb = n_bounded();
     if (h.prim >= nb) {
         let pl = planes[h.prim - nb];
@@ -190,27 +264,9 @@ fn hit_point(h: Hit, r: Ray) -> vec3<f32> {
         let t = triangles[h.prim];
         return v3(t.v0) + h.u * v3(t.e1) + h.v * v3(t.e2);
     }
-    var k = h.prim - params.n_tri;
-    if (k < params.n_sph) {
-        let c = v3(spheres[k].center);
-        let d = normalize_or_zero(p - c);
-        if (all(d == vec3<f32>(0.0))) { return p; }
-        return c + spheres[k].radius * d;
-    }
-    k -= params.n_sph;
-    if (k < params.n_ell) {
-        // `Ellipsoid::on_surface`: the ray re-solved from p, the root nearest p.
-        let e = ellipsoids[k];
-        let m = m3(e.inv);
-        let roots = sphere_roots(m * (p - v3(e.center)), m * r.dir, -1.0, 1.0);
-        if (!roots.hit) { return p; }
-        var t = roots.t0;
-        if (abs(roots.t1) < abs(roots.t0)) { t = roots.t1; }
-        let moved = p + t * r.dir;
-        if (!finite3(moved)) { return p; }
-        return moved;
-    }
-    return box_on_surface(boxes[k - params.n_ell], p);
+    let k = h.prim - params.n_tri;
+    if (k < params.n_sph + params.n_ell) { return p; }
+    return box_on_surface(boxes[k - params.n_sph - params.n_ell], p);
 }
 
 // `PrimitiveSet::is_flat`: triangles and planes.
@@ -251,9 +307,9 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
     let m = materials[prim_material[hit.prim]];
     let eps = params.background.w;
     // The fixed epsilon keeps `org + t·dir`; the other modes start on the surface.
-    var p = ray_at(r, hit.t);
-    if (params.offset_mode != OFFSET_EPSILON) { p = hit_point(hit, r); }
-    let n_geo = prim_normal(hit.prim, p);
+    let surface = shading_surface(hit, r, params.offset_mode != OFFSET_EPSILON);
+    let p = surface.p;
+    let n_geo = surface.n;
     let entering = dot(n_geo, r.dir) < 0.0;
     let n = select(-n_geo, n_geo, entering);
     // Sampled just inside the surface, as on the CPU (no flicker on a checker boundary).

@@ -51,7 +51,8 @@ pub enum OffsetMode {
     Epsilon,
     /// Wächter & Binder (2019), "A fast and robust method for avoiding self-intersection"
     /// (Ray Tracing Gems ch. 6): the hit point is recomputed on the surface (barycentrics for
-    /// triangles, projection for spheres) and moved a fixed number of ULPs along the
+    /// triangles, the ray re-solved relative to the centre for spheres and ellipsoids:
+    /// `PrimitiveSet::shading_surface`) and moved a fixed number of ULPs along the
     /// geometric normal, so the offset follows the magnitude of the coordinates, not the
     /// scene: no self-intersection at any scale, and offsets of a few ULPs instead of a
     /// scene-sized epsilon (near the origin, where ULPs vanish, `2^-16 ·` scene diagonal).

@@ -539,7 +539,7 @@ fn offset_modes_match_the_cpu() {
 
 /// The robust offset's hit points on planes, boxes (one of zero thickness), spheres and
 /// ellipsoids (one a thin disc) seen from 1e4 away (`tests/precision.rs` checks the CPU's against acne): the
-/// GPU's `hit_point` and `box_normal` must agree, or the acne shows as dark pixels.
+/// GPU's `shading_surface` and `box_normal` must agree, or the acne shows as dark pixels.
 #[test]
 fn robust_offsets_seen_from_far_away_match_the_cpu() {
     let Some(g) = gpu(GpuOptions::default()) else {

@@ -928,10 +928,10 @@ fn robust_offsets_on_every_kind_of_primitive_seen_from_far_away() {
     }
 }
 
-/// The robust offset's hit point on thin ellipsoids stays where the ray hit. It is moved
-/// onto the surface along the normal (Newton steps); moved along the line from the centre,
-/// as for spheres, the unit-space length was all rounding error across the short axis, and
-/// points slid 6e-4 (thickness 1e-4) to 0.64 (1e-8) across the disc.
+/// The robust offset's hit point on thin ellipsoids stays where the ray hit. It is re-solved
+/// along the ray (`geometry::resolve_quadric`); moved along the line from the centre, as
+/// spheres once were, the unit-space length was all rounding error across the short axis,
+/// and points slid 6e-4 (thickness 1e-4) to 0.64 (1e-8) across the disc.
 #[test]
 fn robust_hit_points_on_thin_ellipsoids_stay_where_the_ray_hit() {
     use rt2::cpu::whitted::Tracer;

@@ -132,16 +132,14 @@ impl<'a> Tracer<'a> {
     }
 
     /// The shading point of a hit: position, normal facing the ray, material, texture colour.
-    /// The fixed epsilon keeps the historical `org + t·dir` (its default renders are unchanged);
-    /// the other offset modes start from the point recomputed on the surface.
+    /// The fixed epsilon keeps the historical point `org + t·dir`; the other offset modes
+    /// start from the point recomputed on the surface. A sphere's or ellipsoid's normal is
+    /// re-solved relative to its centre in every mode (`PrimitiveSet::shading_surface`).
     pub fn surface(&self, ray: &Ray, hit: &Hit) -> Surface<'a> {
         let s = self.scene;
         let m = s.material_of(hit.prim);
-        let p = match self.opts.offset_mode {
-            OffsetMode::Epsilon => ray.at(hit.t),
-            _ => s.prims.hit_point(hit, ray),
-        };
-        let n_geo = s.prims.normal(hit.prim, p);
+        let on_surface = self.opts.offset_mode != OffsetMode::Epsilon;
+        let (p, n_geo) = s.prims.shading_surface(hit, ray, on_surface);
         let entering = n_geo.dot(ray.dir) < 0.0;
         let n = if entering { n_geo } else { -n_geo };
         Surface {

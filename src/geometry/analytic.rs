@@ -112,17 +112,6 @@ impl Sphere {
     pub fn normal(&self, p: Vec3) -> Vec3 {
         (p - Vec3::from(self.center)).normalize_or_zero()
     }
-
-    /// `p`, a point near the surface, moved onto it along the line from the centre.
-    pub fn on_surface(&self, p: Vec3) -> Vec3 {
-        let c = Vec3::from(self.center);
-        let d = (p - c).normalize_or_zero();
-        if d == Vec3::ZERO {
-            p
-        } else {
-            c + self.radius * d
-        }
-    }
 }
 
 /// An ellipsoid as the image of the unit sphere under `x = center + M s`; stored as the
@@ -239,44 +228,68 @@ impl Ellipsoid {
 
     pub fn normal(&self, p: Vec3) -> Vec3 {
         let inv = Mat3::from_cols_array(&self.inv);
-        let s = inv * (p - Vec3::from(self.center));
-        // `inv` is about 1 / the semi-axis: below about 5e-20 the gradient's square overflows
-        // (normalize_or_zero gave zero); `unit` divides by the largest component first.
-        // Elsewhere the plain normalisation, bit for bit.
-        let g = inv.transpose() * s;
-        if g.length_squared().is_normal() {
-            return g.normalize_or_zero();
-        }
-        unit(g).unwrap_or(Vec3::ZERO)
+        quadric_normal(inv, inv * (p - Vec3::from(self.center)))
     }
+}
 
-    /// `p`, a point near the surface on a ray of direction `d`, moved along that ray onto
-    /// the surface: the ray re-solved from `p` itself, whose unit-space position is about 1
-    /// long, so the solve is well conditioned (from the ray's far origin it is not, which is
-    /// `p`'s error), and the root nearest `p` taken. Neither a move along the line from the
-    /// centre (exact for spheres) nor Newton steps along the gradient serve a thin
-    /// ellipsoid: inside its mid-plane the unit-space length and the gradient across the
-    /// short axis are all rounding, and both slid points up to the rim. `d` is scaled by a
-    /// power of two first (the point `p + t d` does not change), so that `M⁻¹ d` is about 1.
-    /// A ray that does not meet the surface from `p` (a grazing one) keeps `p`.
-    pub fn on_surface(&self, p: Vec3, d: Vec3) -> Vec3 {
-        let inv = Mat3::from_cols_array(&self.inv);
-        let u = inv * (p - Vec3::from(self.center));
-        let du = inv * d;
-        let Some(k) = power_of_two_scale(du.abs().max_element()) else {
-            return p;
-        };
-        let (d, du) = (d * k, du * k);
-        let Some((t0, t1)) = sphere_roots(u, du, Line::Projected, du.length_squared(), 1.0) else {
-            return p;
-        };
-        let moved = p + if t1.abs() < t0.abs() { t1 } else { t0 } * d;
-        if moved.is_finite() {
-            moved
-        } else {
-            p
-        }
+/// The outward unit normal of the quadric `|M⁻¹ x| = 1` (`inv` = `M⁻¹`) at the point whose
+/// unit-space position is `u` (`M⁻¹ x`): the gradient `M⁻ᵀ u`, normalised. `inv` is about
+/// 1 / the semi-axis: below about 5e-20 the gradient's square overflows (normalize_or_zero
+/// gave zero); `unit` divides by the largest component first. Elsewhere the plain
+/// normalisation, bit for bit. Zero where the gradient is zero or not finite.
+fn quadric_normal(inv: Mat3, u: Vec3) -> Vec3 {
+    let g = inv.transpose() * u;
+    if g.length_squared().is_normal() {
+        return g.normalize_or_zero();
     }
+    unit(g).unwrap_or(Vec3::ZERO)
+}
+
+/// The renderer's surface of a hit on the quadric `|M⁻¹ x| = 1` (`inv` = `M⁻¹`, `x` relative
+/// to the centre; a sphere's is `I / r`), in f32: the point, relative to the centre, and the
+/// outward unit normal, for the ray `oc + s d` (`oc`: its origin relative to the centre) hit
+/// at `t` with window start `tmin`. `shade.wgsl`'s `resolve_quadric` is its twin, operation
+/// for operation, so that GPU renders match the CPU's.
+///
+/// Why not the world point `org + t d`: it is rounded to the ULP of its coordinates, which
+/// far from the origin is a large part of a small shape (seen from a few radii, a unit
+/// sphere's normal was 0.02 rad off on average at 1e6 from the origin, a rotated ellipsoid's
+/// up to 0.8 rad; re-solved, both stay within about 1e-5 rad of f64). Relative to
+/// the centre, `q = oc + t d` carries only the rounding of `oc` (exact where the ray starts
+/// near the shape: `org - c` of two nearby floats is exact) and of the sum, both small
+/// against the shape when the viewer is near it. The rounding of `t` lies along the ray, so
+/// the ray is re-solved from `q` (in unit space, `M⁻¹ q` about 1 long: well conditioned;
+/// `M⁻¹ d` scaled by a power of two) and the root nearest `q` taken. As `f64`'s
+/// `quadric_surface` in `primitives.rs` (whose doc gives the cases): where the chord is
+/// within the rounding of `t` (a shape thinner than that), the entry if the ray starts
+/// outside, else the exit; where rounding puts the line just past the rim (a grazing ray),
+/// its point nearest the centre in unit space. The normal is the gradient at that point,
+/// taken in unit space (`M⁻¹ q + s M⁻¹ d`), not from the rounded point. `None` where the
+/// direction is zero or a result is not finite (the caller then keeps `org + t d`).
+pub fn resolve_quadric(inv: Mat3, oc: Vec3, d: Vec3, t: f32, tmin: f32) -> Option<(Vec3, Vec3)> {
+    let q = oc + t * d;
+    let (u, du) = (inv * q, inv * d);
+    let k = power_of_two_scale(du.abs().max_element())?;
+    let dk = du * k;
+    let a = dk.length_squared();
+    let roots = sphere_roots(u, dk, Line::Projected, a, 1.0).map(|(s0, s1)| (s0 * k, s1 * k));
+    let s = match roots {
+        Some((s0, s1)) if s1 - s0 <= 4.0 * t.abs() * f32::EPSILON => {
+            let start = (inv * (oc + tmin * d)).length_squared();
+            let entering = !tmin.is_finite() || start > 1.0 || start.is_nan();
+            if entering {
+                s0
+            } else {
+                s1
+            }
+        }
+        Some((s0, s1)) if s1.abs() < s0.abs() => s1,
+        Some((s0, _)) => s0,
+        None => -(u.dot(dk) / a) * k,
+    };
+    let point = q + s * d;
+    let normal = quadric_normal(inv, u + s * du);
+    (point.is_finite() && normal != Vec3::ZERO).then_some((point, normal))
 }
 
 /// Solid axis-aligned box; a ray starting inside hits its exit face.

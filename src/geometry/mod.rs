@@ -9,7 +9,9 @@ mod scale;
 mod triangle;
 
 pub use aabb::{Aabb, Clipped};
-pub use analytic::{box_intersect, box_normal, box_on_surface, Ellipsoid, Plane, Sphere};
+pub use analytic::{
+    box_intersect, box_normal, box_on_surface, resolve_quadric, Ellipsoid, Plane, Sphere,
+};
 pub use primitives::{PrimKind, PrimitiveSet, RayTest};
 pub use ray::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
 pub use scale::{power_of_two_scale, unit};

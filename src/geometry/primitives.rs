@@ -5,8 +5,8 @@
 
 use super::triangle::watertight;
 use super::{
-    box_intersect, box_normal, box_on_surface, Aabb, Clipped, Ellipsoid, Hit, Plane, PrimIndex,
-    Ray, Sphere, Triangle, TriangleTest,
+    box_intersect, box_normal, box_on_surface, resolve_quadric, Aabb, Clipped, Ellipsoid, Hit,
+    Plane, PrimIndex, Ray, Sphere, Triangle, TriangleTest,
 };
 use crate::precision::Intersector;
 use glam::{DMat3, DVec3, Mat3, Vec3};
@@ -207,14 +207,53 @@ impl PrimitiveSet {
         i >= self.len() || self.locate(i).0 == PrimKind::Triangle
     }
 
-    /// The hit point of `hit` recomputed on the surface, for the robust offset: `org + t·dir`
-    /// carries the error of `t` times the ray's length, which from far away exceeds the
-    /// offset. From the barycentrics for triangles (exact up to one rounding per
-    /// coordinate); `org + t·dir` moved onto the surface for the other primitives (projected
-    /// onto a plane, snapped onto a box's face, along the line from a sphere's centre, along
-    /// the ray onto an ellipsoid), which leaves an error across the surface only.
-    pub fn hit_point(&self, hit: &Hit, ray: &Ray) -> Vec3 {
+    /// The surface of `hit` the renderer shades (`Tracer::surface`; `shade.wgsl`'s
+    /// `shading_surface` is its twin): the point, and the geometric normal (not oriented
+    /// towards the ray), both in f32. The point is `org + t·dir` where `on_surface` is false
+    /// (the fixed-epsilon offset, whose renders keep it), else recomputed on the surface for
+    /// the robust offset, as `org + t·dir` carries the error of `t` times the ray's length,
+    /// which from far away exceeds the offset: from the barycentrics for triangles (exact up
+    /// to one rounding per coordinate), projected onto a plane, snapped onto a box's face. A
+    /// sphere's or ellipsoid's point and normal are re-solved relative to its centre
+    /// ([`resolve_quadric`]) whatever `on_surface` says: from the rounded world point the
+    /// normal of a unit sphere 1e6 from the origin was 0.02 rad off on average (0.05 at worst)
+    /// and of a rotated ellipsoid up to 0.8 rad (`tests/render_reference.rs` measures both).
+    pub fn shading_surface(&self, hit: &Hit, ray: &Ray, on_surface: bool) -> (Vec3, Vec3) {
         let p = ray.at(hit.t);
+        if let Some((q, n)) = self.quadric_surface_f32(hit, ray) {
+            return (if on_surface { q } else { p }, n);
+        }
+        let p = if on_surface {
+            self.flat_point(hit, p)
+        } else {
+            p
+        };
+        (p, self.normal(hit.prim, p))
+    }
+
+    /// [`resolve_quadric`] for a sphere or ellipsoid, in world space; `None` for other kinds.
+    fn quadric_surface_f32(&self, hit: &Hit, ray: &Ray) -> Option<(Vec3, Vec3)> {
+        let i = hit.prim as usize;
+        let (inv, center) = match (i < self.len()).then(|| self.locate(i))? {
+            (PrimKind::Sphere, k) => {
+                let s = &self.spheres[k];
+                (Mat3::from_diagonal(Vec3::splat(1.0 / s.radius)), s.center)
+            }
+            (PrimKind::Ellipsoid, k) => {
+                let e = &self.ellipsoids[k];
+                (Mat3::from_cols_array(&e.inv), e.center)
+            }
+            _ => return None,
+        };
+        let c = Vec3::from(center);
+        let (q, n) = resolve_quadric(inv, ray.org - c, ray.dir, hit.t, ray.tmin)?;
+        let p = c + q;
+        p.is_finite().then_some((p, n))
+    }
+
+    /// `p` (`org + t·dir` of `hit`) recomputed on the surface of a triangle, plane or box
+    /// ([`Self::shading_surface`]); kept for a sphere or ellipsoid whose re-solve failed.
+    fn flat_point(&self, hit: &Hit, p: Vec3) -> Vec3 {
         let i = hit.prim as usize;
         if i >= self.len() {
             return self.planes[i - self.len()].on_surface(p);
@@ -224,19 +263,16 @@ impl PrimitiveSet {
                 let t = &self.triangles[k];
                 Vec3::from(t.v0) + hit.u * Vec3::from(t.e1) + hit.v * Vec3::from(t.e2)
             }
-            (PrimKind::Sphere, k) => self.spheres[k].on_surface(p),
-            (PrimKind::Ellipsoid, k) => self.ellipsoids[k].on_surface(p, ray.dir),
             (PrimKind::Box, k) => box_on_surface(&self.boxes[k], p),
+            _ => p,
         }
     }
 
-    /// [`Self::hit_point`] and [`Self::normal`] there, for callers that want the surface of
-    /// one hit (`Committed::hit_surface`). A sphere's or ellipsoid's point is recomputed in
-    /// f64 relative to its centre ([`quadric_surface`]): from the rounded world point
-    /// `org + t dir`, as the renderer takes it, the normal of a unit sphere 1e4 from the
-    /// origin was 5e-4 rad off and of an ellipsoid 7e-3, and in f32 even relative to the
-    /// centre the normals of shapes 1e-5 across seen from 3 units were 0.05 rad off. A box
-    /// thinner than rounding takes the face the ray meets ([`thin_box_surface`]).
+    /// The surface of one hit for `Committed::hit_surface`: [`Self::shading_surface`] on the
+    /// surface, but a sphere's or ellipsoid's point is recomputed in f64 relative to its
+    /// centre ([`quadric_surface`]): in f32, even relative to the centre, the normals of
+    /// shapes 1e-5 across seen from 3 units were 0.05 rad off. A box thinner than rounding
+    /// takes the face the ray meets ([`thin_box_surface`]).
     pub fn surface_at(&self, hit: &Hit, ray: &Ray) -> (Vec3, Vec3) {
         let i = hit.prim as usize;
         let exact = match (i < self.len()).then(|| self.locate(i)) {
@@ -252,10 +288,7 @@ impl PrimitiveSet {
             Some((PrimKind::Box, k)) => thin_box_surface(&self.boxes[k], hit, ray),
             _ => None,
         };
-        exact.unwrap_or_else(|| {
-            let p = self.hit_point(hit, ray);
-            (p, self.normal(hit.prim, p))
-        })
+        exact.unwrap_or_else(|| self.shading_surface(hit, ray, true))
     }
 
     /// Bytes held by each kind's array, for the memory report.

@@ -3,7 +3,8 @@
 //! primitive, the geometric normal and the material. The primitive methods that give the
 //! renderer its shading point (`cpu::whitted`), on the world-space primitives that placement
 //! made (normals of transformed objects already by the inverse transpose); but spheres and
-//! ellipsoids are taken relative to their centre (`PrimitiveSet::surface_at`).
+//! ellipsoids are taken relative to their centre in f64, where the renderer does it in f32
+//! (`PrimitiveSet::surface_at`).
 
 use super::Committed;
 use crate::geometry::{Hit, Ray};
