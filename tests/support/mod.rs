@@ -3,7 +3,8 @@
 //! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`; the
 //! fork tests' wait for a child; the C API tests' smallest scene; rays around a target and the
 //! sequence behind them; whether a GPU context can be had; renders of shading extremes
-//! (`shading_cases`).
+//! (`shading_cases`); spheres and ellipsoids far from the origin with their shading worked
+//! out in f64.
 
 #![allow(dead_code)]
 
@@ -229,4 +230,161 @@ pub fn c_gpu_or_skip() -> bool {
         eprintln!("SKIPPED (no GPU adapter): {why}");
     }
     false
+}
+
+/// A sphere or rotated ellipsoid placed `distance` from the origin, alone, lit by one light and
+/// seen from a few radii away, with its image worked out here in f64 (`expected`, RGBA8, `SIZE`)
+/// for the shading tests far from the origin (`tests/render_reference.rs`, `tests/gpu.rs`).
+pub struct FarShape {
+    pub name: String,
+    pub scene: rt2::scene::Scene,
+    pub camera: rt2::camera::Camera,
+    pub expected: Vec<u8>,
+    /// The image `center + rot (radii * s)` of the unit sphere.
+    center: glam::DVec3,
+    rot: glam::DQuat,
+    radii: glam::DVec3,
+}
+
+impl FarShape {
+    /// The ray's first hit in front of `org` in f64: its `t` and the outward unit normal. In
+    /// the shape's own axes, scaled to the unit sphere: exact to f64 rounding.
+    pub fn hit(&self, org: glam::DVec3, dir: glam::DVec3) -> Option<(f64, glam::DVec3)> {
+        let back = self.rot.inverse();
+        let (o, du) = (
+            back * (org - self.center) / self.radii,
+            back * dir / self.radii,
+        );
+        let (a, b, c) = (du.dot(du), o.dot(du), o.dot(o) - 1.0);
+        let disc = b * b - a * c;
+        let t = (-b - disc.sqrt()) / a;
+        (disc >= 0.0 && t > 0.0).then(|| (t, (self.rot * ((o + t * du) / self.radii)).normalize()))
+    }
+}
+
+/// Width and height of a [`FarShape`]'s image.
+pub const FAR_SIZE: (u32, u32) = (64, 48);
+
+/// A unit sphere and an ellipsoid of radii (1.5, 0.4, 0.8) rotated 0.9 rad about (1, 2, 0.5),
+/// 1e4 and 1e6 from the origin, the ellipsoid placed by a transform. Their material is plain
+/// Phong (ambient, diffuse, a sharp highlight: normal errors show most there). The reference
+/// traces each pixel's pinhole ray in f64 from the same f32 eye, hits the quadric relative to
+/// its centre (the rotation undone, the radii divided out: exact to f64 rounding), and shades
+/// by the documented model (a miss takes the default background): ambient plus Phong for the light, which nothing shadows (the
+/// shape is convex and alone: where it faces the light, the shadow ray leaves it outward).
+pub fn far_shapes() -> Vec<FarShape> {
+    use glam::{Affine3A, DQuat, DVec3, Vec3};
+    use rt2::scene::{Material, PointLight, Scene, Shape};
+    let material = Material {
+        color: Vec3::new(0.9, 0.6, 0.3),
+        ambient: 0.1,
+        diffuse: 0.7,
+        specular: 0.5,
+        shininess: 20.0,
+        ..Material::default()
+    };
+    let mut out = Vec::new();
+    for distance in [1e4f32, 1e6] {
+        for ellipsoid in [false, true] {
+            let c = Vec3::new(0.6, 0.48, 0.64) * distance;
+            let rot = DQuat::from_axis_angle(DVec3::new(1.0, 2.0, 0.5).normalize(), 0.9);
+            let radii = if ellipsoid {
+                DVec3::new(1.5, 0.4, 0.8)
+            } else {
+                DVec3::ONE
+            };
+            let light = PointLight {
+                position: c + Vec3::new(3.0, 4.0, 5.0),
+                color: Vec3::ONE,
+                intensity: 1.0,
+            };
+            let eye = c + Vec3::new(-1.5, 1.2, 3.5);
+            let mut scene = Scene::new();
+            let m = scene.add_material(material).unwrap();
+            if ellipsoid {
+                let shape = Shape::Ellipsoid {
+                    center: Vec3::ZERO,
+                    radii: radii.as_vec3(),
+                };
+                let id = scene.add_object(shape, m).unwrap();
+                let place = Affine3A::from_rotation_translation(rot.as_quat(), c);
+                scene.set_transform(id, place).unwrap();
+            } else {
+                let shape = Shape::Sphere {
+                    center: c,
+                    radius: 1.0,
+                };
+                scene.add_object(shape, m).unwrap();
+            }
+            scene.add_light(light).unwrap();
+            scene.commit().unwrap();
+            let mut camera = rt2::camera::Camera::default();
+            camera.look_at(eye, c, Vec3::Y).unwrap();
+            camera.set_fov(40.0).unwrap();
+
+            let shape = if ellipsoid {
+                "ellipsoid"
+            } else {
+                "unit sphere"
+            };
+            let mut far = FarShape {
+                name: format!("{shape} at {distance:e}"),
+                scene,
+                camera,
+                expected: Vec::new(),
+                center: c.as_dvec3(),
+                rot,
+                radii,
+            };
+            let (w, h) = FAR_SIZE;
+            let eye = eye.as_dvec3();
+            let fwd = (far.center - eye).normalize();
+            let right = fwd.cross(DVec3::Y).normalize();
+            let up = right.cross(fwd);
+            let hh = (40f64.to_radians() / 2.0).tan();
+            let hw = hh * w as f64 / h as f64;
+            let d = |v: Vec3| v.as_dvec3();
+            for y in 0..h {
+                for x in 0..w {
+                    let nx = 2.0 * (x as f64 + 0.5) / w as f64 - 1.0;
+                    let ny = 1.0 - 2.0 * (y as f64 + 0.5) / h as f64;
+                    let dir = (fwd + nx * hw * right + ny * hh * up).normalize();
+                    let color = match far.hit(eye, dir) {
+                        None => d(rt2::render::RenderOptions::default().background),
+                        Some((t, n)) => {
+                            let p = eye + t * dir;
+                            let base = d(material.color);
+                            let mut color = material.ambient as f64 * base;
+                            let l = (d(light.position) - p).normalize();
+                            let ndotl = n.dot(l);
+                            if ndotl > 0.0 {
+                                let r = -l - 2.0 * (-l).dot(n) * n;
+                                let spec = r.dot(-dir).max(0.0).powf(material.shininess as f64);
+                                color += material.diffuse as f64 * ndotl * base
+                                    + DVec3::splat(material.specular as f64 * spec);
+                            }
+                            color
+                        }
+                    };
+                    let c = color.clamp(DVec3::ZERO, DVec3::ONE) * 255.0 + 0.5;
+                    far.expected
+                        .extend_from_slice(&[c.x as u8, c.y as u8, c.z as u8, 255]);
+                }
+            }
+            out.push(far);
+        }
+    }
+    out
+}
+
+/// The mean and largest difference of `pixels` from `expected`, in 8-bit steps over every
+/// channel of every pixel.
+pub fn pixel_difference(pixels: &[u8], expected: &[u8]) -> (f64, u8) {
+    let d: Vec<u8> = pixels
+        .iter()
+        .zip(expected)
+        .map(|(a, b)| a.abs_diff(*b))
+        .collect();
+    let mean = d.iter().map(|&x| x as f64).sum::<f64>() / d.len() as f64;
+    (mean, d.into_iter().max().unwrap_or(0))
 }
