@@ -691,10 +691,13 @@ fn lit_as_on_the_cpu(shape: Shape, s: f32, eye: (Vec3, Vec3)) {
 }
 
 /// Spheres and ellipsoids 1e4 and 1e6 from the origin are shaded on the GPU (both paths) as
-/// the f64 reference of `support::far_shapes` says, within the CPU's bound
+/// the f64 reference of `support::far_shapes` says, within the CPU's bound of 2 steps
 /// (`render_reference.rs`): the kernels re-solve the hit relative to the centre as the CPU
-/// does. From the rounded world point, the unit sphere at 1e6 was up to 23 steps off on
-/// lavapipe (as on the CPU).
+/// does. On lavapipe every pixel is within it (the images are the CPU's); a hardware GPU,
+/// which fuses multiply-adds, may put a ray at the rim on the other side, so up to 8 of the
+/// 3072 pixels may be further off there (headroom, not measured: no hardware GPU was at
+/// hand). From the rounded world point, 252 pixels of the unit sphere at 1e6 were (up to 23
+/// steps), 303 of the ellipsoid (up to 60).
 #[test]
 fn shapes_far_from_the_origin_are_shaded_as_in_f64() {
     let Some(g) = gpu(GpuOptions::default()) else {
@@ -717,10 +720,13 @@ fn shapes_far_from_the_origin_are_shaded_as_in_f64() {
                     &mut frame,
                 )
                 .unwrap();
-                let (mean, max) = support::pixel_difference(frame.pixels(), &far.expected);
+                let (mean, max, off) = support::pixel_difference(frame.pixels(), &far.expected, 2);
                 let what = format!("{}, {offset_mode:?}, {gpu_path:?}", far.name);
-                println!("{what}: mean {mean:.3}, max {max} steps from the f64 reference");
-                assert!(max <= 2, "{what}: mean {mean:.3}, max {max} steps");
+                println!("{what}: mean {mean:.3}, max {max} steps, {off} pixels over 2 steps");
+                assert!(
+                    off <= 8,
+                    "{what}: mean {mean:.3}, max {max}, {off} pixels off"
+                );
             }
         }
     }

@@ -378,13 +378,14 @@ pub fn far_shapes() -> Vec<FarShape> {
 }
 
 /// The mean and largest difference of `pixels` from `expected`, in 8-bit steps over every
-/// channel of every pixel.
-pub fn pixel_difference(pixels: &[u8], expected: &[u8]) -> (f64, u8) {
+/// channel of every pixel, and how many pixels (RGBA) have a channel more than `steps` off.
+pub fn pixel_difference(pixels: &[u8], expected: &[u8], steps: u8) -> (f64, u8, usize) {
     let d: Vec<u8> = pixels
         .iter()
         .zip(expected)
         .map(|(a, b)| a.abs_diff(*b))
         .collect();
     let mean = d.iter().map(|&x| x as f64).sum::<f64>() / d.len() as f64;
-    (mean, d.into_iter().max().unwrap_or(0))
+    let off = d.chunks(4).filter(|p| p.iter().any(|&x| x > steps)).count();
+    (mean, d.into_iter().max().unwrap_or(0), off)
 }
