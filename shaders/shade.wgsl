@@ -3,9 +3,6 @@
 // transparency straight or refracted (Snell + Schlick). Both render paths call `shade` for one
 // ray and get its local colour and up to two child rays.
 
-// Rays whose weight drops below this add less than a 1/255 step (whitted.rs MIN_WEIGHT).
-const MIN_WEIGHT: f32 = 1.0 / 512.0;
-
 // glam's normalize_or_zero: times the reciprocal length, zero when that is not finite.
 fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
     let r = 1.0 / sqrt(dot(v, v));

@@ -19,7 +19,7 @@ use rayon::prelude::*;
 const BAND_ROWS: usize = 4;
 
 /// Rays whose weight drops below this add less than a 1/255 step and are not traced.
-pub const MIN_WEIGHT: f32 = 1.0 / 512.0;
+const MIN_WEIGHT: f32 = 1.0 / 512.0;
 
 /// One scene + options, shared by all bands of a frame.
 pub struct Tracer<'a> {
