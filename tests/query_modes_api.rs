@@ -280,13 +280,6 @@ fn a_query_longer_than_one_step_answers_every_ray_in_place() {
     }
 }
 
-/// The counters of `rt2_query_stats`, through the C API in every mode, on a tree whose every
-/// node a ray meets is known from the geometry: two stacks of triangles facing x, `A` (5, at
-/// x in [0, 1]) and `B` (7, at x in [9, 10]), each covering `y + z <= 1` of the unit square.
-/// The midpoint builder at depth 1 splits the root at x = 5 into a leaf per stack. A ray along
-/// +x through `y + z > 1` misses everything: root and both leaves (3 nodes, 2 leaves, 12
-/// tests). One through `y + z < 1` hits A's first triangle, before leaving A's leaf: 2 nodes,
-/// 1 leaf, 5 tests. Along -x, the same with B first (7 tests).
 /// Calls of 1 to 20 rays (staged on the stack up to a limit, on the heap beyond it) answer
 /// every ray as the unit sphere says, in every mode: ray i passes at height `x_i` beside its
 /// centre, a hit at `t = 10 - sqrt(1 - x_i^2)` where `|x_i| < 1`.
@@ -352,6 +345,13 @@ fn small_calls_answer_every_ray() {
     }
 }
 
+/// The counters of `rt2_query_stats`, through the C API in every mode, on a tree whose every
+/// node a ray meets is known from the geometry: two stacks of triangles facing x, `A` (5, at
+/// x in [0, 1]) and `B` (7, at x in [9, 10]), each covering `y + z <= 1` of the unit square.
+/// The midpoint builder at depth 1 splits the root at x = 5 into a leaf per stack. A ray along
+/// +x through `y + z > 1` misses everything: root and both leaves (3 nodes, 2 leaves, 12
+/// tests). One through `y + z < 1` hits A's first triangle, before leaving A's leaf: 2 nodes,
+/// 1 leaf, 5 tests. Along -x, the same with B first (7 tests).
 #[test]
 fn query_statistics_count_the_nodes_leaves_and_tests_of_each_ray() {
     let (na, nb) = (5usize, 7usize);
@@ -459,11 +459,6 @@ fn query_statistics_count_the_nodes_leaves_and_tests_of_each_ray() {
     }
 }
 
-/// `rt2_query_options.exclude`: two grids of triangles, at z = 0 (object 0) and z = -1 (object
-/// 1), and rays straight down from z = 10. A ray that ignores the triangle it hits first hits
-/// the lower grid at t = 11; one that ignores a triangle it does not hit is unchanged. The same
-/// in every query mode with either intersector, for closest and any hits. Names the scene
-/// lacks are refused before any output is written.
 /// An any-hit query counts, for each ray, the primitives tested until the first in its way,
 /// in every mode: six overlapping spheres, and twelve stacked triangles (tested in SIMD
 /// blocks), each scene in one leaf; rays through all of its primitives (one test: the first
@@ -572,6 +567,11 @@ unsafe fn any_hit_counts(
     }
 }
 
+/// `rt2_query_options.exclude`: two grids of triangles, at z = 0 (object 0) and z = -1 (object
+/// 1), and rays straight down from z = 10. A ray that ignores the triangle it hits first hits
+/// the lower grid at t = 11; one that ignores a triangle it does not hit is unchanged. The same
+/// in every query mode with either intersector, for closest and any hits. Names the scene
+/// lacks are refused before any output is written.
 #[test]
 fn excluded_primitives_are_ignored_in_every_mode() {
     unsafe {
