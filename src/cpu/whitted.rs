@@ -297,10 +297,11 @@ fn pixel_offset(x: u32, y: u32, s: u32, n: u32) -> Vec2 {
     stratified(x, y, s, s * n + col, n, 0x68e3_1da4)
 }
 
-/// The lens point (in the unit square) of sample `s` of `n`: stratified on the same grid as
-/// the pixel offsets, but each pixel deals the cells to its samples in its own shuffled order
-/// (Kensler's hashed permutation), and every cell can be dealt. Sample `s` used to take cell
-/// `s` for both, which tied a sample's lens radius to its place in the pixel and left the
+/// The lens point (in the unit square) of sample `s` of `n`: stratified on the `side(n)` grid
+/// (the pixel offsets' grid where `n` is a square; theirs is n-rooks otherwise), but each
+/// pixel deals the cells to its samples in its own shuffled order (Kensler's hashed
+/// permutation), and every cell can be dealt. Sample `s` used to take cell `s` for both,
+/// which tied a sample's lens radius to its place in the pixel and left the
 /// outer ring and lower half of the lens unused at one sample per pixel: an edge out of focus
 /// blurred 3% off the thin lens' circle of confusion.
 fn lens_offset(x: u32, y: u32, s: u32, n: u32) -> Vec2 {
