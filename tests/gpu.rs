@@ -1961,3 +1961,37 @@ fn trace_reported(g: &Context, s: &Scene, rays: &[Ray]) -> Vec<Reported> {
     let ids: Vec<u32> = (0..s.objects().len() as u32).collect();
     as_reported(s.committed().unwrap(), &enable_trace(g, s, rays).0, &ids)
 }
+
+/// The GPU's any-hit statistics and answers are the CPU's single rays' with the same
+/// traversal, nodes included, with and without exclusions (`support::any_hit_stats`; the
+/// CPU's modes are compared in `tests/query_modes_api.rs`), as `rt2_query_stats` documents.
+#[test]
+fn any_hit_statistics_are_the_cpus() {
+    use support::any_hit_stats::{cases, counts};
+    let Some(g) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let cpu = cpu();
+    let mut wrong = Vec::new();
+    for case in cases() {
+        let c = case.scene.committed().unwrap();
+        for exclude in [None, Some(&case.exclude[..])] {
+            for traversal in Traversal::ALL {
+                let q = QueryOptions {
+                    traversal: Some(traversal),
+                    ..QueryOptions::default()
+                };
+                let want = counts(&cpu, c, &case.rays, exclude, &q);
+                let got = counts(&g, c, &case.rays, exclude, &q);
+                if got != want {
+                    let excluding = exclude.is_some();
+                    wrong.push(format!(
+                        "{}, excluding: {excluding}, {traversal:?}: GPU {got:?}, CPU {want:?}",
+                        case.name
+                    ));
+                }
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+}

@@ -8,6 +8,7 @@
 
 #![allow(dead_code)]
 
+pub mod any_hit_stats;
 pub mod shading_cases;
 
 use std::path::{Path, PathBuf};
