@@ -54,8 +54,10 @@ pub fn min_weight(scene: &Committed, opts: &RenderOptions) -> f32 {
         c * (m.ambient + m.diffuse * lights) + m.specular * lights
     });
     let bound = surfaces.fold(opts.background.max_element(), f32::max);
-    // Never above MIN_WEIGHT (scenes within [0, 1] render as before); 0 when the bound
-    // overflows: every ray is traced then.
+    // Never above MIN_WEIGHT: scenes whose bound is at most 1 render as before. Colours and
+    // lights within [0, 1] can still exceed it (the built-in `default` scene's glass: 2.14,
+    // with ~7% more render time and a step's difference on 0.5% of its pixels). 0 when the
+    // bound overflows: every ray is traced then.
     MIN_WEIGHT / bound.max(1.0)
 }
 
