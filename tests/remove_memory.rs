@@ -67,9 +67,10 @@ fn placed_bytes(scene: *const rt2_scene) -> isize {
 /// the primitive lookup), removed and committed again beside a sphere: the removal gives back
 /// the mesh's own arrays at the call and the placed arrays (as `rt2_scene_stats` counts them)
 /// at the commit, and after the eight rounds the process holds what it held after the first,
-/// up to the slots the removed ids keep (about 150 bytes each) and the growth of the arrays
+/// up to the slots the removed ids keep (about 25 bytes each) and the growth of the arrays
 /// that hold them. Kept, each mesh would add its 0.8 MB of vertices and indices and its
-/// placed triangles.
+/// placed triangles. Then 10,000 spheres streamed in and out the same way keep at most 64
+/// bytes per removed id, doubling arrays included (an unboxed object's slot alone was 128).
 #[test]
 fn streaming_a_mesh_in_and_out_gives_its_memory_back() {
     const N: u32 = 150;
@@ -174,6 +175,41 @@ fn streaming_a_mesh_in_and_out_gives_its_memory_back() {
             growth < 8 * 1024,
             "seven rounds grew the process by {growth} bytes (one mesh holds {shape_bytes})"
         );
+        let before = live();
+        const SPHERES: isize = 10_000;
+        for _ in 0..SPHERES {
+            let (mut id, at) = (0, [0.5f32, 0.5, 1.0]);
+            ok(
+                rt2_scene_add_sphere(scene, at.as_ptr(), 0.1, 0, &mut id),
+                "sphere",
+            );
+            ok(rt2_scene_commit(scene), "commit");
+            ok(rt2_scene_remove(scene, id), "remove");
+        }
+        ok(rt2_scene_commit(scene), "commit");
+        let mut opt = rt2_query_options_default();
+        let exclude = [rt2_hit {
+            t: 0.0,
+            u: 0.0,
+            v: 0.0,
+            object: 0,
+            prim: 0,
+        }];
+        opt.exclude = exclude.as_ptr();
+        let mut hit = [exclude[0]];
+        let st = rt2_intersect(
+            ctx,
+            scene,
+            ray.as_ptr(),
+            1,
+            hit.as_mut_ptr(),
+            &opt,
+            null_mut(),
+        );
+        ok(st, "intersect (builds the lookup)");
+        let per_id = (live() - before) / SPHERES;
+        eprintln!("{SPHERES} spheres streamed through: {per_id} bytes per removed id");
+        assert!(per_id <= 64, "{per_id} bytes kept per removed id");
         rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);
     }

@@ -113,7 +113,7 @@ fn world_corners(positions: &[Vec3], tri: &[u32; 3], t: &Affine3A, mirrors: bool
 
 /// The exact corners of every triangle of the enabled `objects` (`None`: removed), in the
 /// order [`place`] gives the triangles (`PrimitiveSet::vertices`, for the watertight test).
-pub fn triangle_corners(objects: &[Option<Object>]) -> Fallible<Vec<[[f32; 3]; 3]>> {
+pub fn triangle_corners(objects: &[Option<Box<Object>>]) -> Fallible<Vec<[[f32; 3]; 3]>> {
     let mut out = Vec::new();
     for obj in objects.iter().flatten().filter(|o| o.enabled) {
         if let Shape::Mesh {
