@@ -498,22 +498,9 @@ fn extreme_lights_colours_and_sample_counts_render_as_on_the_cpu() {
     let Some(g) = gpu(GpuOptions::default()) else {
         return;
     };
-    let mut failures = Vec::new();
-    for case in support::shading_cases::cases() {
-        for path in [GpuPathRequest::Megakernel, GpuPathRequest::Wavefront] {
-            let mut frame = Frame::new(case.size.0, case.size.1).unwrap();
-            let opts = RenderOptions {
-                gpu_path: path,
-                ..case.opts
-            };
-            let committed = case.scene.committed().unwrap();
-            g.render(committed, &case.camera, &opts, &mut frame)
-                .unwrap();
-            if let Err(e) = (case.check)(&frame) {
-                failures.push(format!("{} ({path:?}): {e}", case.name));
-            }
-        }
-    }
+    let paths = [GpuPathRequest::Megakernel, GpuPathRequest::Wavefront];
+    let failures =
+        support::shading_cases::failures(&g, &paths, |o, gpu_path| RenderOptions { gpu_path, ..o });
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 

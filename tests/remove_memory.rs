@@ -63,6 +63,31 @@ fn placed_bytes(scene: *const rt2_scene) -> isize {
     (st.bytes_nodes + st.bytes_leaf_lists + st.bytes_leaf_boxes + st.bytes_primitives) as isize
 }
 
+/// The hit of `ray` ignoring primitive 0 of `object`: the exclusion builds the scene's
+/// primitive lookup, which holds an entry per object id.
+unsafe fn trace_excluding(
+    ctx: *const rt2_context,
+    scene: *const rt2_scene,
+    ray: &rt2_ray,
+    object: u32,
+) -> rt2_hit {
+    let mut opt = rt2_query_options_default();
+    let exclude = rt2_hit {
+        t: 0.0,
+        u: 0.0,
+        v: 0.0,
+        object,
+        prim: 0,
+    };
+    opt.exclude = &exclude;
+    let mut hit = exclude;
+    ok(
+        rt2_intersect(ctx, scene, ray, 1, &mut hit, &opt, null_mut()),
+        "intersect",
+    );
+    hit
+}
+
 /// Eight times a 45,000-triangle mesh added, committed, named by an exclusion (which builds
 /// the primitive lookup), removed and committed again beside a sphere: the removal gives back
 /// the mesh's own arrays at the call and the placed arrays (as `rt2_scene_stats` counts them)
@@ -127,28 +152,8 @@ fn streaming_a_mesh_in_and_out_gives_its_memory_back() {
             ok(st, "add the mesh");
             assert_eq!(id, round + 1, "ids are not reused");
             ok(rt2_scene_commit(scene), "commit");
-            // Builds the lookup: ray 0 ignores the mesh's first triangle.
-            let mut opt = rt2_query_options_default();
-            let exclude = [rt2_hit {
-                t: 0.0,
-                u: 0.0,
-                v: 0.0,
-                object: id,
-                prim: 0,
-            }];
-            opt.exclude = exclude.as_ptr();
-            let mut hit = [exclude[0]];
-            let st = rt2_intersect(
-                ctx,
-                scene,
-                ray.as_ptr(),
-                1,
-                hit.as_mut_ptr(),
-                &opt,
-                null_mut(),
-            );
-            ok(st, "intersect");
-            assert_eq!(hit[0].object, id, "the ray misses the mesh");
+            let hit = trace_excluding(ctx, scene, &ray[0], id);
+            assert_eq!(hit.object, id, "the ray misses the mesh");
             let placed = placed_bytes(scene) - sphere_only;
             let before = live();
             ok(rt2_scene_remove(scene, id), "remove");
@@ -187,26 +192,7 @@ fn streaming_a_mesh_in_and_out_gives_its_memory_back() {
             ok(rt2_scene_remove(scene, id), "remove");
         }
         ok(rt2_scene_commit(scene), "commit");
-        let mut opt = rt2_query_options_default();
-        let exclude = [rt2_hit {
-            t: 0.0,
-            u: 0.0,
-            v: 0.0,
-            object: 0,
-            prim: 0,
-        }];
-        opt.exclude = exclude.as_ptr();
-        let mut hit = [exclude[0]];
-        let st = rt2_intersect(
-            ctx,
-            scene,
-            ray.as_ptr(),
-            1,
-            hit.as_mut_ptr(),
-            &opt,
-            null_mut(),
-        );
-        ok(st, "intersect (builds the lookup)");
+        trace_excluding(ctx, scene, &ray[0], 0);
         let per_id = (live() - before) / SPHERES;
         eprintln!("{SPHERES} spheres streamed through: {per_id} bytes per removed id");
         assert!(per_id <= 64, "{per_id} bytes kept per removed id");

@@ -6,29 +6,17 @@ mod support;
 
 use rt2::context::Context;
 use rt2::dispatch::BackendRequest;
-use rt2::frame::Frame;
 use rt2::render::{RenderOptions, Schedule};
-use support::shading_cases::cases;
+use support::shading_cases::failures;
 
 #[test]
 fn extreme_lights_colours_and_sample_counts_render_as_the_shading_model_says() {
     let cpu = Context::new(BackendRequest::Cpu, 0).unwrap();
-    let mut failures = Vec::new();
-    for case in cases() {
-        for schedule in [Schedule::DepthFirst, Schedule::BreadthFirst] {
-            let mut frame = Frame::new(case.size.0, case.size.1).unwrap();
-            let opts = RenderOptions {
-                schedule,
-                ..case.opts
-            };
-            let committed = case.scene.committed().unwrap();
-            cpu.render(committed, &case.camera, &opts, &mut frame)
-                .unwrap();
-            if let Err(e) = (case.check)(&frame) {
-                failures.push(format!("{} ({schedule:?}): {e}", case.name));
-            }
-        }
-    }
+    let schedules = [Schedule::DepthFirst, Schedule::BreadthFirst];
+    let failures = failures(&cpu, &schedules, |o, schedule| RenderOptions {
+        schedule,
+        ..o
+    });
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 

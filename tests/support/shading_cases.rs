@@ -5,6 +5,7 @@
 
 use glam::Vec3;
 use rt2::camera::Camera;
+use rt2::context::Context;
 use rt2::frame::Frame;
 use rt2::render::RenderOptions;
 use rt2::scene::{Material, PointLight, Scene, Shape};
@@ -32,6 +33,29 @@ pub fn cases() -> Vec<Case> {
     all.extend([2, 3, 4, 5, 9, 10].into_iter().map(half_covered_row));
     all.push(light_switched_off());
     all
+}
+
+/// Every case rendered by `ctx` with its options changed by `apply` for each of `variants`
+/// (render schedules, GPU paths): what the checks found wrong, one line per render.
+pub fn failures<V: std::fmt::Debug + Copy>(
+    ctx: &Context,
+    variants: &[V],
+    apply: impl Fn(RenderOptions, V) -> RenderOptions,
+) -> Vec<String> {
+    let mut failures = Vec::new();
+    for case in cases() {
+        for &v in variants {
+            let mut frame = Frame::new(case.size.0, case.size.1).unwrap();
+            let committed = case.scene.committed().unwrap();
+            let opts = apply(case.opts, v);
+            ctx.render(committed, &case.camera, &opts, &mut frame)
+                .unwrap();
+            if let Err(e) = (case.check)(&frame) {
+                failures.push(format!("{} ({v:?}): {e}", case.name));
+            }
+        }
+    }
+    failures
 }
 
 /// The red, green and blue of the centre pixel of a frame of odd size.
