@@ -626,18 +626,7 @@ fn a_disabled_object_can_be_moved() {
 /// offset modes, equal those of a scene built from the enabled objects alone.
 #[test]
 fn every_subset_traces_and_renders_as_a_scene_without_it() {
-    subsets(
-        Rt2Backend::Cpu,
-        &query_options(),
-        &[
-            (0, 0, 0, 0),
-            (1, 0, 1, 0),
-            (0, 1, 1, 0),
-            (0, 2, 0, 0),
-            (1, 2, 1, 0),
-        ],
-        1,
-    );
+    subsets(Rt2Backend::Cpu, &query_options(), &CPU_RENDERS, 1);
 }
 
 /// The same on the GPU for every third subset of the Gray-code order (22 of 64; lavapipe is
@@ -706,6 +695,16 @@ fn material(id: u32) -> u32 {
         0
     }
 }
+
+/// The CPU renders the tests compare, as `(schedule, offset_mode, transparency, gpu_path)`:
+/// both schedules, every offset mode, both transparency modes.
+const CPU_RENDERS: [(u32, u32, u32, u32); 5] = [
+    (0, 0, 0, 0),
+    (1, 0, 1, 0),
+    (0, 1, 1, 0),
+    (0, 2, 0, 0),
+    (1, 2, 1, 0),
+];
 
 fn subsets(
     backend: Rt2Backend,
@@ -1068,17 +1067,7 @@ fn removals(backend: Rt2Backend, opts: &[rt2_query_options], renders: &[(u32, u3
 /// schedules, every offset mode and both transparency modes.
 #[test]
 fn removed_objects_trace_as_a_scene_built_without_them() {
-    removals(
-        Rt2Backend::Cpu,
-        &query_options(),
-        &[
-            (0, 0, 0, 0),
-            (1, 0, 1, 0),
-            (0, 1, 1, 0),
-            (0, 2, 0, 0),
-            (1, 2, 1, 0),
-        ],
-    );
+    removals(Rt2Backend::Cpu, &query_options(), &CPU_RENDERS);
 }
 
 /// [`removals`] under one GPU context: every traversal, renders of both paths. Without an
