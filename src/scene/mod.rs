@@ -335,6 +335,7 @@ impl Scene {
             ));
         }
         object::check(&shape, &Affine3A::IDENTITY)?;
+        let id = next_object_id(self.objects.len())?;
         self.prim_count += shape.prim_count();
         self.objects.push(Some(Box::new(Object {
             shape,
@@ -343,7 +344,7 @@ impl Scene {
             enabled: true,
         })));
         self.stale = Stale::Geometry;
-        Ok(self.objects.len() as u32 - 1)
+        Ok(id)
     }
 
     /// Object `object`, or an error saying whether the id was removed or never given.
@@ -584,6 +585,18 @@ impl Scene {
     }
 }
 
+/// The id of the next object after `issued` ids, or an error once they are used up. Ids are
+/// never reused, so a program streaming objects in and out (8 bytes per removed id) can reach
+/// 2^32 - 1, which is `RT2_INVALID_ID` (a miss), after which `issued as u32` wrapped to id 0.
+fn next_object_id(issued: usize) -> Result<u32> {
+    match u32::try_from(issued) {
+        Ok(id) if id < u32::MAX => Ok(id),
+        _ => Err(Error::unsupported(format!(
+            "the scene has given {issued} object ids, the most it can (ids are not reused)"
+        ))),
+    }
+}
+
 /// The error for an `object` id that names no object: removed, or past the `issued` ids.
 fn no_object(object: u32, issued: usize, removed: bool) -> Error {
     Error::invalid_argument(if removed {
@@ -619,6 +632,17 @@ pub(crate) fn unit_sphere() -> Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Object ids run out before `RT2_INVALID_ID` (the miss id) and never wrap around to 0.
+    #[test]
+    fn object_ids_stop_before_the_miss_id() {
+        assert_eq!(next_object_id(0).unwrap(), 0);
+        assert_eq!(next_object_id(u32::MAX as usize - 1).unwrap(), u32::MAX - 1);
+        for issued in [u32::MAX as usize, u32::MAX as usize + 1, usize::MAX] {
+            let e = next_object_id(issued).unwrap_err();
+            assert_eq!(e.status, crate::error::Rt2Status::Unsupported, "{issued}");
+        }
+    }
 
     /// Each field out of its range is refused, and the scene keeps only its default material.
     #[test]
