@@ -944,7 +944,8 @@ enum rt2_status rt2_render(const rt2_context *ctx,
  * (`rt2_scene_set_enabled`) and its transform changed (`rt2_scene_set_transform`):
  * materials, lights and an object's material are fixed once added, and cannot be removed.
  * A scene gives at most 2^32 - 1 object ids (0 to `RT2_INVALID_ID` - 1), removed ones
- * included: an add past them is UNSUPPORTED.
+ * included: an add past them is UNSUPPORTED, and one whose id's slot (8 bytes) cannot be
+ * allocated is OUT_OF_MEMORY, with nothing added.
  *
  * # Safety
  * `ctx` is a live context; `out` is writable.

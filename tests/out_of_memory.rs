@@ -187,6 +187,57 @@ fn calls_without_memory_fail_with_out_of_memory_and_can_be_retried() {
         rt2_frame_destroy(frame);
     }
     models_without_memory_fail_with_out_of_memory();
+    streamed_object_ids_without_memory_fail_with_out_of_memory();
+}
+
+/// Spheres added and removed one after another (`rt2_scene_remove`, ids never reused) under a
+/// limit of 16 MiB more: the scene's slot per id given (8 bytes) outgrows it within about two
+/// million ids, and the add that cannot have its slot says OUT_OF_MEMORY, gives no id and
+/// leaves the scene as it was (its doubling aborted the process before). Each Vec doubling
+/// is a fresh mapping once past the allocator's mmap threshold, so the limit is met.
+#[allow(clippy::explicit_write)]
+fn streamed_object_ids_without_memory_fail_with_out_of_memory() {
+    unsafe {
+        let mut desc = rt2_context_desc_default();
+        desc.backend = 1;
+        let mut ctx = null_mut();
+        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
+        let mut scene = null_mut();
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let at = [0.5f32, 0.5, 1.0];
+        writeln!(std::io::stderr(), "streaming spheres").unwrap();
+        libc::malloc_trim(0);
+        limit_address_space(Some(address_space() + (16 << 20)));
+        let (mut status, mut given, mut id) = (Rt2Status::Ok, 0u32, RT2_INVALID_ID);
+        while given < 8 << 20 {
+            status = rt2_scene_add_sphere(scene, at.as_ptr(), 0.25, 0, &mut id);
+            if status != Rt2Status::Ok {
+                break;
+            }
+            assert_eq!(id, given, "ids are given in order");
+            assert_eq!(rt2_scene_remove(scene, id), Rt2Status::Ok);
+            given += 1;
+        }
+        limit_address_space(None);
+        assert_eq!(
+            status,
+            Rt2Status::OutOfMemory,
+            "after {given} ids: {}",
+            last_error()
+        );
+        assert!(last_error().contains("object ids"), "{}", last_error());
+        assert_eq!(id, given - 1, "no id written on failure");
+        // The scene is as it was: the next add gets the next id, and the sphere is hit.
+        let status = rt2_scene_add_sphere(scene, at.as_ptr(), 0.25, 0, &mut id);
+        assert_eq!(status, Rt2Status::Ok, "{}", last_error());
+        assert_eq!(id, given);
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok, "{}", last_error());
+        let hit = hit_at(ctx, scene, 0.5, 0.5);
+        assert_eq!(hit.object, given);
+        assert!((hit.t - 1.75).abs() < 1e-6, "t = {}", hit.t);
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
 }
 
 /// A model file of one polygon with ten million corners: 20 MB of file, 120 MB of fan

@@ -21,7 +21,7 @@ pub use object::{Object, PrimOrigin, Shape};
 pub use surface::HitSurface;
 
 use crate::error::{Error, Result};
-use crate::fallible;
+use crate::fallible::{self, TryGrow};
 use crate::geometry::{Aabb, PrimitiveSet};
 use crate::kdtree::{self, BuildOptions, KdTree};
 use glam::{Affine3A, Vec3};
@@ -336,13 +336,22 @@ impl Scene {
         }
         object::check(&shape, &Affine3A::IDENTITY)?;
         let id = next_object_id(self.objects.len())?;
-        self.prim_count += shape.prim_count();
-        self.objects.push(Some(Box::new(Object {
-            shape,
-            material,
-            transform: Affine3A::IDENTITY,
-            enabled: true,
-        })));
+        let prims = shape.prim_count();
+        // Fallible: a program streaming objects in and out grows this array without bound (8
+        // bytes per removed id), and a failed doubling aborted the process.
+        self.objects
+            .try_push(Some(Box::new(Object {
+                shape,
+                material,
+                transform: Affine3A::IDENTITY,
+                enabled: true,
+            })))
+            .map_err(|_| {
+                Error::out_of_memory(format!(
+                    "out of memory for object ids (the scene gave {id}); nothing was added"
+                ))
+            })?;
+        self.prim_count += prims;
         self.stale = Stale::Geometry;
         Ok(id)
     }
