@@ -21,6 +21,11 @@ const BAND_ROWS: usize = 4;
 /// Rays whose weight drops below this add less than a 1/255 step and are not traced.
 const MIN_WEIGHT: f32 = 1.0 / 512.0;
 
+/// The largest radiance bound [`min_weight`] honours: at most 16 times the rays of the fixed
+/// cut-off. In scenes brighter than that, rays under 1/8192 of a pixel's weight are still
+/// dropped, each worth less than `bound / 8192` of the pixel (a documented limit).
+const MAX_RADIANCE_BOUND: f32 = 16.0;
+
 /// One scene + options, shared by all bands of a frame.
 pub struct Tracer<'a> {
     pub scene: &'a Committed,
@@ -40,6 +45,9 @@ pub struct Tracer<'a> {
 /// a surface's ambient plus every light's diffuse and specular term at full strength (weights
 /// along a ray tree sum to at most 1). Colours, lights and the background are not capped at 1,
 /// and a fixed 1/512 dropped a mirror of 0.0015 under a background of 200 (0.3 of the pixel).
+/// The bound is capped at [`MAX_RADIANCE_BOUND`]: the rays of a tree grow about as the inverse
+/// of the cut-off, and uncapped, a light of intensity 1e4 over 41 half-mirror glass planes
+/// took a second per pixel at depth 64 (a light of 1e30, the cut-off 1e-33, never finished).
 pub fn min_weight(scene: &Committed, opts: &RenderOptions) -> f32 {
     let lights: f32 = scene
         .lights
@@ -56,9 +64,9 @@ pub fn min_weight(scene: &Committed, opts: &RenderOptions) -> f32 {
     let bound = surfaces.fold(opts.background.max_element(), f32::max);
     // Never above MIN_WEIGHT: scenes whose bound is at most 1 render as before. Colours and
     // lights within [0, 1] can still exceed it (the built-in `default` scene's glass: 2.14,
-    // with ~7% more render time and a step's difference on 0.5% of its pixels). 0 when the
-    // bound overflows: every ray is traced then.
-    MIN_WEIGHT / bound.max(1.0)
+    // with ~7% more render time and a step's difference on 0.5% of its pixels). A NaN bound
+    // (none seen) keeps the fixed cut-off.
+    MIN_WEIGHT / bound.clamp(1.0, MAX_RADIANCE_BOUND).max(1.0)
 }
 
 impl<'a> Tracer<'a> {
@@ -584,6 +592,41 @@ fn trace_wavefronts(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::{PointLight, Scene, Shape};
+
+    /// The cut-off follows the scene's brightness (a faint mirror of a bright background is
+    /// traced) up to its cap: a light of 1e30 made it 1e-33, and renders never finished.
+    #[test]
+    fn the_weight_cut_off_is_bounded_by_the_scene_and_by_its_cap() {
+        let cut_off = |intensity: f32, background: f32| {
+            let mut s = Scene::new();
+            let sphere = Shape::Sphere {
+                center: Vec3::ZERO,
+                radius: 1.0,
+            };
+            s.add_object(sphere, 0).unwrap();
+            s.add_light(PointLight {
+                position: Vec3::Z * 5.0,
+                color: Vec3::ONE,
+                intensity,
+            })
+            .unwrap();
+            s.commit().unwrap();
+            let opts = RenderOptions {
+                background: Vec3::splat(background),
+                ..RenderOptions::default()
+            };
+            min_weight(s.committed().unwrap(), &opts)
+        };
+        // The default material (colour 0.8, ambient 0.1, diffuse 0.9, specular 0.3) under a
+        // light of 0.5: 0.8 * (0.1 + 0.45) + 0.15 = 0.59, under 1.
+        assert_eq!(cut_off(0.5, 0.0), MIN_WEIGHT);
+        // A background of 4 is the brightest thing.
+        assert_eq!(cut_off(0.5, 4.0), MIN_WEIGHT / 4.0);
+        for intensity in [1e4, 1e30, f32::MAX] {
+            assert_eq!(cut_off(intensity, 0.0), MIN_WEIGHT / MAX_RADIANCE_BOUND);
+        }
+    }
 
     /// The lens deals every cell once per pixel: `permute` is a bijection of `0..l` for every
     /// grid the samples use, with seeds near 2^32 too (where `(i + p) % l` wrapped and two
