@@ -490,6 +490,10 @@ typedef struct rt2_render_options {
   uint32_t struct_size;
   /**
    * Longest chain of rays from the eye, 1..=64 (default 6; 1 = ray casting with shadows).
+   * A chain also ends where a reflected or refracted ray's weight in its pixel falls below
+   * 1/512 divided by the scene's brightest radiance (lights, materials and background, at
+   * least 1 and at most 16): such rays change no 8-bit pixel, except in scenes brighter than
+   * 16, where each may still be worth up to 1/8192 of that brightness.
    */
   uint32_t max_depth;
   /**

@@ -432,6 +432,10 @@ pub struct rt2_render_options {
     /// `sizeof(rt2_render_options)`: start from `rt2_render_options_default()`, which sets it.
     pub struct_size: u32,
     /// Longest chain of rays from the eye, 1..=64 (default 6; 1 = ray casting with shadows).
+    /// A chain also ends where a reflected or refracted ray's weight in its pixel falls below
+    /// 1/512 divided by the scene's brightest radiance (lights, materials and background, at
+    /// least 1 and at most 16): such rays change no 8-bit pixel, except in scenes brighter than
+    /// 16, where each may still be worth up to 1/8192 of that brightness.
     pub max_depth: u32,
     /// Samples per pixel, 1..=1024 (default 1).
     pub samples: u32,
