@@ -198,12 +198,7 @@ fn calls_without_memory_fail_with_out_of_memory_and_can_be_retried() {
 #[allow(clippy::explicit_write)]
 fn streamed_object_ids_without_memory_fail_with_out_of_memory() {
     unsafe {
-        let mut desc = rt2_context_desc_default();
-        desc.backend = 1;
-        let mut ctx = null_mut();
-        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
-        let mut scene = null_mut();
-        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let (ctx, scene) = support::c_cpu_scene(0);
         let at = [0.5f32, 0.5, 1.0];
         writeln!(std::io::stderr(), "streaming spheres").unwrap();
         libc::malloc_trim(0);
@@ -273,12 +268,7 @@ fn models_without_memory_fail_with_out_of_memory() {
     let dir = std::env::temp_dir().join(format!("rt2-oom-models-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     unsafe {
-        let mut desc = rt2_context_desc_default();
-        desc.backend = 1;
-        let mut ctx = null_mut();
-        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
-        let mut scene = null_mut();
-        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let (ctx, scene) = support::c_cpu_scene(0);
         for (file, bytes) in [
             ("binary.ply", binary),
             ("ascii.ply", ascii),

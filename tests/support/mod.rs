@@ -153,6 +153,22 @@ pub fn child_failure(pid: i32, meaning: &str) -> Option<String> {
     }
 }
 
+/// A CPU context of `threads` workers (0: one per core) and an empty scene, through the C API.
+///
+/// # Safety
+/// The caller destroys both handles.
+pub unsafe fn c_cpu_scene(threads: u32) -> (*mut rt2::api::rt2_context, *mut rt2::api::rt2_scene) {
+    use rt2::api::*;
+    use rt2::error::Rt2Status;
+    let mut desc = rt2_context_desc_default();
+    desc.backend = 1;
+    desc.threads = threads;
+    let (mut ctx, mut scene) = (std::ptr::null_mut(), std::ptr::null_mut());
+    assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
+    assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+    (ctx, scene)
+}
+
 /// A CPU context of `threads` workers (0: one per core) and a committed scene of a unit sphere
 /// at the origin, through the C API.
 ///
@@ -163,12 +179,7 @@ pub unsafe fn c_unit_sphere(
 ) -> (*mut rt2::api::rt2_context, *mut rt2::api::rt2_scene) {
     use rt2::api::*;
     use rt2::error::Rt2Status;
-    let mut desc = rt2_context_desc_default();
-    desc.backend = 1;
-    desc.threads = threads;
-    let (mut ctx, mut scene) = (std::ptr::null_mut(), std::ptr::null_mut());
-    assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
-    assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+    let (ctx, scene) = c_cpu_scene(threads);
     let centre = [0.0f32; 3];
     let status = rt2_scene_add_sphere(scene, centre.as_ptr(), 1.0, 0, std::ptr::null_mut());
     assert_eq!(status, Rt2Status::Ok);
