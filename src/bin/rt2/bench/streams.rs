@@ -4,7 +4,7 @@
 //! shared ray sets (diffuse included), Embree's single rays and 8-ray packets measured in the
 //! same run, the lane widths and the stream's ray stack memory.
 
-use super::{embree_rows, model_scene, ray_generator, shared, Args};
+use super::{embree_harness, embree_rows, median, model_scene, ray_generator, shared, Args};
 use crate::output::warn;
 use rt2::context::Context;
 use rt2::cpu::query::{self, QueryMode, STREAM_CHUNK, STREAM_MAX};
@@ -92,11 +92,9 @@ fn incoherent_rays(c: &Committed, n: usize) -> Vec<Ray> {
         .collect()
 }
 
-/// Fastest of `runs` timed passes (after a warm-up) tracing every batch once, for each of
-/// `configs` (a mode and a lane width), on `ctx`'s threads, in seconds. Each run times every
-/// config in turn, so that a busy spell of this shared machine slows them all rather than
-/// the one measured then (the ratios between modes are what the tables compare). The fastest
-/// rather than the median: other processes only ever add time.
+/// Median of `runs` timed passes (after a warm-up) tracing every batch once, for each of
+/// `configs` (a mode and a lane width), on `ctx`'s threads, in seconds: [`median_seconds`]
+/// with every config on the same batches.
 fn seconds(
     ctx: &Context,
     c: &Committed,
@@ -104,10 +102,34 @@ fn seconds(
     configs: &[(QueryMode, Width)],
     runs: usize,
 ) -> Vec<f64> {
-    let longest = batches.iter().map(Vec::len).max().unwrap_or(0);
+    let jobs: Vec<Job> = configs.iter().map(|&config| (batches, config)).collect();
+    median_seconds(ctx, c, &jobs, runs, || {})
+}
+
+/// A timed job: batches traced once each per pass, in one mode and lane width.
+type Job<'a> = (&'a [Vec<Ray>], (QueryMode, Width));
+
+/// Median of `runs` timed passes of each job (after a warm-up pass of each), on `ctx`'s
+/// threads, in seconds. Each run calls `each_run` (the peer's run, where one is timed beside)
+/// and then times every job in turn, so that a busy spell of this shared machine slows them
+/// all rather than the one measured then: the tables compare ratios. The median, as Embree's
+/// harness reports: with the fastest run here against Embree's median, the ratios leaned
+/// towards RT2.
+fn median_seconds(
+    ctx: &Context,
+    c: &Committed,
+    jobs: &[Job],
+    runs: usize,
+    mut each_run: impl FnMut(),
+) -> Vec<f64> {
+    let longest = jobs
+        .iter()
+        .flat_map(|j| j.0.iter().map(Vec::len))
+        .max()
+        .unwrap_or(0);
     let mut hits = vec![Hit::MISS; longest];
     let opts = TraverseOptions::default();
-    let mut pass = |(mode, width): (QueryMode, Width)| {
+    let mut pass = |&(batches, (mode, width)): &Job| {
         let t = Instant::now();
         for b in batches {
             ctx.install(|| {
@@ -124,16 +146,17 @@ fn seconds(
         }
         t.elapsed().as_secs_f64()
     };
-    for &config in configs {
-        pass(config);
+    for j in jobs {
+        pass(j);
     }
-    let mut fastest = vec![f64::INFINITY; configs.len()];
+    let mut times = vec![Vec::with_capacity(runs); jobs.len()];
     for _ in 0..runs {
-        for (f, &config) in fastest.iter_mut().zip(configs) {
-            *f = f.min(pass(config));
+        each_run();
+        for (t, j) in times.iter_mut().zip(jobs) {
+            t.push(pass(j));
         }
     }
-    fastest
+    times.into_iter().map(median).collect()
 }
 
 /// The paper's three modes at the default width ([`MODES`]), then 4-lane packets.
@@ -163,8 +186,9 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          caches. Trees: SAH with perfect splits (the library default; the \
          paper used midpoint trees). Paper: Pentium-M, 1 core; its third model is the Buddha, the \
          Snowden bust stands in for it. Ratios are measured in this run on a shared 2-core machine \
-         (±10%); each figure is the fastest of the timed runs, because other processes only add time, \
-         and each run times every mode in turn, so that a busy spell slows them all.\n\n",
+         (±10%); each figure is the median of the timed runs, as Embree's harness reports, \
+         and each run times every mode in turn (on the shared sets after one run of Embree's \
+         harness), so that a busy spell slows them all.\n\n",
         w = width.lanes(),
         hi = STREAM_MAX
     );
@@ -377,28 +401,39 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
             None
         };
         sets.extend(generated.clone());
-        let embree = embree_rows(
-            &shared().join("models").join(format!("{model}.ply")),
-            &sets,
-            a.runs,
-        );
-        for set in &sets {
-            let rays = vec![rayset::read_rays(set)?];
+        let rays: Vec<Vec<Vec<Ray>>> = sets
+            .iter()
+            .map(|set| Ok(vec![rayset::read_rays(set)?]))
+            .collect::<Result<_>>()?;
+        // Streams and packets at every width (None where the CPU lacks it), then single rays,
+        // every set in each run, after one run of Embree's harness on every set.
+        let columns: Vec<Option<(QueryMode, Width)>> = [QueryMode::Stream, QueryMode::Packet]
+            .iter()
+            .flat_map(|&m| Width::ALL.map(|w| w.supported().then_some((m, w))))
+            .chain([Some((QueryMode::Single, Width::W4))])
+            .collect();
+        let configs: Vec<(QueryMode, Width)> = columns.iter().flatten().copied().collect();
+        let jobs: Vec<Job> = rays
+            .iter()
+            .flat_map(|r| configs.iter().map(move |&config| (r.as_slice(), config)))
+            .collect();
+        let mesh = shared().join("models").join(format!("{model}.ply"));
+        let mut embree = Vec::new();
+        let peer = embree_harness().is_some();
+        let secs = median_seconds(one, c, &jobs, a.runs, || {
+            if peer {
+                embree.extend(embree_rows(&mesh, &sets, 1));
+            }
+        });
+        if !peer {
+            warn("bench: Embree's harness is not built; Embree columns are empty");
+        }
+        for ((set, rays), secs) in sets.iter().zip(&rays).zip(secs.chunks(configs.len())) {
             let stem = set
                 .file_stem()
                 .map_or(String::new(), |s| s.to_string_lossy().into());
             let mut row = format!("| {model} {stem} |");
-            // Streams and packets at every width (None where the CPU lacks it), then single
-            // rays, all timed in each run.
-            let columns: Vec<Option<(QueryMode, Width)>> = [QueryMode::Stream, QueryMode::Packet]
-                .iter()
-                .flat_map(|&m| Width::ALL.map(|w| w.supported().then_some((m, w))))
-                .chain([Some((QueryMode::Single, Width::W4))])
-                .collect();
-            let configs: Vec<(QueryMode, Width)> = columns.iter().flatten().copied().collect();
-            let mut mrays = seconds(one, c, &rays, &configs, a.runs)
-                .into_iter()
-                .map(|s| rays_of(&rays) / s / 1e6);
+            let mut mrays = secs.iter().map(|s| rays_of(rays) / s / 1e6);
             let mut best: f64 = 0.0;
             for column in &columns {
                 match column.and_then(|_| mrays.next()) {
@@ -409,15 +444,18 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
                     None => row += " — |",
                 }
             }
+            // Embree's one-thread Mrays/s of this set and mode, the median of its runs.
             let find = |mode: &str| {
-                embree
+                let runs: Vec<f64> = embree
                     .iter()
-                    .find(|r| {
+                    .filter(|r| {
                         r.get(2).is_some_and(|s| *s == stem)
                             && r.get(3).is_some_and(|s| s == mode)
                             && r.get(4).is_some_and(|s| s == "1")
                     })
-                    .and_then(|r| r.get(7).and_then(|x| x.parse::<f64>().ok()))
+                    .filter_map(|r| r.get(7).and_then(|x| x.parse::<f64>().ok()))
+                    .collect();
+                (!runs.is_empty()).then(|| median(runs))
             };
             let (e1, e8) = (find("intersect1"), find("intersect8(coherent)"));
             let cell = |x: Option<f64>| x.map_or("—".into(), |x| format!("{x:.2}"));
