@@ -6,6 +6,21 @@ use rt2::api::*;
 use rt2::error::Rt2Status;
 use std::ptr::{null, null_mut};
 
+/// The three query modes of the C API.
+const MODES: [Rt2QueryMode; 3] = [
+    Rt2QueryMode::Single,
+    Rt2QueryMode::Packet,
+    Rt2QueryMode::Stream,
+];
+
+/// Query options of the standard traversal in `mode`.
+fn standard_in(mode: Rt2QueryMode) -> rt2_query_options {
+    let mut opt = rt2_query_options_default();
+    opt.traversal = Rt2Traversal::Standard as u32;
+    opt.mode = mode as u32;
+    opt
+}
+
 mod support;
 
 /// A context and a committed scene of the spheres `(centre, radius)`, with their object ids.
@@ -299,11 +314,7 @@ fn small_calls_answer_every_ray() {
                 tmax: f32::INFINITY,
             })
             .collect();
-        for mode in [
-            Rt2QueryMode::Single,
-            Rt2QueryMode::Packet,
-            Rt2QueryMode::Stream,
-        ] {
+        for mode in MODES {
             let mut opt = rt2_query_options_default();
             opt.mode = mode as u32;
             for size in 1..=20 {
@@ -420,14 +431,8 @@ fn query_statistics_count_the_nodes_leaves_and_tests_of_each_ray() {
         b.leaf_size = 1;
         assert_eq!(rt2_scene_set_build_options(scene, &b), Rt2Status::Ok);
         assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
-        for mode in [
-            Rt2QueryMode::Single,
-            Rt2QueryMode::Packet,
-            Rt2QueryMode::Stream,
-        ] {
-            let mut opt = rt2_query_options_default();
-            opt.traversal = Rt2Traversal::Standard as u32;
-            opt.mode = mode as u32;
+        for mode in MODES {
+            let opt = standard_in(mode);
             let miss = rt2_hit {
                 t: 0.0,
                 u: 0.0,
@@ -527,14 +532,8 @@ unsafe fn any_hit_counts(
         .collect();
     let missing = rays.iter().filter(|r| r.org[0] == past[0]).count() as u64;
     let want = rays.len() as u64 - missing + prims * missing;
-    for mode in [
-        Rt2QueryMode::Single,
-        Rt2QueryMode::Packet,
-        Rt2QueryMode::Stream,
-    ] {
-        let mut opt = rt2_query_options_default();
-        opt.traversal = Rt2Traversal::Standard as u32;
-        opt.mode = mode as u32;
+    for mode in MODES {
+        let opt = standard_in(mode);
         let mut occ = vec![9u8; rays.len()];
         let mut stats = rt2_query_stats {
             nodes_visited: 99,
@@ -733,11 +732,7 @@ fn excluded_primitives_are_ignored_in_every_mode() {
             })
             .collect();
         for intersector in [Rt2Intersector::MollerTrumbore, Rt2Intersector::Watertight] {
-            for mode in [
-                Rt2QueryMode::Single,
-                Rt2QueryMode::Packet,
-                Rt2QueryMode::Stream,
-            ] {
+            for mode in MODES {
                 let mut opt = rt2_query_options_default();
                 (opt.mode, opt.intersector, opt.exclude) =
                     (mode as u32, intersector as u32, exclude.as_ptr());
