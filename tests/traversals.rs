@@ -1285,3 +1285,124 @@ fn a_prism_seen_from_afar_hits_its_flat_side() {
         default_options,
     );
 }
+
+/// Shadow rays (a finite `tmax`) in packets and streams at every lane width, in bundles of
+/// nearly parallel rays: each ray's window ends at half its first hit, at it (`[tmin, tmax)`
+/// leaves it out), just past it or well past it, on the mixed scene (leaves of triangles
+/// beside spheres, ellipsoids and boxes), with and without half the rays excluding that hit,
+/// with both intersectors.
+/// Each batch answer must be the single-ray standard traversal's `occluded` of the same ray,
+/// which the leaf tests that stop once every ray is found (streams) or report which lanes
+/// occlude (triangle blocks) must not change; the closest hits too, bit for bit.
+#[test]
+fn shadow_rays_in_batches_answer_as_single_rays() {
+    let mut rng = Rng(31);
+    let prims = mixed(&mut rng);
+    let base = random_rays(&mut rng, 600);
+    let tree = &trees(&prims)[0].1;
+    let mut stats = TraversalStats::default();
+    for intersector in Intersector::ALL {
+        let opts = TraverseOptions {
+            intersector,
+            ..TraverseOptions::default()
+        };
+        let first: Vec<Hit> = base
+            .iter()
+            .map(|r| intersect(tree, &prims, r, Traversal::Standard, &opts, &mut stats))
+            .collect();
+        // Bundles of 40 nearly parallel rays, so that streams meet leaves with more rays than
+        // lanes (their N-rays-per-primitive leaf test) and packets full ones.
+        let mut rays = Vec::new();
+        let mut skip = Vec::new();
+        for (r, h) in base.iter().zip(&first).filter(|(_, h)| h.is_hit()).take(60) {
+            for k in 0..40 {
+                let jitter = Vec3::new(
+                    (k % 3) as f32 - 1.0,
+                    (k / 3 % 3) as f32 - 1.0,
+                    (k / 9 % 3) as f32 - 1.0,
+                ) * 2e-4;
+                let tmax = [h.t * 0.5, h.t, h.t.next_up(), h.t * 2.0][k % 4];
+                rays.push(Ray::new(r.org + jitter, r.dir, 0.0, tmax));
+                skip.push(if k % 8 < 4 { h.prim } else { INVALID });
+            }
+        }
+        assert!(rays.len() > 1000, "{} shadow rays", rays.len());
+        for exclude in [Excluded::All(INVALID), Excluded::Each(&skip)] {
+            // Ray i's single-ray options: the intersector and the primitive it ignores.
+            let single = |i: usize| TraverseOptions {
+                intersector,
+                exclude: exclude.of(i),
+                ..TraverseOptions::default()
+            };
+            let (want, want_hits): (Vec<bool>, Vec<Hit>) = (0..rays.len())
+                .map(|i| {
+                    let (ray, opts) = (&rays[i], &single(i));
+                    let std = Traversal::Standard;
+                    (
+                        occluded(tree, &prims, ray, std, opts, &mut stats),
+                        intersect(tree, &prims, ray, std, opts, &mut stats),
+                    )
+                })
+                .unzip();
+            let blocked = want.iter().filter(|&&b| b).count();
+            assert!(blocked > rays.len() / 4 && blocked < rays.len() * 3 / 4);
+            let tests = RayTests {
+                intersector,
+                exclude,
+            };
+            for width in Width::ALL.into_iter().filter(|w| w.supported()) {
+                // Every batch size up to a few widths, so that lanes past the batch's end and
+                // leaves where only some rays are found are met.
+                for size in [1, 2, 3, 5, 7, 8, 9, 15, 16, 17, 33, rays.len()] {
+                    for mode in ["packet", "stream"] {
+                        let mut got = vec![false; rays.len()];
+                        let mut hits = vec![Hit::MISS; rays.len()];
+                        for (k, chunk) in rays.chunks(size).enumerate() {
+                            let at = k * size;
+                            let out = &mut got[at..at + chunk.len()];
+                            let hit_out = &mut hits[at..at + chunk.len()];
+                            let tests = match exclude {
+                                Excluded::All(_) => tests,
+                                Excluded::Each(e) => RayTests {
+                                    exclude: Excluded::Each(&e[at..at + chunk.len()]),
+                                    ..tests
+                                },
+                            };
+                            match mode {
+                                "packet" => {
+                                    packet::occluded(tree, &prims, chunk, tests, out, width);
+                                    packet::intersect(tree, &prims, chunk, tests, hit_out, width);
+                                }
+                                _ => {
+                                    stream::occluded(tree, &prims, chunk, tests, out, width);
+                                    stream::intersect(tree, &prims, chunk, tests, hit_out, width);
+                                }
+                            }
+                        }
+                        for i in 0..rays.len() {
+                            let (h, w) = (hits[i], want_hits[i]);
+                            assert!(
+                                h.prim == w.prim
+                                    && h.t.to_bits() == w.t.to_bits()
+                                    && h.u.to_bits() == w.u.to_bits()
+                                    && h.v.to_bits() == w.v.to_bits(),
+                                "{mode} x{} in batches of {size}, {}: ray {i} hit {h:?}, want {w:?}",
+                                width.lanes(),
+                                intersector.name(),
+                            );
+                            assert_eq!(
+                                got[i],
+                                want[i],
+                                "{mode} x{} in batches of {size}, {}, {}: ray {i} {:?}",
+                                width.lanes(),
+                                intersector.name(),
+                                matches!(exclude, Excluded::Each(_)),
+                                rays[i]
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
