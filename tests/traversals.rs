@@ -304,10 +304,7 @@ fn check_rays(
                 for (k, how) in Traversal::ALL.into_iter().enumerate() {
                     let hit = intersect(tree, prims, ray, how, &opts, &mut stats[k]);
                     assert!(
-                        hit.prim == std.prim
-                            && hit.t.to_bits() == std.t.to_bits()
-                            && hit.u.to_bits() == std.u.to_bits()
-                            && hit.v.to_bits() == std.v.to_bits(),
+                        same_bits(&hit, &std),
                         "{}: {} gives {hit:?}, standard {std:?}",
                         ctx(),
                         how.name()
@@ -425,15 +422,7 @@ fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ra
             let mut standard_stats = TraversalStats::default();
             let std: Vec<Hit> = (0..rays.len())
                 .map(|i| {
-                    let opts = TraverseOptions {
-                        intersector,
-                        // Spelled out: the reference must not share `Excluded::of`.
-                        exclude: match exclude {
-                            Excluded::All(p) => p,
-                            Excluded::Each(e) => e[i],
-                        },
-                        ..TraverseOptions::default()
-                    };
+                    let opts = reference_options(intersector, exclude, i);
                     single(&opts, &rays[i], &mut standard_stats)
                 })
                 .collect();
@@ -447,18 +436,7 @@ fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ra
             }
             for width in Width::ALL.into_iter().filter(|w| w.supported()) {
                 for mode in ["packet", "stream"] {
-                    let mut hits = vec![Hit::MISS; rays.len()];
-                    let mut occ = vec![false; rays.len()];
-                    let stats = match mode {
-                        "packet" => {
-                            packet::occluded(tree, prims, rays, tests, &mut occ, width);
-                            packet::intersect(tree, prims, rays, tests, &mut hits, width)
-                        }
-                        _ => {
-                            stream::occluded(tree, prims, rays, tests, &mut occ, width);
-                            stream::intersect(tree, prims, rays, tests, &mut hits, width).0
-                        }
-                    };
+                    let (occ, hits, stats) = batch(mode, (tree, prims), rays, tests, width);
                     let how = format!(
                         "{what}, {mode} x{}, {}{}",
                         width.lanes(),
@@ -471,10 +449,7 @@ fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ra
                     );
                     for (i, (h, s)) in hits.iter().zip(&std).enumerate() {
                         assert!(
-                            h.prim == s.prim
-                                && h.t.to_bits() == s.t.to_bits()
-                                && h.u.to_bits() == s.u.to_bits()
-                                && h.v.to_bits() == s.v.to_bits(),
+                            same_bits(h, s),
                             "{how}, ray {i}: {:?} gives {h:?}, standard {s:?}",
                             rays[i]
                         );
@@ -489,6 +464,51 @@ fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ra
             }
         }
     }
+}
+
+/// The single-ray options of ray `i` of a batch under `exclude`: the reference of the batch
+/// tests, so its excluded primitive is spelled out (it must not share `Excluded::of`).
+fn reference_options(intersector: Intersector, exclude: Excluded, i: usize) -> TraverseOptions {
+    TraverseOptions {
+        intersector,
+        exclude: match exclude {
+            Excluded::All(p) => p,
+            Excluded::Each(e) => e[i],
+        },
+        ..TraverseOptions::default()
+    }
+}
+
+/// Whether two hits are the same bit for bit (primitive, `t`, `u`, `v`).
+fn same_bits(a: &Hit, b: &Hit) -> bool {
+    a.prim == b.prim
+        && a.t.to_bits() == b.t.to_bits()
+        && a.u.to_bits() == b.u.to_bits()
+        && a.v.to_bits() == b.v.to_bits()
+}
+
+/// Occlusion and closest hits of `rays` as one batch in `mode` ("packet" or "stream"), and
+/// the closest-hit query's statistics.
+fn batch(
+    mode: &str,
+    (tree, prims): (&KdTree, &PrimitiveSet),
+    rays: &[Ray],
+    tests: RayTests,
+    width: Width,
+) -> (Vec<bool>, Vec<Hit>, TraversalStats) {
+    let mut hits = vec![Hit::MISS; rays.len()];
+    let mut occ = vec![false; rays.len()];
+    let stats = match mode {
+        "packet" => {
+            packet::occluded(tree, prims, rays, tests, &mut occ, width);
+            packet::intersect(tree, prims, rays, tests, &mut hits, width)
+        }
+        _ => {
+            stream::occluded(tree, prims, rays, tests, &mut occ, width);
+            stream::intersect(tree, prims, rays, tests, &mut hits, width).0
+        }
+    };
+    (occ, hits, stats)
 }
 
 fn default_options(_: &KdTree, _: &Ray) -> TraverseOptions {
@@ -1328,19 +1348,13 @@ fn shadow_rays_in_batches_answer_as_single_rays() {
         }
         assert!(rays.len() > 1000, "{} shadow rays", rays.len());
         for exclude in [Excluded::All(INVALID), Excluded::Each(&skip)] {
-            // Ray i's single-ray options: the intersector and the primitive it ignores.
-            let single = |i: usize| TraverseOptions {
-                intersector,
-                exclude: exclude.of(i),
-                ..TraverseOptions::default()
-            };
             let (want, want_hits): (Vec<bool>, Vec<Hit>) = (0..rays.len())
                 .map(|i| {
-                    let (ray, opts) = (&rays[i], &single(i));
-                    let std = Traversal::Standard;
+                    let opts = reference_options(intersector, exclude, i);
+                    let (ray, standard) = (&rays[i], Traversal::Standard);
                     (
-                        occluded(tree, &prims, ray, std, opts, &mut stats),
-                        intersect(tree, &prims, ray, std, opts, &mut stats),
+                        occluded(tree, &prims, ray, standard, &opts, &mut stats),
+                        intersect(tree, &prims, ray, standard, &opts, &mut stats),
                     )
                 })
                 .unzip();
@@ -1355,37 +1369,23 @@ fn shadow_rays_in_batches_answer_as_single_rays() {
                 // leaves where only some rays are found are met.
                 for size in [1, 2, 3, 5, 7, 8, 9, 15, 16, 17, 33, rays.len()] {
                     for mode in ["packet", "stream"] {
-                        let mut got = vec![false; rays.len()];
-                        let mut hits = vec![Hit::MISS; rays.len()];
+                        let (mut got, mut hits) = (Vec::new(), Vec::new());
                         for (k, chunk) in rays.chunks(size).enumerate() {
-                            let at = k * size;
-                            let out = &mut got[at..at + chunk.len()];
-                            let hit_out = &mut hits[at..at + chunk.len()];
                             let tests = match exclude {
                                 Excluded::All(_) => tests,
                                 Excluded::Each(e) => RayTests {
-                                    exclude: Excluded::Each(&e[at..at + chunk.len()]),
+                                    exclude: Excluded::Each(&e[k * size..][..chunk.len()]),
                                     ..tests
                                 },
                             };
-                            match mode {
-                                "packet" => {
-                                    packet::occluded(tree, &prims, chunk, tests, out, width);
-                                    packet::intersect(tree, &prims, chunk, tests, hit_out, width);
-                                }
-                                _ => {
-                                    stream::occluded(tree, &prims, chunk, tests, out, width);
-                                    stream::intersect(tree, &prims, chunk, tests, hit_out, width);
-                                }
-                            }
+                            let (occ, h, _) = batch(mode, (tree, &prims), chunk, tests, width);
+                            got.extend(occ);
+                            hits.extend(h);
                         }
                         for i in 0..rays.len() {
                             let (h, w) = (hits[i], want_hits[i]);
                             assert!(
-                                h.prim == w.prim
-                                    && h.t.to_bits() == w.t.to_bits()
-                                    && h.u.to_bits() == w.u.to_bits()
-                                    && h.v.to_bits() == w.v.to_bits(),
+                                same_bits(&h, &w),
                                 "{mode} x{} in batches of {size}, {}: ray {i} hit {h:?}, want {w:?}",
                                 width.lanes(),
                                 intersector.name(),
