@@ -67,7 +67,12 @@ pub(super) fn build(a: &Args) -> Result<String> {
             // Embree's multi-threaded medians by build name, for the ratios: the harness builds
             // with one thread and with every hardware thread.
             let mut many = std::collections::HashMap::new();
-            for r in embree_rows(&shared().join("models").join(model), &[shadow], a.runs) {
+            for r in embree_rows(
+                &shared().join("models").join(model),
+                &[shadow],
+                a.runs,
+                "1,2",
+            ) {
                 if r.get(2).is_some_and(|s| s == "BUILD") {
                     let threads: u32 = r[4].parse().unwrap_or(1);
                     if threads > 1 {

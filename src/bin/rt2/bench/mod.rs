@@ -248,8 +248,9 @@ fn ray_generator() -> Option<PathBuf> {
         .filter(|p| p.exists())
 }
 
-/// Runs Embree's harness and returns its TSV rows (split into fields).
-fn embree_rows(mesh: &Path, rays: &[PathBuf], runs: usize) -> Vec<Vec<String>> {
+/// Runs Embree's harness with `runs` runs on each of `threads` (its `--threads` list, e.g.
+/// "1,2") and returns its TSV rows (split into fields).
+fn embree_rows(mesh: &Path, rays: &[PathBuf], runs: usize, threads: &str) -> Vec<Vec<String>> {
     let Some(exe) = embree_harness() else {
         warn("bench: Embree's harness is not built; Embree columns are empty");
         return Vec::new();
@@ -259,7 +260,7 @@ fn embree_rows(mesh: &Path, rays: &[PathBuf], runs: usize) -> Vec<Vec<String>> {
     let status = Command::new(exe)
         .arg(mesh)
         .args(rays)
-        .args(["--runs", &runs.to_string(), "--threads", "1,2", "--tsv"])
+        .args(["--runs", &runs.to_string(), "--threads", threads, "--tsv"])
         .arg(&tsv)
         .stdout(std::process::Stdio::null())
         .status();

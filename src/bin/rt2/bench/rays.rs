@@ -39,6 +39,7 @@ pub(super) fn rays(a: &Args) -> Result<String> {
             &shared().join("models").join(format!("{model}.ply")),
             &sets,
             a.runs,
+            "1,2",
         );
         let c_scene = CScene::load(&shared().join("models").join(format!("{model}.ply")))?;
         for set in &sets {

@@ -422,7 +422,7 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
         let peer = embree_harness().is_some();
         let secs = median_seconds(one, c, &jobs, a.runs, || {
             if peer {
-                embree.extend(embree_rows(&mesh, &sets, 1));
+                embree.extend(embree_rows(&mesh, &sets, 1, "1"));
             }
         });
         if !peer {
