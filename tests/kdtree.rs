@@ -16,27 +16,7 @@ fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
 
 mod support;
 
-/// SplitMix64: a small deterministic generator, so every run sees the same scenes.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`.
-    fn f(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    fn vec(&mut self) -> Vec3 {
-        Vec3::new(self.f(), self.f(), self.f())
-    }
-}
+use support::rng::Rng;
 
 /// `n` triangles of size up to `size` around centres uniform in the unit cube, mapped by
 /// `offset + scale * p`.
@@ -44,8 +24,8 @@ fn soup(n: usize, seed: u64, size: f32, scale: f32, offset: Vec3) -> PrimitiveSe
     let mut rng = Rng(seed);
     let mut set = PrimitiveSet::default();
     for _ in 0..n {
-        let c = rng.vec();
-        let mut v = || offset + scale * (c + size * (rng.vec() - 0.5));
+        let c = rng.vec(0.0, 1.0);
+        let mut v = || offset + scale * (c + size * (rng.vec(0.0, 1.0) - 0.5));
         set.triangles.push(Triangle::from_vertices(v(), v(), v()));
     }
     set
@@ -54,11 +34,11 @@ fn soup(n: usize, seed: u64, size: f32, scale: f32, offset: Vec3) -> PrimitiveSe
 /// Triangles in a few tight clusters with empty space between them.
 fn clustered_soup(n: usize, seed: u64) -> PrimitiveSet {
     let mut rng = Rng(seed);
-    let centres: Vec<Vec3> = (0..8).map(|_| rng.vec()).collect();
+    let centres: Vec<Vec3> = (0..8).map(|_| rng.vec(0.0, 1.0)).collect();
     let mut set = PrimitiveSet::default();
     for i in 0..n {
-        let c = centres[i % centres.len()] + 0.05 * (rng.vec() - 0.5);
-        let mut v = || c + 0.01 * (rng.vec() - 0.5);
+        let c = centres[i % centres.len()] + 0.05 * (rng.vec(0.0, 1.0) - 0.5);
+        let mut v = || c + 0.01 * (rng.vec(0.0, 1.0) - 0.5);
         set.triangles.push(Triangle::from_vertices(v(), v(), v()));
     }
     set
@@ -70,17 +50,22 @@ fn mixed(n: usize, seed: u64) -> PrimitiveSet {
     let mut rng = Rng(seed ^ 0xABCD);
     for _ in 0..n / 2 {
         set.spheres.push(Sphere {
-            center: rng.vec().to_array(),
-            radius: 0.05 * rng.f(),
+            center: rng.vec(0.0, 1.0).to_array(),
+            radius: 0.05 * rng.unit(),
         });
     }
     for _ in 0..n / 4 {
-        let m = Mat3::from_cols(0.05 * rng.vec(), 0.05 * rng.vec(), 0.05 * rng.vec());
-        set.ellipsoids.extend(Ellipsoid::new(rng.vec(), m));
+        let m = Mat3::from_cols(
+            0.05 * rng.vec(0.0, 1.0),
+            0.05 * rng.vec(0.0, 1.0),
+            0.05 * rng.vec(0.0, 1.0),
+        );
+        set.ellipsoids.extend(Ellipsoid::new(rng.vec(0.0, 1.0), m));
     }
     for _ in 0..n / 4 {
-        let min = rng.vec();
-        set.boxes.push(Aabb::new(min, min + 0.08 * rng.vec()));
+        let min = rng.vec(0.0, 1.0);
+        set.boxes
+            .push(Aabb::new(min, min + 0.08 * rng.vec(0.0, 1.0)));
     }
     set
 }
@@ -440,23 +425,23 @@ fn degenerate_scenes_give_valid_trees() {
     let mut flat = PrimitiveSet::default();
     for _ in 0..300 {
         // Small triangles: large overlapping ones would drive the midpoint tree to 2^20 leaves.
-        let c = rng.vec();
-        let mut v = || (c + 0.2 * rng.vec()) * Vec3::new(1.0, 1.0, 0.0) + Vec3::Z * 0.5;
+        let c = rng.vec(0.0, 1.0);
+        let mut v = || (c + 0.2 * rng.vec(0.0, 1.0)) * Vec3::new(1.0, 1.0, 0.0) + Vec3::Z * 0.5;
         flat.triangles.push(Triangle::from_vertices(v(), v(), v()));
     }
     let mut zero_area = PrimitiveSet::default();
     for _ in 0..300 {
-        let (a, b) = (rng.vec(), rng.vec());
+        let (a, b) = (rng.vec(0.0, 1.0), rng.vec(0.0, 1.0));
         zero_area
             .triangles
-            .push(Triangle::from_vertices(a, b, a.lerp(b, rng.f())));
+            .push(Triangle::from_vertices(a, b, a.lerp(b, rng.unit())));
     }
     // Triangles lying in the planes the midpoint builder picks (x = 0.5, 0.25, 0.75) and boxes
     // spanning the whole scene make planar-in-split and boundary cases.
     let mut in_planes = soup(200, 5, 0.2, 1.0, Vec3::ZERO);
     for x in [0.5f32, 0.25, 0.75] {
         for _ in 0..40 {
-            let mut v = || Vec3::new(x, rng.f(), rng.f());
+            let mut v = || Vec3::new(x, rng.unit(), rng.unit());
             in_planes
                 .triangles
                 .push(Triangle::from_vertices(v(), v(), v()));
@@ -569,7 +554,7 @@ fn coincident_large_triangles_among_small_ones_keep_to_the_reference_budget() {
         ));
     }
     for _ in 0..1000 {
-        let c = Vec3::new(2.0 * rng.f() - 1.0, 2.0 * rng.f() - 1.0, 0.0);
+        let c = Vec3::new(2.0 * rng.unit() - 1.0, 2.0 * rng.unit() - 1.0, 0.0);
         set.triangles.push(Triangle::from_vertices(
             c,
             c + Vec3::new(1e-4, 0.0, 0.0),
@@ -887,7 +872,7 @@ fn locate_leaf_finds_the_voxel_of_a_point() {
         let tree = build(&set, &opts);
         let voxels = node_voxels(&tree);
         for _ in 0..2000 {
-            let p = tree.bounds.min + rng.vec() * tree.bounds.extent();
+            let p = tree.bounds.min + rng.vec(0.0, 1.0) * tree.bounds.extent();
             let node = tree.locate_leaf(p) as usize;
             assert!(tree.nodes[node].is_leaf());
             assert!(voxels[node].unwrap().0.contains_point(p));

@@ -14,27 +14,8 @@ use rt2::precision::{offset_ray_origin, Intersector};
 use rt2::scene::tessellate::{self, Mesh};
 use rt2::scene::{Committed, Scene, Shape};
 
-/// SplitMix64: deterministic, no dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn unit(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    fn ball(&mut self) -> Vec3 {
-        loop {
-            let v = Vec3::new(self.unit(), self.unit(), self.unit()) * 2.0 - 1.0;
-            if v.length_squared() <= 1.0 && v != Vec3::ZERO {
-                return v;
-            }
-        }
-    }
-}
+mod support;
+use support::rng::Rng;
 
 /// A closed mesh and points strictly inside it.
 struct Case {

@@ -22,40 +22,8 @@ fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
 }
 use rt2::precision::Intersector;
 
-/// SplitMix64: deterministic, no dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[lo, hi)`.
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * ((self.next() >> 40) as f32 / (1u64 << 24) as f32)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-
-    fn vec(&mut self, lo: f32, hi: f32) -> Vec3 {
-        Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
-    }
-
-    fn dir(&mut self) -> Vec3 {
-        loop {
-            let v = self.vec(-1.0, 1.0);
-            if (1e-4..=1.0).contains(&v.length_squared()) {
-                return v.normalize();
-            }
-        }
-    }
-}
+mod support;
+use support::rng::Rng;
 
 fn soup(rng: &mut Rng, n: usize, size: f32) -> PrimitiveSet {
     let mut prims = PrimitiveSet::default();

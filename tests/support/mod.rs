@@ -3,12 +3,13 @@
 //! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`; the
 //! fork tests' wait for a child; the C API tests' smallest scene; rays around a target and the
 //! sequence behind them; whether a GPU context can be had; renders of shading extremes
-//! (`shading_cases`); spheres and ellipsoids far from the origin with their shading worked
+//! (`shading_cases`); the tests' random numbers (`rng`); spheres and ellipsoids far from the origin with their shading worked
 //! out in f64.
 
 #![allow(dead_code)]
 
 pub mod any_hit_stats;
+pub mod rng;
 pub mod shading_cases;
 
 use std::path::{Path, PathBuf};
