@@ -8,6 +8,8 @@
 //! order on the GPU, both render paths), also with mirrored meshes and while another thread
 //! queries. `rt2_scene_remove` likewise: after removals (and adds), a scene traces and renders
 //! as one built without the removed objects; a removed id is refused everywhere, saying so.
+//! Random sequences of adds, removals, toggles, transforms and refused calls trace and render
+//! after every commit as a scene built from scratch with what is left.
 
 use rt2::api::*;
 use rt2::error::Rt2Status;
@@ -649,24 +651,7 @@ fn every_subset_on_the_gpu() {
     if !support::c_gpu_or_skip() {
         return;
     }
-    let mut opts = Vec::new();
-    for traversal in 0..=7 {
-        let mut o = rt2_query_options_default();
-        o.traversal = traversal;
-        opts.push(o);
-    }
-    subsets(
-        Rt2Backend::Gpu,
-        &opts,
-        &[
-            (0, 0, 0, 1),
-            (0, 2, 1, 1),
-            (0, 0, 0, 2),
-            (0, 2, 1, 2),
-            (0, 1, 0, 2),
-        ],
-        3,
-    );
+    subsets(Rt2Backend::Gpu, &gpu_options(), &GPU_RENDERS, 3);
 }
 
 /// A committed scene of `objs` under one light, `objs[k]` of a translucent red material when
@@ -1053,26 +1038,116 @@ fn mirrored_meshes_with_every_subset_disabled() {
     }
 }
 
+/// An object a scene holds, as a scene built from scratch must repeat it: its id there, the
+/// object, whether it is enabled and its transform.
+#[derive(Clone)]
+struct Held {
+    id: u32,
+    obj: Obj,
+    enabled: bool,
+    transform: Option<[f32; 12]>,
+}
+
+/// A mirror: `x` flipped, then moved by 0.1 (hits on a mirrored mesh report `u`, `v` swapped
+/// back by object id).
+const MIRROR: [f32; 12] = [-1.0, 0.0, 0.0, 0.1, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+
+/// A committed [`lit_scene`] of the objects `held`, in their states, built from scratch.
+fn rebuilt(ctx: *mut rt2_context, held: &[Held]) -> *mut rt2_scene {
+    let (objs, ids): (Vec<Obj>, Vec<u32>) = held.iter().map(|h| (h.obj.clone(), h.id)).unzip();
+    let scene = lit_scene(ctx, &objs, &ids);
+    unsafe {
+        for (k, h) in held.iter().enumerate() {
+            if !h.enabled {
+                ok(rt2_scene_set_enabled(scene, k as u32, 0), "disable");
+            }
+            if let Some(m) = &h.transform {
+                ok(rt2_scene_set_transform(scene, k as u32, m.as_ptr()), "move");
+            }
+        }
+        ok(rt2_scene_commit(scene), "commit");
+    }
+    scene
+}
+
+/// `scene` (holding `held`) against [`rebuilt`]'s scene of `held`: the hits (ids mapped) and
+/// occlusion under every option in `opts`, also excluding the first hits, the renders in
+/// `renders` and the object count are the same.
+fn same_as_rebuilt(
+    ctx: *mut rt2_context,
+    scene: *mut rt2_scene,
+    held: &[Held],
+    opts: &[rt2_query_options],
+    renders: &[(u32, u32, u32, u32)],
+    step: &str,
+) {
+    let rays = rays();
+    let live: Vec<u32> = held.iter().map(|h| h.id).collect();
+    let reference = rebuilt(ctx, held);
+    for opt in opts {
+        let what = format!("{step}, {}", name(opt));
+        let (hits, occ) = trace(ctx, scene, &rays, opt);
+        let (want, want_occ) = trace(ctx, reference, &rays, opt);
+        let want = renamed(want, &live);
+        same_trace(&(hits.clone(), occ), &(want.clone(), want_occ), &what);
+        let (mut o2, mut o3) = (*opt, *opt);
+        o2.exclude = hits.as_ptr();
+        let mut want_ex = want.clone();
+        for h in &mut want_ex {
+            if h.object != RT2_INVALID_ID {
+                h.object = live.iter().position(|&o| o == h.object).unwrap() as u32;
+            }
+        }
+        o3.exclude = want_ex.as_ptr();
+        same(
+            &trace(ctx, scene, &rays, &o2).0,
+            &renamed(trace(ctx, reference, &rays, &o3).0, &live),
+            &format!("{what}, excluding the first hits"),
+        );
+    }
+    for &(schedule, offset_mode, transparency, gpu_path) in renders {
+        let mut opt = rt2_render_options_default();
+        (opt.schedule, opt.offset_mode) = (schedule, offset_mode);
+        (opt.transparency, opt.gpu_path) = (transparency, gpu_path);
+        same(
+            &render(ctx, scene, &opt),
+            &render(ctx, reference, &opt),
+            &format!("{step}, render {schedule} {offset_mode} {transparency} {gpu_path}"),
+        );
+    }
+    assert_eq!(stats(scene).object_count, live.len() as u32, "{step}");
+    assert_eq!(stats(reference).object_count, live.len() as u32, "{step}");
+    unsafe { rt2_scene_destroy(reference) };
+}
+
 /// Objects removed from one scene in steps, with objects added in between: the sphere, the
 /// box (disabled first) and the second mesh; then, after two adds (the second a mirrored
-/// mesh: hits report its `u`, `v` swapped back by object id), the first mesh (whose removal
-/// renumbers the exact corners of the watertight test) and a new object; then one more added
-/// and the mirrored mesh removed in the same commit. After each commit, the hits (ids mapped)
-/// and occlusion under every option in `opts`, also excluding the first hits, and the renders
-/// in `renders` equal those of a scene built from the objects left alone; the objects removed
-/// were hit before, adds get new ids, and `object_count` counts the objects left.
+/// mesh), the first mesh (whose removal renumbers the exact corners of the watertight test)
+/// and a new object; then one more added and the mirrored mesh removed in the same commit.
+/// After each commit the scene is [`same_as_rebuilt`] under `opts` and `renders`; the objects
+/// removed were hit before, and adds get new ids.
 fn removals(backend: Rt2Backend, opts: &[rt2_query_options], renders: &[(u32, u32, u32, u32)]) {
     let ctx = context(backend);
-    // Every object ever added, by id, and the ids the scene holds.
-    let mut objs = objects();
-    let mut live: Vec<u32> = (0..objs.len() as u32).collect();
-    let scene = lit_scene(ctx, &objs, &live);
+    let mut held: Vec<Held> = (0..)
+        .zip(objects())
+        .map(|(id, obj)| Held {
+            id,
+            obj,
+            enabled: true,
+            transform: None,
+        })
+        .collect();
+    let scene = rebuilt(ctx, &held);
+    let mut next_id = held.len() as u32;
     let rays = rays();
     // Object 3 (the box) stays disabled, object 7 (added) is mirrored.
     let (disabled, mirrored) = (3, 7);
-    let mirror: [f32; 12] = [-1.0, 0.0, 0.0, 0.1, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    held[disabled].enabled = false;
     unsafe {
-        ok(rt2_scene_set_enabled(scene, disabled, 0), "disable the box");
+        ok(
+            rt2_scene_set_enabled(scene, disabled as u32, 0),
+            "disable the box",
+        );
         ok(rt2_scene_commit(scene), "commit");
     }
     let added = [
@@ -1090,79 +1165,140 @@ fn removals(backend: Rt2Backend, opts: &[rt2_query_options], renders: &[(u32, u3
         let hit_before = trace(ctx, scene, &rays, &opts[0]).0;
         unsafe {
             for o in new {
-                let id = add(scene, o, material(objs.len() as u32));
-                assert_eq!(id, objs.len() as u32, "not a new id");
-                objs.push(o.clone());
-                live.push(id);
+                let id = add(scene, o, material(next_id));
+                assert_eq!(id, next_id, "not a new id");
+                next_id += 1;
+                let mut h = Held {
+                    id,
+                    obj: o.clone(),
+                    enabled: true,
+                    transform: None,
+                };
                 if id == mirrored {
                     ok(
-                        rt2_scene_set_transform(scene, id, mirror.as_ptr()),
+                        rt2_scene_set_transform(scene, id, MIRROR.as_ptr()),
                         "mirror",
                     );
+                    h.transform = Some(MIRROR);
                 }
+                held.push(h);
             }
             for &o in gone {
                 ok(rt2_scene_remove(scene, o), "remove");
-                live.retain(|&l| l != o);
+                held.retain(|h| h.id != o);
             }
             ok(rt2_scene_commit(scene), "commit");
         }
+        let live: Vec<u32> = held.iter().map(|h| h.id).collect();
         let step = format!("removed {gone:?} (left {live:?})");
-        for &o in gone.iter().filter(|&&o| o != disabled) {
+        for &o in gone.iter().filter(|&&o| o != disabled as u32) {
             assert!(on(&hit_before, &[o]) > 20, "{step}: few rays met {o}");
         }
-        let kept: Vec<Obj> = live.iter().map(|&o| objs[o as usize].clone()).collect();
-        // The reference's objects in the same states as the scene's.
-        let reference = lit_scene(ctx, &kept, &live);
-        unsafe {
-            if let Some(k) = live.iter().position(|&o| o == disabled) {
-                ok(rt2_scene_set_enabled(reference, k as u32, 0), "disable");
-            }
-            if let Some(k) = live.iter().position(|&o| o == mirrored) {
-                let st = rt2_scene_set_transform(reference, k as u32, mirror.as_ptr());
-                ok(st, "mirror");
-            }
-            ok(rt2_scene_commit(reference), "commit");
-        }
-        for opt in opts {
-            let what = format!("{step}, {}", name(opt));
-            let (hits, occ) = trace(ctx, scene, &rays, opt);
-            let (want, want_occ) = trace(ctx, reference, &rays, opt);
-            let want = renamed(want, &live);
-            same_trace(&(hits.clone(), occ), &(want.clone(), want_occ), &what);
-            let (mut o2, mut o3) = (*opt, *opt);
-            o2.exclude = hits.as_ptr();
-            let mut want_ex = want.clone();
-            for h in &mut want_ex {
-                if h.object != RT2_INVALID_ID {
-                    h.object = live.iter().position(|&o| o == h.object).unwrap() as u32;
-                }
-            }
-            o3.exclude = want_ex.as_ptr();
-            same(
-                &trace(ctx, scene, &rays, &o2).0,
-                &renamed(trace(ctx, reference, &rays, &o3).0, &live),
-                &format!("{what}, excluding the first hits"),
-            );
-        }
-        for &(schedule, offset_mode, transparency, gpu_path) in renders {
-            let mut opt = rt2_render_options_default();
-            (opt.schedule, opt.offset_mode) = (schedule, offset_mode);
-            (opt.transparency, opt.gpu_path) = (transparency, gpu_path);
-            same(
-                &render(ctx, scene, &opt),
-                &render(ctx, reference, &opt),
-                &format!("{step}, render {schedule} {offset_mode} {transparency} {gpu_path}"),
-            );
-        }
-        assert_eq!(stats(scene).object_count, live.len() as u32, "{step}");
-        assert_eq!(stats(reference).object_count, live.len() as u32, "{step}");
-        unsafe { rt2_scene_destroy(reference) };
+        same_as_rebuilt(ctx, scene, &held, opts, renders, &step);
     }
     unsafe {
         rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);
     }
+}
+
+/// Random sequences of `edits` edits, one scene each from empty: adds (objects of every kind,
+/// each id new), removals, toggles, transforms (none, a move, a mirror) and calls naming a
+/// removed id (refused, saying so, changing nothing), with a commit after about every third
+/// edit. After each commit the scene is [`same_as_rebuilt`], each commit under the next of
+/// `opts` and of `renders` in turn. The sequences that reach a check with no object left and
+/// with eight or more make sure both ends were met.
+fn random_edits(
+    backend: Rt2Backend,
+    opts: &[rt2_query_options],
+    renders: &[(u32, u32, u32, u32)],
+    sequences: u64,
+    edits: usize,
+) {
+    let ctx = context(backend);
+    let pool = [
+        objects(),
+        vec![
+            Obj::Sphere([0.8, -0.5, 0.5], 0.6),
+            grid(4, -2.5, 2.0, 0.8),
+            Obj::Box([0.5, -2.5, 0.0], [2.0, -1.5, 1.0]),
+        ],
+    ]
+    .concat();
+    let moves = [
+        [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+        [1.0, 0.0, 0.0, 0.3, 0.0, 1.0, 0.0, -0.2, 0.0, 0.0, 1.0, 0.4],
+        MIRROR,
+    ];
+    let (mut checks, mut emptied, mut full) = (0, 0, 0);
+    for seed in 1..=sequences {
+        let mut rng = support::rng::Rng(seed);
+        let scene = rebuilt(ctx, &[]);
+        let (mut held, mut removed) = (Vec::<Held>::new(), Vec::<u32>::new());
+        let mut next_id = 0;
+        for e in 0..edits {
+            let step = format!("sequence {seed}, edit {e}");
+            let k = rng.below(held.len().max(1));
+            unsafe {
+                match rng.below(7) {
+                    0..=2 => {
+                        let obj = pool[rng.below(pool.len())].clone();
+                        let id = add(scene, &obj, material(next_id));
+                        assert_eq!(id, next_id, "{step}: not a new id");
+                        next_id += 1;
+                        held.push(Held {
+                            id,
+                            obj,
+                            enabled: true,
+                            transform: None,
+                        });
+                    }
+                    3 | 4 if !held.is_empty() => {
+                        ok(rt2_scene_remove(scene, held[k].id), &step);
+                        removed.push(held.remove(k).id);
+                    }
+                    5 if !held.is_empty() => {
+                        let h = &mut held[k];
+                        h.enabled = !h.enabled;
+                        ok(rt2_scene_set_enabled(scene, h.id, h.enabled as u32), &step);
+                    }
+                    6 if !held.is_empty() => {
+                        let m = moves[rng.below(moves.len())];
+                        ok(
+                            rt2_scene_set_transform(scene, held[k].id, m.as_ptr()),
+                            &step,
+                        );
+                        held[k].transform = Some(m);
+                    }
+                    _ if !removed.is_empty() => {
+                        let id = removed[rng.below(removed.len())];
+                        let st = match rng.below(3) {
+                            0 => rt2_scene_remove(scene, id),
+                            1 => rt2_scene_set_enabled(scene, id, 1),
+                            _ => rt2_scene_set_transform(scene, id, MIRROR.as_ptr()),
+                        };
+                        refused(st, &format!("object is {id}"), true, &step);
+                    }
+                    _ => {}
+                }
+            }
+            if rng.below(3) == 0 || e + 1 == edits {
+                ok(unsafe { rt2_scene_commit(scene) }, &step);
+                let opt = &opts[checks % opts.len()];
+                let render = &renders[checks % renders.len()];
+                same_as_rebuilt(ctx, scene, &held, &[*opt], &[*render], &step);
+                checks += 1;
+                emptied += usize::from(held.is_empty() && !removed.is_empty());
+                full += usize::from(held.len() >= 8);
+            }
+        }
+        unsafe { rt2_scene_destroy(scene) };
+    }
+    assert!(
+        emptied > 0 && full > 0,
+        "{emptied} checks emptied, {full} full"
+    );
+    unsafe { rt2_context_destroy(ctx) };
 }
 
 /// [`removals`] on the CPU: every query mode, intersector and traversal; renders in both
@@ -1179,17 +1315,39 @@ fn removed_objects_on_the_gpu() {
     if !support::c_gpu_or_skip() {
         return;
     }
-    let opts: Vec<_> = (0..=7)
+    removals(Rt2Backend::Gpu, &gpu_options(), &GPU_RENDERS);
+}
+
+/// Every traversal on a GPU context (0: the default).
+fn gpu_options() -> Vec<rt2_query_options> {
+    (0..=7)
         .map(|traversal| rt2_query_options {
             traversal,
             ..rt2_query_options_default()
         })
-        .collect();
-    removals(
-        Rt2Backend::Gpu,
-        &opts,
-        &[(0, 0, 0, 1), (0, 2, 1, 1), (0, 0, 0, 2), (0, 1, 0, 2)],
-    );
+        .collect()
+}
+
+/// The GPU renders the tests compare (as [`CPU_RENDERS`]): both GPU paths, every offset mode,
+/// both transparency modes.
+const GPU_RENDERS: [(u32, u32, u32, u32); 4] =
+    [(0, 0, 0, 1), (0, 2, 1, 1), (0, 0, 0, 2), (0, 1, 0, 2)];
+
+/// [`random_edits`] on the CPU: 12 sequences of 40 edits, every query option and CPU render
+/// in turn.
+#[test]
+fn random_edits_trace_as_a_scene_built_from_what_is_left() {
+    random_edits(Rt2Backend::Cpu, &query_options(), &CPU_RENDERS, 12, 40);
+}
+
+/// [`random_edits`] under one GPU context: 3 sequences of 40 edits. Without an adapter it
+/// prints SKIPPED and passes, unless `RT2_REQUIRE_GPU=1`.
+#[test]
+fn random_edits_on_the_gpu() {
+    if !support::c_gpu_or_skip() {
+        return;
+    }
+    random_edits(Rt2Backend::Gpu, &gpu_options(), &GPU_RENDERS, 3, 40);
 }
 
 /// Asserts that `status` is INVALID_ARGUMENT with a message containing `want` (and saying
