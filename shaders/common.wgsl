@@ -25,7 +25,7 @@ struct Material {
 struct Light { position: array<f32, 3>, intensity: f32, color: array<f32, 3>, pad: f32 }
 struct RayIn { org: array<f32, 3>, tmin: f32, dir: array<f32, 3>, tmax: f32 }
 struct HitOut { t: f32, u: f32, v: f32, prim: u32 }
-struct StatsOut { nodes: u32, leaves: u32, prims: u32, pad: u32 }
+struct StatsOut { nodes: u32, leaves: u32, prims: u32, cut: u32 }
 struct Item { org: array<f32, 3>, pixel: u32, dir: array<f32, 3>, depth: u32, weight: array<f32, 3>, skip: u32 }
 struct Params {
     bounds_min: vec4<f32>, bounds_max: vec4<f32>,
@@ -35,7 +35,7 @@ struct Params {
     count: u32, width: u32, height: u32, row0: u32,
     samples: u32, sample: u32, max_depth: u32, refract: u32,
     has_mask: u32, rope_bits: u32, excluding: u32, offset_mode: u32,
-    scale: f32, min_weight: f32, pad2: u32, pad3: u32,
+    scale: f32, min_weight: f32, probe_trips: u32, pad3: u32,
 }
 
 // Group 0: the committed scene, uploaded once per commit (src/gpu/scene.rs). Empty arrays
@@ -81,6 +81,22 @@ fn next_up(x: f32) -> f32 {
 // per-dimension workgroup limit is 65535; src/gpu/device.rs splits larger jobs).
 fn flat_id(wid: vec3<u32>, lid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return (wid.y * nwg.x + wid.x) * WG + lid.x;
+}
+
+// Whether every loop this invocation ran ended by its own condition. Mesa's llvmpipe
+// (lavapipe) counts the loop iterations of an invocation (a SIMD group of them, in lockstep)
+// over all its loops and, past 65535, ends each loop at its next back edge, with no error
+// (gallivm's loop limiter). This loop wants `params.probe_trips` (2) iterations, a count the
+// compiler cannot see and so cannot unroll: once the limiter has run out it stops after one.
+// Called last, it tells a job cut short from one that was not (src/dispatch.rs
+// SOFTWARE_LOOP_BUDGET); on drivers without such a limit it is always true.
+fn loops_ran_to_the_end() -> bool {
+    var trips = 0u;
+    loop {
+        trips += 1u;
+        if (trips >= params.probe_trips) { break; }
+    }
+    return trips >= params.probe_trips;
 }
 
 // `skip`: the global index of the primitive the ray ignores (`RayTest::exclude`; INVALID: none).

@@ -1,7 +1,7 @@
 // Batch ray queries (rt2_intersect / rt2_occluded): one thread per ray.
 @group(1) @binding(1) var<storage, read> rays: array<RayIn>;           // the batch (.rays records)
 @group(1) @binding(2) var<storage, read_write> hits: array<HitOut>;    // one answer per ray
-@group(1) @binding(3) var<storage, read_write> stats: array<StatsOut>; // work per ray
+@group(1) @binding(3) var<storage, read_write> stats: array<StatsOut>; // work per ray, and whether the driver cut it short
 // The primitive each ray ignores, read when params.excluding is set (else another buffer of
 // the job is bound here, and not read).
 @group(1) @binding(4) var<storage, read> excludes: array<u32>;
@@ -20,7 +20,7 @@ fn intersect_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     var st = Stats(0u, 0u, 0u);
     let h = closest_hit(load_ray(i), &st);
     hits[i] = HitOut(h.t, h.u, h.v, h.prim);
-    stats[i] = StatsOut(st.nodes, st.leaves, st.prims, 0u);
+    stats[i] = StatsOut(st.nodes, st.leaves, st.prims, select(1u, 0u, loops_ran_to_the_end()));
 }
 
 @compute @workgroup_size(64)
@@ -30,5 +30,5 @@ fn occluded_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocatio
     var st = Stats(0u, 0u, 0u);
     let blocked = occluded(load_ray(i), &st);
     hits[i] = HitOut(0.0, 0.0, 0.0, select(INVALID, 0u, blocked));
-    stats[i] = StatsOut(st.nodes, st.leaves, st.prims, 0u);
+    stats[i] = StatsOut(st.nodes, st.leaves, st.prims, select(1u, 0u, loops_ran_to_the_end()));
 }

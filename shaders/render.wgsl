@@ -10,6 +10,12 @@
 
 fn masked(i: u32) -> bool { return params.has_mask != 0u && mask[i] == 0u; }
 
+// A pixel as the frame holds it: alpha 0 marks one whose work the driver cut short
+// (`loops_ran_to_the_end`), which src/gpu/render.rs refuses to show.
+fn pixel(sum: vec3<f32>, cut: bool) -> u32 {
+    return select(pack(sum), pack(sum) & 0x00ffffffu, cut);
+}
+
 struct Pending { org: vec3<f32>, dir: vec3<f32>, w: vec3<f32>, depth: u32, skip: u32 }
 // Longest pending list: each pop pushes at most two, so it grows by one per level at most.
 const PENDING_MAX: u32 = 72u;
@@ -45,7 +51,7 @@ fn megakernel(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
         }
         sum += color;
     }
-    frame[i] = pack(sum);
+    frame[i] = pixel(sum, !loops_ran_to_the_end());
 }
 
 // ---- Wavefront: one kernel per bounce, live rays compacted by a prefix sum ----
@@ -74,7 +80,8 @@ fn wave_trace(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
     if (i >= params.count) { return; }
     let q = queue[i];
     let sh = shade(Ray(v3(q.org), v3(q.dir), 0.0, inf(), q.skip), v3(q.weight), q.depth);
-    contrib[i] = vec4<f32>(sh.color, 0.0);
+    // w: 1 when the driver cut this ray short, summed per pixel by wave_accumulate.
+    contrib[i] = vec4<f32>(sh.color, select(1.0, 0.0, loops_ran_to_the_end()));
     let t = sh.transmitted;
     let m = sh.mirror;
     slots[2u * i] = item(t.org, q.pixel, t.dir, q.depth + 1u, t.w, t.skip);
@@ -111,10 +118,10 @@ fn wave_compact(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation
     if (incl > prev && incl - 1u < arrayLength(&queue)) { queue[incl - 1u] = slots[j]; }
 }
 
-// Sums over samples into RGBA8.
+// Sums over samples into RGBA8 (alpha 0 where a ray of the pixel was cut short).
 @compute @workgroup_size(64)
 fn wave_finalize(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let i = flat_id(wid, lid, nwg);
     if (i >= params.count || masked(i)) { return; }
-    frame[i] = pack(accum[i].xyz);
+    frame[i] = pixel(accum[i].xyz, accum[i].w != 0.0);
 }

@@ -135,15 +135,19 @@ pub fn choose_gpu_traversal(
 
 /// The loop iterations Mesa's llvmpipe (lavapipe) allows one shader invocation, counted over
 /// all its loops and per SIMD group of invocations (8 under AVX2): gallivm's
-/// `LP_MAX_TGSI_LOOP_ITERATIONS`. Beyond it every loop exits early and the job still succeeds,
-/// with wrong answers. Hardware drivers have no such budget.
+/// `LP_MAX_TGSI_LOOP_ITERATIONS`. Beyond it every loop exits early and the dispatch still
+/// succeeds, with wrong answers; the kernels' last loop finds out (`loops_ran_to_the_end` in
+/// `shaders/common.wgsl`), and the job fails as beyond the device's limits
+/// (`gpu::GpuError::cut_short`): AUTO runs it on the CPU. Hardware drivers have no such
+/// budget.
 pub const SOFTWARE_LOOP_BUDGET: u32 = 65_535;
 
 /// The render path AUTO picks on the GPU (thesis §3.3), and why. `software`: the adapter is a
 /// CPU implementation ([`crate::gpu::Gpu::software`]), where a megakernel invocation that
 /// loops over several samples of a pixel may exhaust [`SOFTWARE_LOOP_BUDGET`] (on lavapipe
-/// 128 samples of a 400-sphere leaf came out dark with status OK: `tests/gpu.rs`); the wavefront path
-/// dispatches each sample and bounce on its own, so one invocation traces one ray.
+/// 128 samples of a 400-sphere leaf do, and the frame goes to the CPU: `tests/gpu.rs`); the
+/// wavefront path dispatches each sample and bounce on its own, so one invocation traces one
+/// ray and the GPU keeps the frame.
 pub fn choose_gpu_path(
     scene: &Committed,
     opts: &RenderOptions,

@@ -1,7 +1,8 @@
 //! The GPU backend against the CPU backend: same hits on the shared bunny ray sets and on the
 //! hard cases, the same images (within a stated tolerance) on every built-in scene for every
 //! traversal and both render paths, rows split across two logical devices, the AUTO
-//! decisions and the upload cache. CI runs these on lavapipe with `RT2_REQUIRE_GPU=1`;
+//! decisions, the upload cache, and queries and renders that lavapipe's loop budget cuts
+//! short (refused, or run on the CPU under AUTO). CI runs these on lavapipe with `RT2_REQUIRE_GPU=1`;
 //! without an adapter they print SKIPPED and pass, unless `RT2_REQUIRE_GPU=1`.
 
 use glam::{Mat3, Vec3};
@@ -1301,6 +1302,34 @@ fn auto_choices_are_reported_for_the_last_job() {
     assert!(draw(&cpu(), &s, &o).is_some_and(|c| c.starts_with("CPU traversal standard: ")));
 }
 
+/// `n` concentric spheres of radius 1 to 1 + (n - 1)/1000 around the origin (one leaf, which
+/// a ray from outside tests whole: its closest hit is the last sphere) and a light.
+fn concentric_spheres(n: usize) -> Scene {
+    let mut s = Scene::new();
+    let matte = s.add_material(Material::default()).unwrap();
+    for i in 0..n {
+        let shape = Shape::Sphere {
+            center: Vec3::ZERO,
+            radius: 1.0 + i as f32 * 1e-3,
+        };
+        s.add_object(shape, matte).unwrap();
+    }
+    s.add_light(PointLight {
+        position: Vec3::new(3.0, 4.0, 5.0),
+        color: Vec3::ONE,
+        intensity: 1.0,
+    })
+    .unwrap();
+    s
+}
+
+/// An 8 × 8 render of `c` by `ctx` under `opts`, from the default camera.
+fn draw_8x8(ctx: &Context, c: &Committed, opts: &RenderOptions) -> rt2::error::Result<Frame> {
+    let mut f = Frame::new(8, 8).unwrap();
+    ctx.render(c, &rt2::camera::Camera::default(), opts, &mut f)?;
+    Ok(f)
+}
+
 /// Mesa's llvmpipe (lavapipe) ends every loop of a shader invocation once the invocation (a
 /// SIMD group of 8 or 16) has run 65535 loop iterations in all, and the job still succeeds.
 /// A megakernel pixel loops over all its samples in one invocation: here 128 samples of a
@@ -1314,35 +1343,15 @@ fn auto_renders_many_samples_within_the_software_loop_budget() {
     let Some((auto, _)) = auto_on_gpu(None) else {
         return;
     };
-    let mut s = Scene::new();
-    let matte = s.add_material(Material::default()).unwrap();
-    for i in 0..400 {
-        let shape = Shape::Sphere {
-            center: Vec3::ZERO,
-            radius: 1.0 + i as f32 * 1e-3,
-        };
-        s.add_object(shape, matte).unwrap();
-    }
-    s.add_light(PointLight {
-        position: Vec3::new(3.0, 4.0, 5.0),
-        color: Vec3::ONE,
-        intensity: 1.0,
-    })
-    .unwrap();
+    let mut s = concentric_spheres(400);
     s.commit().unwrap();
     let c = s.committed().unwrap();
-    let cam = rt2::camera::Camera::default();
     let opts = RenderOptions {
         samples: 128,
         ..RenderOptions::default()
     };
-    let draw = |ctx: &Context, o: &RenderOptions| {
-        let mut f = Frame::new(8, 8).unwrap();
-        ctx.render(c, &cam, o, &mut f).unwrap();
-        f
-    };
-    let want = draw(&cpu(), &opts);
-    let got = draw(&auto, &opts);
+    let want = draw_8x8(&cpu(), c, &opts).unwrap();
+    let got = draw_8x8(&auto, c, &opts).unwrap();
     let choice = auto.last_auto_choice().unwrap();
     println!("auto_choice: {choice}");
     let d = image_diff(&got, &want);
@@ -1355,6 +1364,140 @@ fn auto_renders_many_samples_within_the_software_loop_budget() {
             choice.contains("GPU render path wavefront: the adapter is a software one"),
             "{choice}"
         );
+    }
+}
+
+/// A query whose rays need more loop iterations than lavapipe allows an invocation is never
+/// answered wrong with success: one ray through 70,000 [`concentric_spheres`], with 63 cheap rays to a
+/// sphere of its own beside it, in every traversal: an explicit GPU context returns the CPU's
+/// hits, or fails with BACKEND_UNAVAILABLE saying the driver cut rays short, and on a
+/// software adapter it must fail (before the kernels probed their loops, lavapipe returned
+/// sphere 65,532 with success); AUTO returns the CPU's hits, on a software adapter after
+/// falling back and saying why. Occlusion stops at the first sphere, within the budget:
+/// answered on the GPU, as on the CPU.
+#[test]
+fn queries_cut_short_by_the_driver_are_refused() {
+    let Some(explicit) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let auto = auto_on_gpu(None).map(|(auto, _)| auto);
+    let software = explicit.gpu().unwrap().software;
+    let mut s = concentric_spheres(70_000);
+    let side = Vec3::new(300.0, 0.0, 0.0);
+    s.add_object(
+        Shape::Sphere {
+            center: side,
+            radius: 1.0,
+        },
+        0,
+    )
+    .unwrap();
+    s.commit().unwrap();
+    let c = s.committed().unwrap();
+    let eye = Vec3::new(150.0, 0.0, -200.0);
+    let rays: Vec<Ray> = (0..64)
+        .map(|k| {
+            let to = if k == 5 { Vec3::ZERO } else { side };
+            Ray::new(eye, (to - eye).normalize(), 0.0, f32::INFINITY)
+        })
+        .collect();
+    let mut want = vec![Hit::MISS; rays.len()];
+    let mut want_occ = vec![false; rays.len()];
+    cpu()
+        .intersect(c, &rays, &mut want, &QueryOptions::default())
+        .unwrap();
+    cpu()
+        .occluded(c, &rays, &mut want_occ, &QueryOptions::default())
+        .unwrap();
+    assert_eq!(want[5].prim, 69_999, "the CPU's closest sphere");
+    assert!(want.iter().all(|h| h.is_hit()) && want_occ.iter().all(|&o| o));
+    for how in Traversal::ALL {
+        let q = query(how);
+        let mut hits = vec![Hit::MISS; rays.len()];
+        match explicit.intersect(c, &rays, &mut hits, &q) {
+            Ok(_) => {
+                assert!(!software, "{how:?}: lavapipe answered {:?}", hits[5]);
+                assert_eq!(hits, want, "{how:?}");
+            }
+            Err(e) => {
+                assert_eq!(
+                    e.status,
+                    Rt2Status::BackendUnavailable,
+                    "{how:?}: {}",
+                    e.message
+                );
+                assert!(e.message.contains("cut"), "{how:?}: {}", e.message);
+            }
+        }
+        let mut occ = vec![false; rays.len()];
+        explicit.occluded(c, &rays, &mut occ, &q).unwrap();
+        assert_eq!(occ, want_occ, "{how:?}");
+        if let Some(auto) = &auto {
+            let mut hits = vec![Hit::MISS; rays.len()];
+            auto.intersect(c, &rays, &mut hits, &q).unwrap();
+            assert_eq!(hits, want, "{how:?}, AUTO");
+            let fallback = auto.last_fallback();
+            assert_eq!(fallback.is_some(), software, "{how:?}: {fallback:?}");
+        }
+    }
+}
+
+/// A render whose pixels need more loop iterations than lavapipe allows an invocation is never
+/// shown: the megakernel over 128 samples of 400 [`concentric_spheres`] (about 100,000
+/// iterations a pixel), and the wavefront path with one sample of 70,000 (a primary ray tests
+/// them all). An explicit GPU context gives the CPU's image or fails with BACKEND_UNAVAILABLE,
+/// saying the driver cut pixels short, leaving the frame as it was; on a software adapter it
+/// must fail (before the kernels probed their loops, the megakernel's pixels came out dark
+/// with success). AUTO gives the CPU's image.
+#[test]
+fn renders_cut_short_by_the_driver_are_refused() {
+    let Some(explicit) = gpu(GpuOptions::default()) else {
+        return;
+    };
+    let auto = auto_on_gpu(None).map(|(auto, _)| auto);
+    let software = explicit.gpu().unwrap().software;
+    for (n, samples, path) in [
+        (400, 128, GpuPathRequest::Megakernel),
+        (70_000, 1, GpuPathRequest::Wavefront),
+    ] {
+        let what = format!("{n} spheres, {samples} samples, {path:?}");
+        let mut s = concentric_spheres(n);
+        s.commit().unwrap();
+        let c = s.committed().unwrap();
+        let opts = RenderOptions {
+            samples,
+            gpu_path: path,
+            ..RenderOptions::default()
+        };
+        let want = draw_8x8(&cpu(), c, &opts).unwrap();
+        let mut f = Frame::new(8, 8).unwrap();
+        match explicit.render(c, &rt2::camera::Camera::default(), &opts, &mut f) {
+            Ok(()) => {
+                assert!(!software, "{what}: lavapipe's image was shown");
+                for (mean, p99) in image_diff(&f, &want) {
+                    assert!(mean <= MEAN_MAX && p99 <= P99_MAX, "{what}");
+                }
+            }
+            Err(e) => {
+                assert_eq!(
+                    e.status,
+                    Rt2Status::BackendUnavailable,
+                    "{what}: {}",
+                    e.message
+                );
+                assert!(e.message.contains("cut"), "{what}: {}", e.message);
+                assert!(
+                    f.pixels().iter().all(|&b| b == 0),
+                    "{what}: the frame was written"
+                );
+            }
+        }
+        if let Some(auto) = &auto {
+            let got = draw_8x8(auto, c, &opts).unwrap();
+            for (mean, p99) in image_diff(&got, &want) {
+                assert!(mean <= MEAN_MAX && p99 <= P99_MAX, "{what}, AUTO");
+            }
+        }
     }
 }
 

@@ -21,17 +21,19 @@ pub enum Rt2Backend {
     /// (lavapipe, SwiftShader, WARP): with only such an adapter it traces on the CPU.
     Auto = 0,
     Cpu = 1,
-    /// The GPU, a software adapter included. On Mesa's lavapipe (llvmpipe) results may be
-    /// wrong with `RT2_STATUS_OK`: the driver ends every loop of a shader invocation once the
-    /// invocation has run 65535 loop iterations in all (its `LP_MAX_TGSI_LOOP_ITERATIONS`),
-    /// counted per SIMD group of invocations that run in lockstep (aligned groups of 8 rays
-    /// or pixels with llvmpipe's usual 256-bit vectors). A ray whose traversal (node steps
-    /// plus primitive tests, roughly) needs about 65k iterations, e.g. through a leaf of
-    /// 70,000 overlapping primitives, gets a wrong hit or a miss, and so do the other rays of
-    /// its group that were not done yet; a megakernel pixel counts all its samples and
-    /// bounces (with `RT2_GPU_PATH_AUTO` and more than one sample, a software adapter takes
-    /// the wavefront path, which traces one ray per invocation). Nothing detects the cut.
-    /// Hardware drivers have no such budget.
+    /// The GPU, a software adapter included. On Mesa's lavapipe (llvmpipe) some jobs fail
+    /// with `RT2_STATUS_BACKEND_UNAVAILABLE`: the driver ends every loop of a shader
+    /// invocation once the invocation has run 65535 loop iterations in all (its
+    /// `LP_MAX_TGSI_LOOP_ITERATIONS`), counted per SIMD group of invocations that run in
+    /// lockstep (aligned groups of 8 rays or pixels with llvmpipe's usual 256-bit vectors).
+    /// A ray whose traversal (node steps plus primitive tests, roughly) needs about 65k
+    /// iterations, e.g. through a leaf of 70,000 overlapping primitives, would get a wrong hit
+    /// or a miss, and so would the other rays of its group that were not done yet; a
+    /// megakernel pixel counts all its samples and bounces (with `RT2_GPU_PATH_AUTO` and more
+    /// than one sample, a software adapter takes the wavefront path, which traces one ray per
+    /// invocation). The kernels detect the cut (their last loop stops early too), and such a
+    /// query or render returns that status, saying the driver cut its rays or pixels short,
+    /// with no answers written. Hardware drivers have no such budget.
     Gpu = 2,
 }
 

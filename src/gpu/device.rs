@@ -23,8 +23,8 @@ pub struct GpuOptions {
     /// splits frames across them as several GPUs would (how the split is tested on one GPU).
     pub logical_devices: usize,
     /// Let AUTO use a software adapter (tests only: lavapipe is slower than the CPU path, and
-    /// its loop budget of 65535 iterations per invocation cuts long traversals short with no
-    /// error: `dispatch::SOFTWARE_LOOP_BUDGET`).
+    /// its loop budget of 65535 iterations per invocation cuts long traversals short, which
+    /// sends such jobs to the CPU: `dispatch::SOFTWARE_LOOP_BUDGET`).
     pub auto_accepts_software: bool,
     /// Lower the storage binding limit (tests of the AUTO fallback on small limits).
     pub max_binding_override: Option<u64>,

@@ -111,6 +111,10 @@ pub struct GpuHit {
     pub prim: u32,
 }
 
+/// Iterations the kernels' last loop asks for (`GpuParams::probe_trips`): it stops after one
+/// when the driver's loop budget ran out before it.
+pub const PROBE_TRIPS: u32 = 2;
+
 /// Per-ray work counters (thesis table 1), summed on the host in 64 bits.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -118,7 +122,8 @@ pub struct GpuStats {
     pub nodes: u32,
     pub leaves: u32,
     pub prims: u32,
-    pub pad: u32,
+    /// 1 when the driver cut the ray's traversal short (`loops_ran_to_the_end` in the kernels).
+    pub cut: u32,
 }
 
 /// A ray still to trace in the wavefront path: where it goes, what it carries and for which
@@ -185,8 +190,10 @@ pub struct GpuParams {
     pub scale: f32,
     /// Rays of smaller weight are not traced (`cpu::whitted::min_weight`).
     pub min_weight: f32,
-    // Scalars, not an array: uniform arrays need a 16-byte stride.
-    pub pad2: u32,
+    /// Iterations of the kernels' last loop, which tells whether the driver cut the job short
+    /// (`loops_ran_to_the_end`): [`PROBE_TRIPS`], a run-time value so that it is not unrolled.
+    pub probe_trips: u32,
+    // A scalar, not an array: uniform arrays need a 16-byte stride.
     pub pad3: u32,
 }
 
@@ -273,7 +280,7 @@ mod tests {
         layout!("Light", GpuLight, [position, intensity, color, pad]);
         layout!("RayIn", GpuRay, [org, tmin, dir, tmax]);
         layout!("HitOut", GpuHit, [t, u, v, prim]);
-        layout!("StatsOut", GpuStats, [nodes, leaves, prims, pad]);
+        layout!("StatsOut", GpuStats, [nodes, leaves, prims, cut]);
         layout!("Item", GpuItem, [org, pixel, dir, depth, weight, skip]);
         layout!(
             "Params",
@@ -308,7 +315,7 @@ mod tests {
                 offset_mode,
                 scale,
                 min_weight,
-                pad2,
+                probe_trips,
                 pad3
             ]
         );

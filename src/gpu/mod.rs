@@ -95,6 +95,21 @@ pub enum GpuError {
     Other(crate::error::Error),
 }
 
+impl GpuError {
+    /// The driver cut `count` of a job's rays or pixels (`what`) short: its loop budget
+    /// ([`crate::dispatch::SOFTWARE_LOOP_BUDGET`]) ran out, as the kernels' last loop found
+    /// (`loops_ran_to_the_end` in `shaders/common.wgsl`). Their answers may be wrong, so the
+    /// job gives none: a limit of the device, which AUTO meets by running the job on the CPU.
+    pub(crate) fn cut_short(count: usize, what: &str) -> Self {
+        GpuError::Limits(format!(
+            "the GPU driver cut {count} {what} short: a software driver (llvmpipe) ends every \
+             loop of a shader invocation after {} iterations in all (a group of invocations \
+             in lockstep), and this job needed more",
+            crate::dispatch::SOFTWARE_LOOP_BUDGET
+        ))
+    }
+}
+
 /// Host memory for a job's buffers (rays, mask, read-back) that could not be allocated: as
 /// when the device runs out, AUTO runs the job on the CPU.
 impl From<crate::fallible::OutOfMemory> for GpuError {

@@ -4,7 +4,7 @@
 use super::device::{lock_cache, Device};
 use super::kernels::Program;
 use super::layout::{GpuHit, GpuParams, GpuRay, GpuStats};
-use super::GpuResult;
+use super::{GpuError, GpuResult};
 use crate::cpu::traverse::Traversal;
 use crate::fallible;
 use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats};
@@ -32,6 +32,7 @@ pub(crate) fn run(
         .min(dev.max_threads())
         .max(1) as usize;
     let mut stats = TraversalStats::default();
+    let mut cut = 0;
     for (k, piece) in rays.chunks(per).enumerate() {
         let gpu_rays: Vec<GpuRay> = fallible::collect(piece.iter().map(gpu_ray))?;
         let params = cache.job(GpuParams {
@@ -123,7 +124,12 @@ pub(crate) fn run(
             stats.nodes_visited += s.nodes as u64;
             stats.leaves_visited += s.leaves as u64;
             stats.prim_tests += s.prims as u64;
+            cut += s.cut as usize;
         }
+    }
+    if cut > 0 {
+        // Answers that may be wrong are not answers: AUTO traces the batch on the CPU.
+        return Err(GpuError::cut_short(cut, "rays"));
     }
     Ok(stats)
 }

@@ -4,7 +4,7 @@
 //! when a rope traversal first needs them.
 
 use super::device::Device;
-use super::layout::{GpuAabb, GpuLight, GpuMaterial, GpuParams};
+use super::layout::{GpuAabb, GpuLight, GpuMaterial, GpuParams, PROBE_TRIPS};
 use super::{GpuError, GpuResult};
 use crate::fallible::{self, Fallible};
 use crate::geometry::Aabb;
@@ -101,7 +101,8 @@ fn converted<T: bytemuck::Pod>(
 }
 
 impl SceneCache {
-    /// A job's parameters with the scene's part (bounds and counts) filled in.
+    /// A job's parameters with the scene's part (bounds and counts) and the loop probe's
+    /// iterations filled in.
     pub fn job(&self, job: GpuParams) -> GpuParams {
         let s = &self.params;
         GpuParams {
@@ -115,6 +116,7 @@ impl SceneCache {
             n_leaves: s.n_leaves,
             n_lights: s.n_lights,
             rope_bits: s.rope_bits,
+            probe_trips: PROBE_TRIPS,
             ..job
         }
     }
