@@ -69,7 +69,8 @@ enum rt2_backend
    * than one sample, a software adapter takes the wavefront path, which traces one ray per
    * invocation). The kernels detect the cut (their last loop stops early too), and such a
    * query or render returns that status, saying the driver cut its rays or pixels short,
-   * with no answers written. Hardware drivers have no such budget.
+   * with no answers written (but those of a query's earlier steps of 2^20 rays: see
+   * `rt2_intersect`). Hardware drivers have no such budget.
    */
   RT2_BACKEND_GPU = 2,
 };
@@ -891,8 +892,9 @@ struct rt2_query_options rt2_query_options_default(void);
 /**
  * Closest hits of `count` rays into `hits`. `opt` may be NULL (defaults); `stats` may be NULL
  * (not collected). Rays are traced in steps of 2^20: on failure `hits` is untouched unless the
- * backend failed part-way (internal error, GPU lost or out of memory), which leaves the
- * earlier steps' hits written.
+ * backend failed part-way (internal error, GPU lost or out of memory, or on lavapipe a later
+ * step's rays cut short by the driver: `RT2_BACKEND_GPU`), which leaves the earlier steps'
+ * hits written.
  *
  * `hits` overlapping `rays` is an INVALID_ARGUMENT (`opt->exclude` may be `hits` itself).
  *

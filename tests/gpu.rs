@@ -1373,8 +1373,9 @@ fn auto_renders_many_samples_within_the_software_loop_budget() {
 /// hits, or fails with BACKEND_UNAVAILABLE saying the driver cut rays short, and on a
 /// software adapter it must fail (before the kernels probed their loops, lavapipe returned
 /// sphere 65,532 with success); AUTO returns the CPU's hits, on a software adapter after
-/// falling back and saying why. Occlusion stops at the first sphere, within the budget:
-/// answered on the GPU, as on the CPU.
+/// falling back and saying why. A refused query leaves the caller's hits as they were (the
+/// kernels' answers once reached them before the check). Occlusion stops at the first sphere,
+/// within the budget: answered on the GPU, as on the CPU.
 #[test]
 fn queries_cut_short_by_the_driver_are_refused() {
     let Some(explicit) = gpu(GpuOptions::default()) else {
@@ -1411,9 +1412,16 @@ fn queries_cut_short_by_the_driver_are_refused() {
         .unwrap();
     assert_eq!(want[5].prim, 69_999, "the CPU's closest sphere");
     assert!(want.iter().all(|h| h.is_hit()) && want_occ.iter().all(|&o| o));
+    // What the caller's hits held before: a refused query leaves them so.
+    let before = Hit {
+        t: -1.0,
+        u: 0.5,
+        v: 0.5,
+        prim: 12_345,
+    };
     for how in Traversal::ALL {
         let q = query(how);
-        let mut hits = vec![Hit::MISS; rays.len()];
+        let mut hits = vec![before; rays.len()];
         match explicit.intersect(c, &rays, &mut hits, &q) {
             Ok(_) => {
                 assert!(!software, "{how:?}: lavapipe answered {:?}", hits[5]);
@@ -1427,6 +1435,11 @@ fn queries_cut_short_by_the_driver_are_refused() {
                     e.message
                 );
                 assert!(e.message.contains("cut"), "{how:?}: {}", e.message);
+                assert!(
+                    hits.iter().all(|h| *h == before),
+                    "{how:?}: a refused query wrote {:?}",
+                    hits[5]
+                );
             }
         }
         let mut occ = vec![false; rays.len()];

@@ -33,7 +33,8 @@ pub enum Rt2Backend {
     /// than one sample, a software adapter takes the wavefront path, which traces one ray per
     /// invocation). The kernels detect the cut (their last loop stops early too), and such a
     /// query or render returns that status, saying the driver cut its rays or pixels short,
-    /// with no answers written. Hardware drivers have no such budget.
+    /// with no answers written (but those of a query's earlier steps of 2^20 rays: see
+    /// `rt2_intersect`). Hardware drivers have no such budget.
     Gpu = 2,
 }
 

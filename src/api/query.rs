@@ -340,8 +340,9 @@ unsafe fn run_query<T>(
 
 /// Closest hits of `count` rays into `hits`. `opt` may be NULL (defaults); `stats` may be NULL
 /// (not collected). Rays are traced in steps of 2^20: on failure `hits` is untouched unless the
-/// backend failed part-way (internal error, GPU lost or out of memory), which leaves the
-/// earlier steps' hits written.
+/// backend failed part-way (internal error, GPU lost or out of memory, or on lavapipe a later
+/// step's rays cut short by the driver: `RT2_BACKEND_GPU`), which leaves the earlier steps'
+/// hits written.
 ///
 /// `hits` overlapping `rays` is an INVALID_ARGUMENT (`opt->exclude` may be `hits` itself).
 ///

@@ -32,7 +32,6 @@ pub(crate) fn run(
         .min(dev.max_threads())
         .max(1) as usize;
     let mut stats = TraversalStats::default();
-    let mut cut = 0;
     for (k, piece) in rays.chunks(per).enumerate() {
         let gpu_rays: Vec<GpuRay> = fallible::collect(piece.iter().map(gpu_ray))?;
         let params = cache.job(GpuParams {
@@ -106,6 +105,14 @@ pub(crate) fn run(
         let bytes = dev.read_back(enc, &out, 0, stat_view.offset + hit_bytes)?;
         let gh: &[GpuHit] = bytemuck::cast_slice(&bytes[..hit_bytes as usize]);
         let gs: &[GpuStats] = bytemuck::cast_slice(&bytes[stat_view.offset as usize..]);
+        // Answers that may be wrong are not answers, and are not written: the piece is checked
+        // before its hits reach `hits` (a refused one-piece job leaves them as they were; the
+        // earlier pieces of a longer one stay written, as on any failure part-way). AUTO
+        // traces the batch on the CPU.
+        let cut = gs.iter().filter(|s| s.cut != 0).count();
+        if cut > 0 {
+            return Err(GpuError::cut_short(cut, "rays"));
+        }
         let base = k * per;
         for (i, h) in gh.iter().enumerate() {
             if let Some(out) = hits.as_deref_mut() {
@@ -124,12 +131,7 @@ pub(crate) fn run(
             stats.nodes_visited += s.nodes as u64;
             stats.leaves_visited += s.leaves as u64;
             stats.prim_tests += s.prims as u64;
-            cut += s.cut as usize;
         }
-    }
-    if cut > 0 {
-        // Answers that may be wrong are not answers: AUTO traces the batch on the CPU.
-        return Err(GpuError::cut_short(cut, "rays"));
     }
     Ok(stats)
 }
