@@ -87,16 +87,18 @@ fn flat_id(wid: vec3<u32>, lid: vec3<u32>, nwg: vec3<u32>) -> u32 {
 // (lavapipe) counts the loop iterations of an invocation (a SIMD group of them, in lockstep)
 // over all its loops and, past 65535, ends each loop at its next back edge, with no error
 // (gallivm's loop limiter). This loop wants `params.probe_trips` (2) iterations, a count the
-// compiler cannot see and so cannot unroll: once the limiter has run out it stops after one.
-// Called last, it tells a job cut short from one that was not (src/dispatch.rs
-// SOFTWARE_LOOP_BUDGET); on drivers without such a limit it is always true.
+// compiler cannot see and so cannot unroll; once the limiter has run out it does not take its
+// back edge. The answer is whether it did (`trips > 1`), not its exit condition, which a
+// compiler may take as true after the loop. Called last, it tells a job cut short from one
+// that was not (src/dispatch.rs SOFTWARE_LOOP_BUDGET); on drivers without such a limit it is
+// always true.
 fn loops_ran_to_the_end() -> bool {
     var trips = 0u;
     loop {
         trips += 1u;
         if (trips >= params.probe_trips) { break; }
     }
-    return trips >= params.probe_trips;
+    return trips > 1u;
 }
 
 // `skip`: the global index of the primitive the ray ignores (`RayTest::exclude`; INVALID: none).

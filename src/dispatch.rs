@@ -145,9 +145,10 @@ pub const SOFTWARE_LOOP_BUDGET: u32 = 65_535;
 /// The render path AUTO picks on the GPU (thesis §3.3), and why. `software`: the adapter is a
 /// CPU implementation ([`crate::gpu::Gpu::software`]), where a megakernel invocation that
 /// loops over several samples of a pixel may exhaust [`SOFTWARE_LOOP_BUDGET`] (on lavapipe
-/// 128 samples of a 400-sphere leaf do, and the frame goes to the CPU: `tests/gpu.rs`); the
-/// wavefront path dispatches each sample and bounce on its own, so one invocation traces one
-/// ray and the GPU keeps the frame.
+/// 128 samples of a 400-sphere leaf do, and the frame is refused, or rendered on the CPU under
+/// AUTO: `tests/gpu.rs`); the wavefront path dispatches each sample and bounce on its own, so
+/// one invocation traces one ray and the GPU keeps the frame (unless a chunk's ray tree
+/// outgrows the wave queue and that chunk takes the megakernel after all).
 pub fn choose_gpu_path(
     scene: &Committed,
     opts: &RenderOptions,

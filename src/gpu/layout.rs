@@ -112,7 +112,8 @@ pub struct GpuHit {
 }
 
 /// Iterations the kernels' last loop asks for (`GpuParams::probe_trips`): it stops after one
-/// when the driver's loop budget ran out before it.
+/// when the driver's loop budget ran out before it, and `loops_ran_to_the_end` asks whether it
+/// came round a second time, so this must stay 2.
 pub const PROBE_TRIPS: u32 = 2;
 
 /// Per-ray work counters (thesis table 1), summed on the host in 64 bits.
