@@ -272,7 +272,10 @@ fn moller_trumbore(
     let qz = sx * e1y - e1x * sy;
     let v = ((d[0] * qx) + (d[1] * qy) + (d[2] * qz)) * inv;
     let t = ((e2x * qx) + (e2y * qy) + (e2z * qz)) * inv;
-    let ok = (det != 0.0 && det.is_finite())
+    // `det * 0.0 == 0.0` is `det.is_finite()` (inf and NaN give NaN): written so, LLVM tested
+    // every lane's bits with integer instructions, 15% of a single ray's instructions.
+    let ok = (det != 0.0)
+        & (det * 0.0 == 0.0)
         & (0.0..=1.0).contains(&u)
         & !(v < 0.0 || u + v > 1.0)
         & (t >= tmin)
