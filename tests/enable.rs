@@ -1070,24 +1070,23 @@ fn rebuilt(ctx: *mut rt2_context, held: &[Held]) -> *mut rt2_scene {
     scene
 }
 
-/// `scene` (holding `held`) against [`rebuilt`]'s scene of `held`: the hits (ids mapped) and
-/// occlusion under every option in `opts`, also excluding the first hits, the renders in
-/// `renders` and the object count are the same.
+/// `scene` (holding `held`) against [`rebuilt`]'s scene of `held`: the hits of `rays` (ids
+/// mapped) and their occlusion under every option in `opts`, also excluding the first hits,
+/// the renders in `renders` and the object count are the same.
 fn same_as_rebuilt(
     ctx: *mut rt2_context,
-    scene: *mut rt2_scene,
-    held: &[Held],
+    (scene, held): (*mut rt2_scene, &[Held]),
+    rays: &[rt2_ray],
     opts: &[rt2_query_options],
     renders: &[(u32, u32, u32, u32)],
     step: &str,
 ) {
-    let rays = rays();
     let live: Vec<u32> = held.iter().map(|h| h.id).collect();
     let reference = rebuilt(ctx, held);
     for opt in opts {
         let what = format!("{step}, {}", name(opt));
-        let (hits, occ) = trace(ctx, scene, &rays, opt);
-        let (want, want_occ) = trace(ctx, reference, &rays, opt);
+        let (hits, occ) = trace(ctx, scene, rays, opt);
+        let (want, want_occ) = trace(ctx, reference, rays, opt);
         let want = renamed(want, &live);
         same_trace(&(hits.clone(), occ), &(want.clone(), want_occ), &what);
         let (mut o2, mut o3) = (*opt, *opt);
@@ -1100,8 +1099,8 @@ fn same_as_rebuilt(
         }
         o3.exclude = want_ex.as_ptr();
         same(
-            &trace(ctx, scene, &rays, &o2).0,
-            &renamed(trace(ctx, reference, &rays, &o3).0, &live),
+            &trace(ctx, scene, rays, &o2).0,
+            &renamed(trace(ctx, reference, rays, &o3).0, &live),
             &format!("{what}, excluding the first hits"),
         );
     }
@@ -1194,7 +1193,7 @@ fn removals(backend: Rt2Backend, opts: &[rt2_query_options], renders: &[(u32, u3
         for &o in gone.iter().filter(|&&o| o != disabled as u32) {
             assert!(on(&hit_before, &[o]) > 20, "{step}: few rays met {o}");
         }
-        same_as_rebuilt(ctx, scene, &held, opts, renders, &step);
+        same_as_rebuilt(ctx, (scene, &held), &rays, opts, renders, &step);
     }
     unsafe {
         rt2_scene_destroy(scene);
@@ -1230,6 +1229,7 @@ fn random_edits(
         [1.0, 0.0, 0.0, 0.3, 0.0, 1.0, 0.0, -0.2, 0.0, 0.0, 1.0, 0.4],
         MIRROR,
     ];
+    let rays = rays();
     let (mut checks, mut emptied, mut full) = (0, 0, 0);
     for seed in 1..=sequences {
         let mut rng = support::rng::Rng(seed);
@@ -1286,7 +1286,7 @@ fn random_edits(
                 ok(unsafe { rt2_scene_commit(scene) }, &step);
                 let opt = &opts[checks % opts.len()];
                 let render = &renders[checks % renders.len()];
-                same_as_rebuilt(ctx, scene, &held, &[*opt], &[*render], &step);
+                same_as_rebuilt(ctx, (scene, &held), &rays, &[*opt], &[*render], &step);
                 checks += 1;
                 emptied += usize::from(held.is_empty() && !removed.is_empty());
                 full += usize::from(held.len() >= 8);

@@ -111,30 +111,25 @@ pub(crate) fn render(
     });
     // Nothing is written unless every band arrived: a failed frame is left as it was.
     let results = results.into_iter().collect::<GpuResult<Vec<_>>>()?;
+    // Every pixel the frame shows, with its index in the frame (masked ones are left alone).
+    let shown = || {
+        bands
+            .iter()
+            .zip(&results)
+            .flat_map(|((a, _), band)| {
+                let first = *a as usize * w as usize;
+                band.iter().enumerate().map(move |(i, &px)| (first + i, px))
+            })
+            .filter(|&(idx, _)| mask.is_none_or(|m| m[idx] != 0))
+    };
     // The kernels mark a pixel whose work the driver cut short with alpha 0
     // (`loops_ran_to_the_end`): such a frame is not shown, and AUTO renders it on the CPU.
-    let shown = |idx: usize| mask.is_none_or(|m| m[idx] != 0);
-    let cut = bands
-        .iter()
-        .zip(&results)
-        .flat_map(|((a, _), band)| {
-            let first = *a as usize * w as usize;
-            band.iter().enumerate().map(move |(i, &px)| (first + i, px))
-        })
-        .filter(|&(idx, px)| shown(idx) && px >> 24 == 0)
-        .count();
+    let cut = shown().filter(|&(_, px)| px >> 24 == 0).count();
     if cut > 0 {
         return Err(GpuError::cut_short(cut, "pixels"));
     }
-    for ((a, _), band) in bands.iter().zip(results) {
-        let first = *a as usize * w as usize;
-        for (i, px) in band.iter().enumerate() {
-            let idx = first + i;
-            if !shown(idx) {
-                continue;
-            }
-            pixels[4 * idx..4 * idx + 4].copy_from_slice(&px.to_le_bytes());
-        }
+    for (idx, px) in shown() {
+        pixels[4 * idx..4 * idx + 4].copy_from_slice(&px.to_le_bytes());
     }
     Ok(())
 }
