@@ -545,6 +545,40 @@ fn random_soups_match_reference() {
     }
 }
 
+/// A pinhole camera's rays over the soups: consecutive rays are neighbours, so packets and
+/// streams carry many rays to the same leaves, which take the N-rays × 1-triangle leaf test,
+/// while the rays near a triangle's silhouette part and reach leaves alone. Long triangles
+/// cross many leaves, so a ray often finds a hit past the leaf it is found in, and must stop
+/// in the first later leaf that tests the same triangle, whichever leaf test found it.
+#[test]
+fn camera_rays_match_reference() {
+    let mut rng = Rng(9);
+    let eye = Vec3::new(0.45, 0.55, -1.5);
+    let side = 48;
+    let rays: Vec<Ray> = (0..side * side)
+        .map(|i| {
+            let (x, y) = ((i % side) as f32, (i / side) as f32);
+            let at = Vec3::new(
+                -0.2 + 1.4 * x / side as f32,
+                -0.2 + 1.4 * y / side as f32,
+                0.5,
+            );
+            Ray::new(eye, (at - eye).normalize(), 0.0, f32::INFINITY)
+        })
+        .collect();
+    for (n, size) in [(200, 0.3), (2000, 0.05)] {
+        let prims = soup(&mut rng, n, size);
+        check_rays(
+            "camera over a soup",
+            &prims,
+            &trees(&prims),
+            &rays,
+            Check::Full,
+            default_options,
+        );
+    }
+}
+
 #[test]
 fn mixed_scenes_match_reference() {
     let mut rng = Rng(2);

@@ -105,10 +105,11 @@ pub(crate) trait Answer {
         t_exit: f32,
         stats: &mut TraversalStats,
     ) -> bool;
-    /// Tests the rays `ids` (lanes `live`, their tests `tests`) against a leaf's primitives
-    /// `leaf`, N rays per triangle, primitives in leaf order as the single-ray test; `t_exit`
-    /// is where each ray leaves the leaf. Returns the lanes that are finished, and counts in
-    /// `stats` the primitive tests each ray needed, as the single-ray test counts them.
+    /// Tests the rays `ids` (lanes `live`, their tests `tests`, gathered in `lanes`) against a
+    /// leaf's primitives `leaf`, N rays per triangle, primitives in leaf order as the single-ray
+    /// test; `t_exit` is where each ray leaves the leaf. Returns the lanes that are finished,
+    /// and counts in `stats` the primitive tests each ray needed, as the single-ray test counts
+    /// them.
     #[allow(clippy::too_many_arguments)]
     fn leaf_rays<const N: usize>(
         &mut self,
@@ -117,11 +118,21 @@ pub(crate) trait Answer {
         leaf: &[u32],
         rays: &[Ray],
         tests: &RayTests,
+        lanes: &mut LaneRays<N>,
         ids: &[u32; N],
         live: u32,
         t_exit: &[f32; N],
         stats: &mut TraversalStats,
     ) -> u32;
+    /// Reads the closest `t` so far and the bound of candidates ([`Hit::bound`]) of the rays
+    /// `ids` in lanes `live`, as [`LaneRays`] keeps them; any-hit queries need none.
+    fn read_bounds<const N: usize>(
+        &self,
+        rays: &[Ray],
+        lanes: (&[u32; N], u32),
+        hit_t: &mut [f32; N],
+        bound: &mut [f32; N],
+    );
     /// Ray `i` through the subtree `start` alone, with the standard single-ray traversal.
     /// True when the ray is finished.
     #[allow(clippy::too_many_arguments)]
@@ -183,6 +194,7 @@ impl Answer for Closest<'_> {
         leaf: &[u32],
         rays: &[Ray],
         tests: &RayTests,
+        lanes: &mut LaneRays<N>,
         ids: &[u32; N],
         live: u32,
         t_exit: &[f32; N],
@@ -190,23 +202,17 @@ impl Answer for Closest<'_> {
     ) -> u32 {
         // A closest hit tests every primitive of the leaf.
         stats.prim_tests += live.count_ones() as u64 * leaf.len() as u64;
-        let lanes = RayLanes::gather(rays, ids);
-        let lane_tests = lanes.tests(tests.intersector);
-        // Each lane's closest `t` so far and its `Hit::bound`, kept beside the hits and updated
-        // only when a lane's hit changes: recomputed for every lane at every triangle, the
-        // bound (a `next_up` per lane) cost a twentieth of a stream's instructions.
-        let (mut hit_t, mut bound) = ([f32::INFINITY; N], lanes.tmax);
+        let lane_tests = lanes.rays.tests(tests.intersector);
+        // Copied out and back: captured by the closures below, the struct would live in memory.
+        let (mut hit_t, mut bound) = (lanes.hit_t, lanes.bound);
         let update = |hit: &Hit, l: usize, hit_t: &mut [f32; N], bound: &mut [f32; N]| {
             hit_t[l] = hit.t;
             bound[l] = hit.bound(&rays[ids[l] as usize]);
         };
-        for_lanes(live, |l| {
-            update(&self.0[ids[l] as usize], l, &mut hit_t, &mut bound)
-        });
         for &p in leaf {
             if (p as usize) < prims.triangles.len() {
                 let rows = prims.triangle_rows(p as usize, tests.intersector);
-                let (t, u, v) = lanes.triangle(rows, &lane_tests, &bound);
+                let (t, u, v) = lanes.rays.triangle(rows, &lane_tests, &bound);
                 let hits = lanes_less(isa, &t, &[f32::INFINITY; N]);
                 for_lanes(live & hits & tests.exclude.keeping(p, ids), |l| {
                     let hit = &mut self.0[ids[l] as usize];
@@ -221,8 +227,24 @@ impl Answer for Closest<'_> {
                 });
             }
         }
+        (lanes.hit_t, lanes.bound) = (hit_t, bound);
         // Strictly before the exit, as `traverse::common::Closest`.
         live & lanes_less(isa, &hit_t, t_exit)
+    }
+
+    #[inline(always)]
+    fn read_bounds<const N: usize>(
+        &self,
+        rays: &[Ray],
+        (ids, live): (&[u32; N], u32),
+        hit_t: &mut [f32; N],
+        bound: &mut [f32; N],
+    ) {
+        for_lanes(live, |l| {
+            let i = ids[l] as usize;
+            hit_t[l] = self.0[i].t;
+            bound[l] = self.0[i].bound(&rays[i]);
+        });
     }
 
     #[inline(always)]
@@ -294,13 +316,13 @@ impl Answer for AnyHit<'_> {
         leaf: &[u32],
         rays: &[Ray],
         tests: &RayTests,
+        lanes: &mut LaneRays<N>,
         ids: &[u32; N],
         live: u32,
         _t_exit: &[f32; N],
         stats: &mut TraversalStats,
     ) -> u32 {
-        let lanes = RayLanes::gather(rays, ids);
-        let lane_tests = lanes.tests(tests.intersector);
+        let lane_tests = lanes.rays.tests(tests.intersector);
         let mut found = 0u32;
         for &p in leaf {
             // A ray stops at the first primitive in its way, as the single-ray test does;
@@ -312,7 +334,7 @@ impl Answer for AnyHit<'_> {
             stats.prim_tests += searching.count_ones() as u64;
             if (p as usize) < prims.triangles.len() {
                 let rows = prims.triangle_rows(p as usize, tests.intersector);
-                let (t, _, _) = lanes.triangle(rows, &lane_tests, &lanes.tmax);
+                let (t, _, _) = lanes.rays.triangle(rows, &lane_tests, &lanes.rays.tmax);
                 found |= lanes_less(isa, &t, &[f32::INFINITY; N]) & tests.exclude.keeping(p, ids);
             } else {
                 for_lanes(live & !found, |l| {
@@ -345,6 +367,29 @@ impl Answer for AnyHit<'_> {
 
     #[inline(always)]
     fn prefetch(&self, _: usize) {}
+
+    #[inline(always)]
+    fn read_bounds<const N: usize>(
+        &self,
+        _: &[Ray],
+        _: (&[u32; N], u32),
+        _: &mut [f32; N],
+        _: &mut [f32; N],
+    ) {
+    }
+}
+
+/// N rays ready for the N-rays × 1-triangle leaf test ([`Answer::leaf_rays`]): in
+/// structure-of-arrays form, with (for closest hits) each ray's closest `t` so far and its
+/// [`Hit::bound`]. Those two are kept here and updated only when a lane's hit changes:
+/// recomputed for every lane at every triangle, the bound (a `next_up` per lane) cost a
+/// twentieth of a stream's instructions. A packet gathers its rays once for all its leaves
+/// (and [`Batch::reread`]s them after tests made elsewhere); a stream, which meets different
+/// rays at each leaf, gathers them per leaf visit.
+pub(crate) struct LaneRays<const N: usize> {
+    rays: RayLanes<N>,
+    hit_t: [f32; N],
+    bound: [f32; N],
 }
 
 /// The batch: rays, their origins and reciprocal directions by axis (one array per axis, so a
@@ -491,17 +536,39 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         self.answer.prefetch(i);
     }
 
-    /// Tests the rays `ids` (lanes `live`, segments ending at `t_exit`) against leaf `leaf`, N
-    /// rays per triangle, and marks the finished ones done.
+    /// The rays `ids` (lanes `live`) gathered for [`Batch::visit_leaf_rays`] (an index past the
+    /// end reads the last ray, as [`RayLanes::gather`]).
+    #[inline(always)]
+    pub fn lane_rays<const N: usize>(&self, ids: &[u32; N], live: u32) -> LaneRays<N> {
+        let rays = RayLanes::gather(self.rays, ids);
+        let (mut hit_t, mut bound) = ([f32::INFINITY; N], rays.tmax);
+        self.answer
+            .read_bounds(self.rays, (ids, live), &mut hit_t, &mut bound);
+        LaneRays { hit_t, bound, rays }
+    }
+
+    /// Brings the closest hits of lanes `live` in `lanes` up to date, after tests that did not
+    /// go through `lanes`.
+    #[inline(always)]
+    pub fn reread<const N: usize>(&self, lanes: &mut LaneRays<N>, ids: &[u32; N], live: u32) {
+        let (mut hit_t, mut bound) = (lanes.hit_t, lanes.bound);
+        self.answer
+            .read_bounds(self.rays, (ids, live), &mut hit_t, &mut bound);
+        (lanes.hit_t, lanes.bound) = (hit_t, bound);
+    }
+
+    /// Tests the rays `ids` (lanes `live`, gathered in `lanes`, segments ending at `t_exit`)
+    /// against leaf `leaf`, N rays per triangle, marks the finished ones done and returns them.
     #[inline(always)]
     pub fn visit_leaf_rays<const N: usize>(
         &mut self,
         isa: Isa<N>,
         leaf: &[u32],
+        lanes: &mut LaneRays<N>,
         ids: &[u32; N],
         live: u32,
         t_exit: &[f32; N],
-    ) {
+    ) -> u32 {
         self.stats.leaves_visited += live.count_ones() as u64;
         let done = self.answer.leaf_rays(
             isa,
@@ -509,6 +576,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
             leaf,
             self.rays,
             &self.tests(),
+            lanes,
             ids,
             live,
             t_exit,
@@ -516,6 +584,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         );
         for_lanes(live, |l| self.done[ids[l] as usize] = done >> l & 1 == 1);
         self.finished += done.count_ones() as usize;
+        done
     }
 
     /// Traces ray `i` through the subtree `start` alone and marks it done when finished.
