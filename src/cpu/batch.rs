@@ -107,9 +107,10 @@ pub(crate) trait Answer {
     ) -> bool;
     /// Tests the rays `ids` (lanes `live`, their tests `tests`, gathered in `lanes`) against a
     /// leaf's primitives `leaf`, N rays per triangle, primitives in leaf order as the single-ray
-    /// test; `t_exit` is where each ray leaves the leaf. Returns the lanes that are finished,
-    /// and counts in `stats` the primitive tests each ray needed, as the single-ray test counts
-    /// them.
+    /// test; `t_exit` is where each ray leaves the leaf. `kept`: the lanes' [`LaneBounds`] kept
+    /// by a packet, read and updated here; `None` (a stream) reads them from the answers.
+    /// Returns the lanes that are finished, and counts in `stats` the primitive tests each ray
+    /// needed, as the single-ray test counts them.
     #[allow(clippy::too_many_arguments)]
     fn leaf_rays<const N: usize>(
         &mut self,
@@ -118,20 +119,20 @@ pub(crate) trait Answer {
         leaf: &[u32],
         rays: &[Ray],
         tests: &RayTests,
-        lanes: &mut LaneRays<N>,
+        lanes: &RayLanes<N>,
+        kept: Option<&mut LaneBounds<N>>,
         ids: &[u32; N],
         live: u32,
         t_exit: &[f32; N],
         stats: &mut TraversalStats,
     ) -> u32;
-    /// Reads the closest `t` so far and the bound of candidates ([`Hit::bound`]) of the rays
-    /// `ids` in lanes `live`, as [`LaneRays`] keeps them; any-hit queries need none.
+    /// Reads into `bounds` the [`LaneBounds`] of the rays `ids` in lanes `live`; any-hit
+    /// queries need none.
     fn read_bounds<const N: usize>(
         &self,
         rays: &[Ray],
         lanes: (&[u32; N], u32),
-        hit_t: &mut [f32; N],
-        bound: &mut [f32; N],
+        bounds: &mut LaneBounds<N>,
     );
     /// Ray `i` through the subtree `start` alone, with the standard single-ray traversal.
     /// True when the ray is finished.
@@ -186,6 +187,8 @@ impl Answer for Closest<'_> {
         hit.t < t_exit
     }
 
+    /// Both of the above: the answer's [`Answer::leaf_rays`], the statistics and the finished
+    /// flags.
     #[inline(always)]
     fn leaf_rays<const N: usize>(
         &mut self,
@@ -194,7 +197,8 @@ impl Answer for Closest<'_> {
         leaf: &[u32],
         rays: &[Ray],
         tests: &RayTests,
-        lanes: &mut LaneRays<N>,
+        lanes: &RayLanes<N>,
+        kept: Option<&mut LaneBounds<N>>,
         ids: &[u32; N],
         live: u32,
         t_exit: &[f32; N],
@@ -202,9 +206,20 @@ impl Answer for Closest<'_> {
     ) -> u32 {
         // A closest hit tests every primitive of the leaf.
         stats.prim_tests += live.count_ones() as u64 * leaf.len() as u64;
-        let lane_tests = lanes.rays.tests(tests.intersector);
-        // Copied out and back: captured by the closures below, the struct would live in memory.
-        let (mut hit_t, mut bound) = (lanes.hit_t, lanes.bound);
+        let lane_tests = lanes.tests(tests.intersector);
+        // Copied out (and back): captured by the closures below, the bounds would live in
+        // memory.
+        let LaneBounds {
+            mut hit_t,
+            mut bound,
+        } = match &kept {
+            Some(k) => **k,
+            None => {
+                let mut fresh = LaneBounds::of(lanes);
+                self.read_bounds(rays, (ids, live), &mut fresh);
+                fresh
+            }
+        };
         let update = |hit: &Hit, l: usize, hit_t: &mut [f32; N], bound: &mut [f32; N]| {
             hit_t[l] = hit.t;
             bound[l] = hit.bound(&rays[ids[l] as usize]);
@@ -212,7 +227,7 @@ impl Answer for Closest<'_> {
         for &p in leaf {
             if (p as usize) < prims.triangles.len() {
                 let rows = prims.triangle_rows(p as usize, tests.intersector);
-                let (t, u, v) = lanes.rays.triangle(rows, &lane_tests, &bound);
+                let (t, u, v) = lanes.triangle(rows, &lane_tests, &bound);
                 let hits = lanes_less(isa, &t, &[f32::INFINITY; N]);
                 for_lanes(live & hits & tests.exclude.keeping(p, ids), |l| {
                     let hit = &mut self.0[ids[l] as usize];
@@ -227,7 +242,9 @@ impl Answer for Closest<'_> {
                 });
             }
         }
-        (lanes.hit_t, lanes.bound) = (hit_t, bound);
+        if let Some(k) = kept {
+            *k = LaneBounds { hit_t, bound };
+        }
         // Strictly before the exit, as `traverse::common::Closest`.
         live & lanes_less(isa, &hit_t, t_exit)
     }
@@ -237,13 +254,12 @@ impl Answer for Closest<'_> {
         &self,
         rays: &[Ray],
         (ids, live): (&[u32; N], u32),
-        hit_t: &mut [f32; N],
-        bound: &mut [f32; N],
+        bounds: &mut LaneBounds<N>,
     ) {
         for_lanes(live, |l| {
             let i = ids[l] as usize;
-            hit_t[l] = self.0[i].t;
-            bound[l] = self.0[i].bound(&rays[i]);
+            bounds.hit_t[l] = self.0[i].t;
+            bounds.bound[l] = self.0[i].bound(&rays[i]);
         });
     }
 
@@ -308,6 +324,8 @@ impl Answer for AnyHit<'_> {
         found
     }
 
+    /// Both of the above: the answer's [`Answer::leaf_rays`], the statistics and the finished
+    /// flags.
     #[inline(always)]
     fn leaf_rays<const N: usize>(
         &mut self,
@@ -316,13 +334,14 @@ impl Answer for AnyHit<'_> {
         leaf: &[u32],
         rays: &[Ray],
         tests: &RayTests,
-        lanes: &mut LaneRays<N>,
+        lanes: &RayLanes<N>,
+        _: Option<&mut LaneBounds<N>>,
         ids: &[u32; N],
         live: u32,
         _t_exit: &[f32; N],
         stats: &mut TraversalStats,
     ) -> u32 {
-        let lane_tests = lanes.rays.tests(tests.intersector);
+        let lane_tests = lanes.tests(tests.intersector);
         let mut found = 0u32;
         for &p in leaf {
             // A ray stops at the first primitive in its way, as the single-ray test does;
@@ -334,7 +353,7 @@ impl Answer for AnyHit<'_> {
             stats.prim_tests += searching.count_ones() as u64;
             if (p as usize) < prims.triangles.len() {
                 let rows = prims.triangle_rows(p as usize, tests.intersector);
-                let (t, _, _) = lanes.rays.triangle(rows, &lane_tests, &lanes.rays.tmax);
+                let (t, _, _) = lanes.triangle(rows, &lane_tests, &lanes.tmax);
                 found |= lanes_less(isa, &t, &[f32::INFINITY; N]) & tests.exclude.keeping(p, ids);
             } else {
                 for_lanes(live & !found, |l| {
@@ -369,27 +388,37 @@ impl Answer for AnyHit<'_> {
     fn prefetch(&self, _: usize) {}
 
     #[inline(always)]
-    fn read_bounds<const N: usize>(
-        &self,
-        _: &[Ray],
-        _: (&[u32; N], u32),
-        _: &mut [f32; N],
-        _: &mut [f32; N],
-    ) {
+    fn read_bounds<const N: usize>(&self, _: &[Ray], _: (&[u32; N], u32), _: &mut LaneBounds<N>) {}
+}
+
+/// Each lane's closest `t` so far and its [`Hit::bound`], for the N-rays × 1-triangle leaf
+/// test ([`Answer::leaf_rays`]), which updates them only when a lane's hit changes: recomputed
+/// for every lane at every triangle, the bound (a `next_up` per lane) cost a twentieth of a
+/// stream's instructions. A stream, which meets different rays at each leaf, reads them per leaf
+/// visit; a packet keeps them across its leaves ([`PacketLanes`]).
+#[derive(Clone, Copy)]
+pub(crate) struct LaneBounds<const N: usize> {
+    hit_t: [f32; N],
+    bound: [f32; N],
+}
+
+impl<const N: usize> LaneBounds<N> {
+    /// No hit yet: every candidate below the ray's `tmax`.
+    #[inline(always)]
+    fn of(rays: &RayLanes<N>) -> Self {
+        LaneBounds {
+            hit_t: [f32::INFINITY; N],
+            bound: rays.tmax,
+        }
     }
 }
 
-/// N rays ready for the N-rays × 1-triangle leaf test ([`Answer::leaf_rays`]): in
-/// structure-of-arrays form, with (for closest hits) each ray's closest `t` so far and its
-/// [`Hit::bound`]. Those two are kept here and updated only when a lane's hit changes:
-/// recomputed for every lane at every triangle, the bound (a `next_up` per lane) cost a
-/// twentieth of a stream's instructions. A packet gathers its rays once for all its leaves
-/// (and [`Batch::reread`]s them after tests made elsewhere); a stream, which meets different
-/// rays at each leaf, gathers them per leaf visit.
-pub(crate) struct LaneRays<const N: usize> {
+/// A packet's rays in structure-of-arrays form and their [`LaneBounds`], gathered once for all
+/// its leaves that take the N-rays × 1-triangle test ([`Batch::visit_packet_leaf`]), and
+/// [`Batch::reread`] after tests made elsewhere.
+pub(crate) struct PacketLanes<const N: usize> {
     rays: RayLanes<N>,
-    hit_t: [f32; N],
-    bound: [f32; N],
+    bounds: LaneBounds<N>,
 }
 
 /// The batch: rays, their origins and reciprocal directions by axis (one array per axis, so a
@@ -536,35 +565,63 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         self.answer.prefetch(i);
     }
 
-    /// The rays `ids` (lanes `live`) gathered for [`Batch::visit_leaf_rays`] (an index past the
-    /// end reads the last ray, as [`RayLanes::gather`]).
+    /// The packet's rays `ids` (lanes `live`) gathered for [`Batch::visit_packet_leaf`] (an
+    /// index past the end reads the last ray, as [`RayLanes::gather`]).
     #[inline(always)]
-    pub fn lane_rays<const N: usize>(&self, ids: &[u32; N], live: u32) -> LaneRays<N> {
+    pub fn packet_lanes<const N: usize>(&self, ids: &[u32; N], live: u32) -> PacketLanes<N> {
         let rays = RayLanes::gather(self.rays, ids);
-        let (mut hit_t, mut bound) = ([f32::INFINITY; N], rays.tmax);
-        self.answer
-            .read_bounds(self.rays, (ids, live), &mut hit_t, &mut bound);
-        LaneRays { hit_t, bound, rays }
+        let mut bounds = LaneBounds::of(&rays);
+        self.answer.read_bounds(self.rays, (ids, live), &mut bounds);
+        PacketLanes { rays, bounds }
     }
 
-    /// Brings the closest hits of lanes `live` in `lanes` up to date, after tests that did not
-    /// go through `lanes`.
+    /// Brings the bounds of lanes `live` in `lanes` up to date, after tests that did not go
+    /// through them.
     #[inline(always)]
-    pub fn reread<const N: usize>(&self, lanes: &mut LaneRays<N>, ids: &[u32; N], live: u32) {
-        let (mut hit_t, mut bound) = (lanes.hit_t, lanes.bound);
+    pub fn reread<const N: usize>(&self, lanes: &mut PacketLanes<N>, ids: &[u32; N], live: u32) {
         self.answer
-            .read_bounds(self.rays, (ids, live), &mut hit_t, &mut bound);
-        (lanes.hit_t, lanes.bound) = (hit_t, bound);
+            .read_bounds(self.rays, (ids, live), &mut lanes.bounds);
     }
 
-    /// Tests the rays `ids` (lanes `live`, gathered in `lanes`, segments ending at `t_exit`)
-    /// against leaf `leaf`, N rays per triangle, marks the finished ones done and returns them.
+    /// Tests the rays `ids` (lanes `live`, segments ending at `t_exit`) of a stream against
+    /// leaf `leaf`, N rays per triangle, and marks the finished ones done.
     #[inline(always)]
     pub fn visit_leaf_rays<const N: usize>(
         &mut self,
         isa: Isa<N>,
         leaf: &[u32],
-        lanes: &mut LaneRays<N>,
+        ids: &[u32; N],
+        live: u32,
+        t_exit: &[f32; N],
+    ) {
+        let lanes = RayLanes::gather(self.rays, ids);
+        self.leaf_rays(isa, leaf, (&lanes, None), ids, live, t_exit);
+    }
+
+    /// [`Batch::visit_leaf_rays`] for a packet's rays, gathered in `lanes`; returns the lanes
+    /// finished.
+    #[inline(always)]
+    pub fn visit_packet_leaf<const N: usize>(
+        &mut self,
+        isa: Isa<N>,
+        leaf: &[u32],
+        lanes: &mut PacketLanes<N>,
+        ids: &[u32; N],
+        live: u32,
+        t_exit: &[f32; N],
+    ) -> u32 {
+        let kept = (&lanes.rays, Some(&mut lanes.bounds));
+        self.leaf_rays(isa, leaf, kept, ids, live, t_exit)
+    }
+
+    /// Both of the above: the answer's [`Answer::leaf_rays`], the statistics and the finished
+    /// flags.
+    #[inline(always)]
+    fn leaf_rays<const N: usize>(
+        &mut self,
+        isa: Isa<N>,
+        leaf: &[u32],
+        (lanes, kept): (&RayLanes<N>, Option<&mut LaneBounds<N>>),
         ids: &[u32; N],
         live: u32,
         t_exit: &[f32; N],
@@ -577,6 +634,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
             self.rays,
             &self.tests(),
             lanes,
+            kept,
             ids,
             live,
             t_exit,

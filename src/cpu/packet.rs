@@ -153,9 +153,9 @@ pub(crate) fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
         if rays_per_triangle(live, list) {
             let lanes = match lanes {
                 Some(ref mut lanes) => lanes,
-                None => lanes.insert(b.lane_rays(&id, p.mask)),
+                None => lanes.insert(b.packet_lanes(&id, p.mask)),
             };
-            dead |= b.visit_leaf_rays(isa, list, lanes, &id, live, &cur.t1);
+            dead |= b.visit_packet_leaf(isa, list, lanes, &id, live, &cur.t1);
         } else {
             let leaf = s.leaf.gather(
                 b.prims,

@@ -194,9 +194,7 @@ fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
                     b.prefetch_leaf(i);
                 }
                 let (id, _, t1) = lists.load::<N>(at);
-                let live = first::<N>(count - k);
-                let mut lanes = b.lane_rays(&id, live);
-                b.visit_leaf_rays(isa, leaf, &mut lanes, &id, live, &t1);
+                b.visit_leaf_rays(isa, leaf, &id, first::<N>(count - k), &t1);
             }
             continue;
         }
