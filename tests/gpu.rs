@@ -1367,6 +1367,16 @@ fn auto_renders_many_samples_within_the_software_loop_budget() {
     }
 }
 
+/// The contexts of the tests of jobs cut short by the driver: an explicit GPU context, an
+/// AUTO one on the GPU (where the backend is not overridden) and whether the adapter is
+/// software (where the cut must happen).
+fn cut_short_contexts() -> Option<(Context, Option<Context>, bool)> {
+    let explicit = gpu(GpuOptions::default())?;
+    let auto = auto_on_gpu(None).map(|(auto, _)| auto);
+    let software = explicit.gpu().unwrap().software;
+    Some((explicit, auto, software))
+}
+
 /// A query whose rays need more loop iterations than lavapipe allows an invocation is never
 /// answered wrong with success: one ray through 70,000 [`concentric_spheres`], with 63 cheap rays to a
 /// sphere of its own beside it, in every traversal: an explicit GPU context returns the CPU's
@@ -1378,11 +1388,9 @@ fn auto_renders_many_samples_within_the_software_loop_budget() {
 /// within the budget: answered on the GPU, as on the CPU.
 #[test]
 fn queries_cut_short_by_the_driver_are_refused() {
-    let Some(explicit) = gpu(GpuOptions::default()) else {
+    let Some((explicit, auto, software)) = cut_short_contexts() else {
         return;
     };
-    let auto = auto_on_gpu(None).map(|(auto, _)| auto);
-    let software = explicit.gpu().unwrap().software;
     let mut s = concentric_spheres(70_000);
     let side = Vec3::new(300.0, 0.0, 0.0);
     s.add_object(
@@ -1464,11 +1472,9 @@ fn queries_cut_short_by_the_driver_are_refused() {
 /// with success). AUTO gives the CPU's image.
 #[test]
 fn renders_cut_short_by_the_driver_are_refused() {
-    let Some(explicit) = gpu(GpuOptions::default()) else {
+    let Some((explicit, auto, software)) = cut_short_contexts() else {
         return;
     };
-    let auto = auto_on_gpu(None).map(|(auto, _)| auto);
-    let software = explicit.gpu().unwrap().software;
     for (n, samples, path) in [
         (400, 128, GpuPathRequest::Megakernel),
         (70_000, 1, GpuPathRequest::Wavefront),

@@ -187,8 +187,6 @@ impl Answer for Closest<'_> {
         hit.t < t_exit
     }
 
-    /// Both of the above: the answer's [`Answer::leaf_rays`], the statistics and the finished
-    /// flags.
     #[inline(always)]
     fn leaf_rays<const N: usize>(
         &mut self,
@@ -324,8 +322,6 @@ impl Answer for AnyHit<'_> {
         found
     }
 
-    /// Both of the above: the answer's [`Answer::leaf_rays`], the statistics and the finished
-    /// flags.
     #[inline(always)]
     fn leaf_rays<const N: usize>(
         &mut self,

@@ -195,8 +195,8 @@ pub(crate) fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
 /// one triangle at a time, rather than one ray against a block of the leaf's triangles: when at
 /// least one ray reaches it per two primitives. Fewer rays pay less for their few block tests
 /// (or single-ray tests) than for a test of every triangle. Against block tests at every leaf,
-/// this took 8-lane packets from 767 to 657 instructions per ray on the bunny's primary set and
-/// from 1081 to 941 on the dragon's, 3% fewer on the bunny's diffuse set and the same on its
+/// this took 8-lane packets from 767 to 659 instructions per ray on the bunny's primary set and
+/// from 1081 to 944 on the dragon's, 3% fewer on the bunny's diffuse set and the same on its
 /// incoherent set (callgrind, which lacks AVX-512); testing every leaf so cost 30% more on
 /// incoherent rays.
 #[inline(always)]
