@@ -9,7 +9,7 @@ use glam::{Mat3, Vec3};
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::{Backend, BackendRequest};
-use rt2::error::Rt2Status;
+use rt2::error::{Error, Rt2Status};
 use rt2::frame::Frame;
 use rt2::geometry::{Hit, PrimIndex, Ray};
 use rt2::gpu::GpuOptions;
@@ -1377,6 +1377,18 @@ fn cut_short_contexts() -> Option<(Context, Option<Context>, bool)> {
     Some((explicit, auto, software))
 }
 
+/// Asserts that `e` is the refusal of a job the driver cut short: BACKEND_UNAVAILABLE, with a
+/// message that says so.
+fn refused_as_cut(e: &Error, what: &str) {
+    assert_eq!(
+        e.status,
+        Rt2Status::BackendUnavailable,
+        "{what}: {}",
+        e.message
+    );
+    assert!(e.message.contains("cut"), "{what}: {}", e.message);
+}
+
 /// A query whose rays need more loop iterations than lavapipe allows an invocation is never
 /// answered wrong with success: one ray through 70,000 [`concentric_spheres`], with 63 cheap rays to a
 /// sphere of its own beside it, in every traversal: an explicit GPU context returns the CPU's
@@ -1436,13 +1448,7 @@ fn queries_cut_short_by_the_driver_are_refused() {
                 assert_eq!(hits, want, "{how:?}");
             }
             Err(e) => {
-                assert_eq!(
-                    e.status,
-                    Rt2Status::BackendUnavailable,
-                    "{how:?}: {}",
-                    e.message
-                );
-                assert!(e.message.contains("cut"), "{how:?}: {}", e.message);
+                refused_as_cut(&e, &format!("{how:?}"));
                 assert!(
                     hits.iter().all(|h| *h == before),
                     "{how:?}: a refused query wrote {:?}",
@@ -1498,13 +1504,7 @@ fn renders_cut_short_by_the_driver_are_refused() {
                 }
             }
             Err(e) => {
-                assert_eq!(
-                    e.status,
-                    Rt2Status::BackendUnavailable,
-                    "{what}: {}",
-                    e.message
-                );
-                assert!(e.message.contains("cut"), "{what}: {}", e.message);
+                refused_as_cut(&e, &what);
                 assert!(
                     f.pixels().iter().all(|&b| b == 0),
                     "{what}: the frame was written"
