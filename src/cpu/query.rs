@@ -199,6 +199,31 @@ fn serial<T>(
 /// cost a copy of every ray (measured: 25% of the speed on 1376×768 frames).
 const LONG_RUNS: usize = 64;
 
+/// Neighbour pairs [`octant_runs_at_least`] looks at, at most.
+const RUN_SAMPLES: usize = 1024;
+
+/// Whether consecutive rays share an octant in runs of `run` rays or more on average, as a
+/// camera's rays in scanline order do: whether the octant changes at one neighbour pair in
+/// `run` or fewer. Judged from [`RUN_SAMPLES`] pairs in a larger batch, so that it costs the
+/// same for a million rays as for a thousand, at the positions of a Weyl sequence (the
+/// fractions of `k` times the golden ratio): evenly spaced samples would alias with an image's
+/// rows, all falling on the column where the octant changes, or all missing it.
+pub fn octant_runs_at_least(rays: &[Ray], run: usize) -> bool {
+    let pairs = rays.len().saturating_sub(1);
+    let changed = |i: usize| octant(&rays[i]) != octant(&rays[i + 1]);
+    let (samples, changes) = if pairs <= RUN_SAMPLES {
+        (pairs, (0..pairs).filter(|&i| changed(i)).count())
+    } else {
+        const GOLDEN: f64 = 0.618_033_988_749_894_9;
+        let at = |k: usize| ((k as f64 * GOLDEN).fract() * pairs as f64) as usize;
+        let changes = (0..RUN_SAMPLES)
+            .filter(|&k| changed(at(k).min(pairs - 1)))
+            .count();
+        (RUN_SAMPLES, changes)
+    };
+    changes * run <= samples
+}
+
 /// Streams of at most [`STREAM_MAX`] rays, no more than a thread's share (but at least
 /// [`STREAM_CHUNK`]), traced in parallel. Rays that come in long octant runs are cut in their
 /// own order; others are sorted by octant (a stable counting sort) and each stream, of one
@@ -212,11 +237,10 @@ fn streamed<T: RayAnswer>(
         .len()
         .div_ceil(rayon::current_num_threads())
         .clamp(STREAM_CHUNK, STREAM_MAX);
-    let octants: Vec<u8> = rays.iter().map(|r| octant(r) as u8).collect();
-    let runs = 1 + octants.windows(2).filter(|w| w[0] != w[1]).count();
-    if runs * LONG_RUNS <= rays.len() {
+    if octant_runs_at_least(rays, LONG_RUNS) {
         return chunked((rays, exclude), out, size, trace);
     }
+    let octants: Vec<u8> = rays.iter().map(|r| octant(r) as u8).collect();
     let mut start = [0usize; 9];
     for &o in &octants {
         start[o as usize + 1] += 1;
