@@ -208,7 +208,7 @@ enum rt2_query_mode
 #endif // __cplusplus
  {
   /**
-   * One ray at a time with `rt2_query_options.traversal` (default).
+   * One ray at a time with `rt2_query_options.traversal`.
    */
   RT2_QUERY_MODE_SINGLE = 0,
   /**
@@ -221,6 +221,14 @@ enum rt2_query_mode
    * streams of one octant and at most 32768 rays (`cpu::query::STREAM_MAX`).
    */
   RT2_QUERY_MODE_STREAM = 2,
+  /**
+   * The library chooses per batch (default): PACKET for 8 rays or more that come in runs of
+   * one octant (16 rays long on average or more), as a camera's rays in scanline order do;
+   * STREAM for 128 rays or more in mixed octants (incoherent); SINGLE for smaller batches
+   * and whenever `traversal` names another traversal than STANDARD or AUTO.
+   * `rt2_context_properties.auto_choice` says which it took and why.
+   */
+  RT2_QUERY_MODE_AUTO = 3,
 };
 #ifndef __cplusplus
 typedef uint32_t rt2_query_mode;
@@ -389,12 +397,12 @@ typedef struct rt2_context_properties {
   const char *fallback;
   /**
    * What the library chose for the context's last render or ray query where the caller
-   * left the choice to it (`RT2_TRAVERSAL_AUTO`, `RT2_GPU_PATH_AUTO`), and why, on the
-   * backend that ran the job, as `"<what> <choice>: <why>"` items joined by `"; "`, e.g.
-   * `"GPU traversal ropes++: ...; GPU render path megakernel: ..."` or
-   * `"CPU traversal standard: ..."`. NULL when the caller chose everything or no job ran
-   * yet. Same job and same lifetime as `fallback`: a copy, valid until the next
-   * `rt2_context_info` on this thread.
+   * left the choice to it (`RT2_TRAVERSAL_AUTO`, `RT2_QUERY_MODE_AUTO`, `RT2_GPU_PATH_AUTO`),
+   * and why, on the backend that ran the job, as `"<what> <choice>: <why>"` items joined by
+   * `"; "`, e.g. `"GPU traversal ropes++: ...; GPU render path megakernel: ..."` or
+   * `"CPU traversal standard: ...; CPU query mode packet: ..."`. NULL when the caller chose
+   * everything or no job ran yet. Same job and same lifetime as `fallback`: a copy, valid
+   * until the next `rt2_context_info` on this thread.
    */
   const char *auto_choice;
 } rt2_context_properties;
@@ -578,9 +586,10 @@ typedef struct rt2_query_options {
    */
   uint32_t short_stack_size;
   /**
-   * An `rt2_query_mode` value (default SINGLE). PACKET and STREAM follow the standard
-   * traversal's order whatever `traversal` says, and return the same hits. The GPU ignores
-   * `mode` and honours `traversal` (a job an AUTO context moves to the CPU takes `mode`).
+   * An `rt2_query_mode` value (default AUTO; a zeroed struct says SINGLE). PACKET and STREAM
+   * follow the standard traversal's order whatever `traversal` says, and return the same
+   * hits. The GPU ignores `mode` and honours `traversal` (a job an AUTO context moves to the
+   * CPU takes `mode`).
    */
   uint32_t mode;
   /**
@@ -885,7 +894,7 @@ struct rt2_build_options rt2_build_options_default(void);
 struct rt2_render_options rt2_render_options_default(void);
 
 /**
- * Default query options (AUTO traversal).
+ * Default query options (AUTO traversal, AUTO mode).
  */
 struct rt2_query_options rt2_query_options_default(void);
 

@@ -169,7 +169,8 @@ impl Context {
 
     /// What the library chose for the last render or query where the caller left the choice
     /// to it (AUTO), and why, on the backend that ran the job: `"GPU traversal ropes++: …;
-    /// GPU render path wavefront: …"`, or `"CPU traversal standard: …"` for a job on the CPU.
+    /// GPU render path wavefront: …"`, or `"CPU traversal standard: …; CPU query mode
+    /// packet: …"` for a query on the CPU.
     /// `None` when the caller chose everything (or no job ran yet). The C API reports it as
     /// `rt2_context_properties.auto_choice`.
     pub fn last_auto_choice(&self) -> Option<String> {
@@ -378,9 +379,11 @@ impl Context {
             },
             |out, choices| {
                 let (how, opts) = self.query_setup(scene, q, choices);
+                let (mode, why) = dispatch::choose_query_mode(rays, q.mode, q.traversal);
+                choices.mode(q.mode.is_none(), mode.name(), why);
                 let width = Width::best();
                 let mut trace =
-                    || cpu::query::trace(scene, (rays, exclude), out, how, &opts, q.mode, width);
+                    || cpu::query::trace(scene, (rays, exclude), out, how, &opts, mode, width);
                 // One chunk runs on one thread wherever it runs: on the caller's, it skips the
                 // hand-off to the pool, which cost about 15 µs a call (over 100 rays' worth on
                 // the bunny) and made a loop of one-ray calls 100 times slower than a batch.
@@ -466,6 +469,7 @@ struct JobRecord {
 #[derive(Clone, Debug, Default)]
 struct AutoChoices {
     traversal: Option<Choice>,
+    mode: Option<Choice>,
     gpu_path: Option<Choice>,
 }
 
@@ -490,6 +494,17 @@ impl AutoChoices {
         }
     }
 
+    /// Notes the CPU query mode `name`, if AUTO chose it (`auto`).
+    fn mode(&mut self, auto: bool, name: &'static str, why: &'static str) {
+        if auto {
+            self.mode = Some(Choice {
+                what: "CPU query mode",
+                name,
+                why: why.into(),
+            });
+        }
+    }
+
     /// Notes the GPU render path `name`, if AUTO chose it (`auto`).
     fn gpu_path(&mut self, auto: bool, name: &'static str, why: String) {
         if auto {
@@ -502,7 +517,7 @@ impl AutoChoices {
     }
 
     fn report(&self) -> Option<String> {
-        let said: Vec<String> = [&self.traversal, &self.gpu_path]
+        let said: Vec<String> = [&self.traversal, &self.mode, &self.gpu_path]
             .into_iter()
             .flatten()
             .map(|c| format!("{} {}: {}", c.what, c.name, c.why))
@@ -541,8 +556,9 @@ pub struct QueryOptions {
     /// `None` lets the library choose (AUTO).
     pub traversal: Option<Traversal>,
     pub short_stack_size: usize,
-    /// One ray at a time, packets or streams (same hits; see [`cpu::query::QueryMode`]).
-    pub mode: cpu::query::QueryMode,
+    /// One ray at a time, packets or streams (same hits; see [`cpu::query::QueryMode`]);
+    /// `None` lets the library choose (AUTO, `dispatch::choose_query_mode`).
+    pub mode: Option<cpu::query::QueryMode>,
     /// The ray–triangle test (`crate::precision`).
     pub intersector: crate::precision::Intersector,
 }
@@ -565,7 +581,7 @@ impl Default for QueryOptions {
         QueryOptions {
             traversal: None,
             short_stack_size: 3,
-            mode: cpu::query::QueryMode::Single,
+            mode: None,
             intersector: crate::precision::Intersector::MollerTrumbore,
         }
     }

@@ -2,6 +2,7 @@
 //! Tree builds always run on the CPU (as in the thesis); tracing goes to the GPU when one is
 //! usable, otherwise to the CPU. `RT2_BACKEND=cpu|gpu|auto` overrides the caller's choice.
 
+use crate::cpu::query::{octant_runs_at_least, QueryMode};
 use crate::cpu::traverse::Traversal;
 use crate::error::{Error, Result, Rt2Status};
 use crate::gpu::{self, Gpu, GpuOptions, GpuPath};
@@ -223,6 +224,60 @@ pub fn choose_traversal(
     }
 }
 
+/// Rays per octant run, on average, from which AUTO takes a batch for a camera's (coherent):
+/// a 16-ray packet, AVX-512's, then mostly fills from one run. Scanline rows change octant
+/// twice (at the centre column and the row's end): images 32 pixels wide or more pass.
+pub const AUTO_PACKET_RUN: usize = 16;
+
+/// Fewest coherent rays (in octant runs of [`AUTO_PACKET_RUN`]) AUTO traces as packets: on the
+/// bunny's primary rays, in batches of 8 through `Context::intersect`, packets ran at 1.4×
+/// single rays, and at 0.8× in batches of 4.
+pub const AUTO_PACKET_MIN: usize = 8;
+
+/// Fewest incoherent rays AUTO traces as a stream: on the bunny's and the dragon's incoherent
+/// rays streams caught up with single rays in batches of about 128 (0.7–1.0× below 100 rays,
+/// 1.3–1.5× from 4096).
+pub const AUTO_STREAM_MIN: usize = 128;
+
+/// The query mode AUTO picks for a batch of rays on the CPU, and why. Every mode returns the
+/// same hits, so the choice is one of speed alone (`rt2 bench streams`, one thread): packets
+/// for rays that come in runs of one octant, as a camera's do (on primary rays 16-lane
+/// packets ran at 1.1–1.4× streams and 2.3–2.9× single rays); streams for rays in mixed
+/// octants (on incoherent and diffuse rays at 1.1–1.8× packets and 1.2–2.3× single rays);
+/// single rays for batches too small to pay for a batch's setup. Packets and streams walk the
+/// tree in the standard traversal's order, so a batch whose caller asked for another
+/// traversal runs one ray at a time.
+pub fn choose_query_mode(
+    rays: &[crate::geometry::Ray],
+    requested: Option<QueryMode>,
+    traversal: Option<Traversal>,
+) -> (QueryMode, &'static str) {
+    let coherent = || octant_runs_at_least(rays, AUTO_PACKET_RUN);
+    match (requested, traversal) {
+        (Some(m), _) => (m, "requested by the caller"),
+        (None, Some(t)) if t != Traversal::Standard => (
+            QueryMode::Single,
+            "the requested traversal runs one ray at a time (packets and streams take the \
+             standard traversal's order)",
+        ),
+        _ if rays.len() < AUTO_PACKET_MIN => {
+            (QueryMode::Single, "too few rays to pay for a batch's setup")
+        }
+        _ if coherent() => (
+            QueryMode::Packet,
+            "the rays come in runs of one octant, as a camera's do: neighbours share nodes",
+        ),
+        _ if rays.len() < AUTO_STREAM_MIN => (
+            QueryMode::Single,
+            "too few incoherent rays to pay for a stream's setup",
+        ),
+        _ => (
+            QueryMode::Stream,
+            "the rays change octant often (incoherent): all of them walk the tree's top at once",
+        ),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -320,5 +375,98 @@ mod tests {
             choose_traversal(s.committed().unwrap(), None).0,
             Traversal::Standard
         );
+    }
+
+    /// `n` rays from the origin: in runs of `run` rays of one octant (the direction's signs
+    /// change from run to run), or each in the next octant for `run` = 1.
+    fn rays_in_runs(n: usize, run: usize) -> Vec<crate::geometry::Ray> {
+        (0..n)
+            .map(|i| {
+                let o = (i / run) % 8;
+                let sign = |bit: usize| if o >> bit & 1 == 1 { -1.0 } else { 1.0 };
+                let dir = Vec3::new(sign(0) * 0.3, sign(1) * 0.2, sign(2));
+                crate::geometry::Ray::new(Vec3::ZERO, dir, 0.0, f32::INFINITY)
+            })
+            .collect()
+    }
+
+    /// AUTO traces camera-like batches (long octant runs) in packets from 8 rays on,
+    /// incoherent ones as streams from 128 rays on, smaller batches and other traversals one
+    /// ray at a time, and takes the caller's mode as given.
+    #[test]
+    fn auto_query_mode_follows_coherence_size_and_traversal() {
+        let pick = |rays: &[crate::geometry::Ray], t| choose_query_mode(rays, None, t).0;
+        let camera = rays_in_runs(4096, 512);
+        let mixed = rays_in_runs(4096, 1);
+        assert_eq!(pick(&camera, None), QueryMode::Packet);
+        assert_eq!(pick(&camera, Some(Traversal::Standard)), QueryMode::Packet);
+        assert_eq!(pick(&mixed, None), QueryMode::Stream);
+        assert_eq!(pick(&camera[..AUTO_PACKET_MIN], None), QueryMode::Packet);
+        assert_eq!(
+            pick(&camera[..AUTO_PACKET_MIN - 1], None),
+            QueryMode::Single
+        );
+        assert_eq!(pick(&mixed[..AUTO_STREAM_MIN], None), QueryMode::Stream);
+        assert_eq!(pick(&mixed[..AUTO_STREAM_MIN - 1], None), QueryMode::Single);
+        for t in Traversal::ALL
+            .into_iter()
+            .filter(|&t| t != Traversal::Standard)
+        {
+            let (mode, why) = choose_query_mode(&mixed, None, Some(t));
+            assert_eq!(mode, QueryMode::Single, "{t:?}");
+            assert!(why.contains("standard traversal's order"), "{why}");
+        }
+        let asked = Some(QueryMode::Stream);
+        assert_eq!(
+            choose_query_mode(&camera, asked, None),
+            (QueryMode::Stream, "requested by the caller")
+        );
+    }
+
+    /// The octant-run test for runs of 64 passes a batch whose octant changes at one neighbour
+    /// pair in 64 or fewer: exactly in a batch of up to 1025 rays, from 1024 sampled pairs in a
+    /// larger one (a million rays in runs of 256 pass, in runs of 16 or 1 they do not).
+    #[test]
+    fn octant_runs_are_judged_from_samples() {
+        for (n, run, long) in [
+            (1, 1, true),
+            (64, 64, true),
+            (129, 64, true),
+            (64, 32, false),
+            (1025, 1, false),
+            (1 << 20, 256, true),
+            (1 << 20, 16, false),
+            (1 << 20, 1, false),
+        ] {
+            let rays = rays_in_runs(n, run);
+            assert_eq!(
+                octant_runs_at_least(&rays, 64),
+                long,
+                "{n} rays in runs of {run}"
+            );
+        }
+        assert!(octant_runs_at_least(&[], 64));
+    }
+
+    /// A pinhole camera's rays in scanline order change octant at the centre column and at
+    /// the end of each row: two pairs in a row of 1024. Samples spaced evenly by a row's length
+    /// would all fall on one column (both changes or neither); the test's samples do not.
+    #[test]
+    fn camera_rays_in_scanline_order_are_long_runs() {
+        for (w, h) in [(1024, 1024), (512, 512), (1376, 768)] {
+            let rays: Vec<crate::geometry::Ray> = (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w) as f32, (i / w) as f32);
+                    let dir = Vec3::new(x + 0.5 - w as f32 / 2.0, h as f32 / 2.0 - y - 0.5, -900.0);
+                    crate::geometry::Ray::new(Vec3::ZERO, dir, 0.0, f32::INFINITY)
+                })
+                .collect();
+            assert!(octant_runs_at_least(&rays, 64), "{w}x{h}");
+            // Shuffled (every 7919th ray in turn) the same rays are incoherent.
+            let shuffled: Vec<_> = (0..rays.len())
+                .map(|k| rays[k * 7919 % rays.len()])
+                .collect();
+            assert!(!octant_runs_at_least(&shuffled, 64), "{w}x{h} shuffled");
+        }
     }
 }

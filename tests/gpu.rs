@@ -1299,6 +1299,11 @@ fn auto_choices_are_reported_for_the_last_job() {
     let choice = auto.last_auto_choice().unwrap();
     println!("auto_choice of a query that fell back: {choice}");
     assert!(choice.starts_with("CPU traversal standard: "), "{choice}");
+    // The CPU also chose how to trace the batch: one ray is traced alone.
+    assert!(
+        choice.contains("; CPU query mode single: too few rays"),
+        "{choice}"
+    );
     assert!(draw(&cpu(), &s, &o).is_some_and(|c| c.starts_with("CPU traversal standard: ")));
 }
 

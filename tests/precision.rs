@@ -986,7 +986,7 @@ fn hit_at_every_direction_length(what: &str, shape: Shape, origin: Vec3, distanc
             let mut occluded = vec![false; rays.len()];
             let q = rt2::context::QueryOptions {
                 intersector,
-                mode,
+                mode: Some(mode),
                 ..Default::default()
             };
             let c = scene.committed().unwrap();

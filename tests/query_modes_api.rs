@@ -1,16 +1,17 @@
 //! The C API's query modes and render schedules: `rt2_query_options.mode` selects single rays,
-//! packets or streams (same hits), `rt2_render_options.schedule` depth- or breadth-first, and
-//! out-of-range values are errors, not undefined behaviour.
+//! packets, streams or AUTO's choice among them (same hits), `rt2_render_options.schedule`
+//! depth- or breadth-first, and out-of-range values are errors, not undefined behaviour.
 
 use rt2::api::*;
 use rt2::error::Rt2Status;
 use std::ptr::{null, null_mut};
 
-/// The three query modes of the C API.
-const MODES: [Rt2QueryMode; 3] = [
+/// The query modes of the C API.
+const MODES: [Rt2QueryMode; 4] = [
     Rt2QueryMode::Single,
     Rt2QueryMode::Packet,
     Rt2QueryMode::Stream,
+    Rt2QueryMode::Auto,
 ];
 
 /// Query options of the standard traversal in `mode`.
@@ -108,15 +109,10 @@ fn every_query_mode_gives_the_same_hits_and_bad_values_are_rejected() {
             })
             .collect();
         let mut results = Vec::new();
-        let modes = [
-            Rt2QueryMode::Single,
-            Rt2QueryMode::Packet,
-            Rt2QueryMode::Stream,
-        ];
         let intersectors = [Rt2Intersector::MollerTrumbore, Rt2Intersector::Watertight];
-        for (intersector, mode) in intersectors.iter().flat_map(|&i| modes.map(|m| (i, m))) {
+        for (intersector, mode) in intersectors.iter().flat_map(|&i| MODES.map(|m| (i, m))) {
             let mut opt = rt2_query_options_default();
-            assert_eq!(opt.mode, Rt2QueryMode::Single as u32);
+            assert_eq!(opt.mode, Rt2QueryMode::Auto as u32);
             opt.mode = mode as u32;
             opt.intersector = intersector as u32;
             let mut hits = vec![
@@ -153,7 +149,7 @@ fn every_query_mode_gives_the_same_hits_and_bad_values_are_rejected() {
             rt2_intersect(ctx, scene, rays.as_ptr(), 1, &mut hit, opt, null_mut())
         };
         let mut opt = rt2_query_options_default();
-        opt.mode = 3;
+        opt.mode = 4;
         assert_eq!(one_ray(&opt), Rt2Status::InvalidArgument);
         // The short stack holds at most 32 entries: 33 is refused, 32 runs.
         for (size, want) in [(33, Rt2Status::InvalidArgument), (32, Rt2Status::Ok)] {
@@ -589,7 +585,7 @@ fn any_hit_statistics_agree_in_every_mode_and_traversal() {
         for exclude in [None, Some(&case.exclude[..])] {
             for intersector in Intersector::ALL {
                 let q = |mode, traversal| QueryOptions {
-                    mode,
+                    mode: Some(mode),
                     traversal: Some(traversal),
                     intersector,
                     ..QueryOptions::default()
@@ -851,10 +847,12 @@ fn packets_and_streams_build_no_ropes_on_the_cpu() {
             })
             .collect();
         let mut hits: Vec<rt2_hit> = vec![std::mem::zeroed(); rays.len()];
+        // AUTO runs a rope traversal one ray at a time, so it needs the ropes.
         for (mode, ropes) in [
             (Rt2QueryMode::Packet, on_gpu),
             (Rt2QueryMode::Stream, on_gpu),
             (Rt2QueryMode::Single, true),
+            (Rt2QueryMode::Auto, true),
         ] {
             let mut opt = rt2_query_options_default();
             opt.traversal = Rt2Traversal::RopesPlusPlus as u32;
@@ -863,6 +861,112 @@ fn packets_and_streams_build_no_ropes_on_the_cpu() {
             assert_eq!(st, Rt2Status::Ok);
             assert!(hits.iter().all(|h| h.t == 4.0), "{mode:?}");
             assert_eq!(rope_bytes() > 0, ropes, "{mode:?}: ropes built?");
+        }
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// `rt2_context_properties.auto_choice` of `ctx` (`None`: NULL).
+unsafe fn auto_choice(ctx: *const rt2_context) -> Option<String> {
+    let mut info: rt2_context_properties = std::mem::zeroed();
+    info.struct_size = std::mem::size_of::<rt2_context_properties>() as u32;
+    assert_eq!(rt2_context_info(ctx, &mut info), Rt2Status::Ok);
+    (!info.auto_choice.is_null()).then(|| {
+        std::ffi::CStr::from_ptr(info.auto_choice)
+            .to_string_lossy()
+            .into_owned()
+    })
+}
+
+/// AUTO (the default mode) traces a camera's rays in scanline order as packets, the same rays
+/// shuffled as streams, a handful of rays and any batch of a non-standard traversal one ray at
+/// a time; it says so in `auto_choice`, and every choice gives SINGLE's hits bit for bit, for
+/// closest and any hits.
+#[test]
+fn auto_mode_chooses_by_coherence_and_size_and_says_why() {
+    unsafe {
+        let spheres = (0..100).map(|k| {
+            let c = [
+                (k % 10) as f32 - 4.5,
+                (k / 10) as f32 - 4.5,
+                0.3 * (k % 4) as f32,
+            ];
+            (c, 0.35)
+        });
+        let (ctx, scene, _) = sphere_scene(spheres);
+        // A 64×64 pinhole camera 12 units in front of the spheres, in scanline order.
+        let camera: Vec<rt2_ray> = (0..64 * 64)
+            .map(|i| rt2_ray {
+                org: [0.0, 0.0, 12.0],
+                tmin: 0.0,
+                dir: [
+                    ((i % 64) as f32 + 0.5 - 32.0) / 64.0,
+                    (32.0 - (i / 64) as f32 - 0.5) / 64.0,
+                    -1.0,
+                ],
+                tmax: f32::INFINITY,
+            })
+            .collect();
+        let shuffled: Vec<rt2_ray> = (0..camera.len())
+            .map(|k| camera[k * 2741 % camera.len()])
+            .collect();
+        let cases: [(&[rt2_ray], Rt2Traversal, &str); 5] = [
+            (&camera, Rt2Traversal::Auto, "CPU query mode packet: "),
+            (&camera, Rt2Traversal::Standard, "CPU query mode packet: "),
+            (&shuffled, Rt2Traversal::Auto, "CPU query mode stream: "),
+            (&camera[..5], Rt2Traversal::Auto, "CPU query mode single: "),
+            (&shuffled, Rt2Traversal::Ropes, "CPU query mode single: "),
+        ];
+        let mut info: rt2_context_properties = std::mem::zeroed();
+        info.struct_size = std::mem::size_of::<rt2_context_properties>() as u32;
+        assert_eq!(rt2_context_info(ctx, &mut info), Rt2Status::Ok);
+        let on_cpu = info.backend == Rt2Backend::Cpu as u32;
+        let mut hit_some = false;
+        for (rays, traversal, said) in cases {
+            let mut single = standard_in(Rt2QueryMode::Single);
+            single.traversal = traversal as u32;
+            let mut want = vec![std::mem::zeroed::<rt2_hit>(); rays.len()];
+            assert_eq!(
+                intersect_all(ctx, scene, rays, &mut want, &single),
+                Rt2Status::Ok
+            );
+            let mut want_occ = vec![2u8; rays.len()];
+            assert_eq!(
+                occluded_all(ctx, scene, rays, &mut want_occ, &single),
+                Rt2Status::Ok
+            );
+
+            let mut auto = rt2_query_options_default();
+            auto.traversal = traversal as u32;
+            let mut got = vec![std::mem::zeroed::<rt2_hit>(); rays.len()];
+            assert_eq!(
+                intersect_all(ctx, scene, rays, &mut got, &auto),
+                Rt2Status::Ok
+            );
+            if on_cpu {
+                let choice = auto_choice(ctx).expect("the mode was left to AUTO");
+                assert!(choice.contains(said), "{said}: {choice}");
+            }
+            assert_eq!(got, want, "{said}");
+            let mut occ = vec![2u8; rays.len()];
+            assert_eq!(
+                occluded_all(ctx, scene, rays, &mut occ, &auto),
+                Rt2Status::Ok
+            );
+            assert_eq!(occ, want_occ, "{said}");
+            hit_some |= got.iter().any(|h| h.object != RT2_INVALID_ID);
+        }
+        assert!(hit_some, "the camera sees spheres");
+        // A mode the caller chose is not reported as AUTO's.
+        if on_cpu {
+            let packets = standard_in(Rt2QueryMode::Packet);
+            let mut hits = vec![std::mem::zeroed::<rt2_hit>(); camera.len()];
+            assert_eq!(
+                intersect_all(ctx, scene, &camera, &mut hits, &packets),
+                Rt2Status::Ok
+            );
+            assert_eq!(auto_choice(ctx), None);
         }
         rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);

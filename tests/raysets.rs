@@ -57,7 +57,7 @@ fn every_traversal_and_mode_agrees_with_embree_on_the_bunny_ray_sets() {
         for (how, mode) in runs {
             let q = QueryOptions {
                 traversal: Some(how),
-                mode,
+                mode: Some(mode),
                 ..QueryOptions::default()
             };
             let mut hits = vec![Hit::MISS; rays.len()];

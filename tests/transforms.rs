@@ -522,7 +522,7 @@ fn a_mirrored_closed_mesh_stays_watertight() {
         scene.ensure_exact_vertices().unwrap();
         let q = QueryOptions {
             intersector: Intersector::Watertight,
-            mode: QueryMode::Single,
+            mode: Some(QueryMode::Single),
             ..QueryOptions::default()
         };
         let mut hits = vec![Hit::MISS; rays.len()];

@@ -60,12 +60,12 @@ pub struct rt2_context_properties {
     /// exiting)" instead.
     pub fallback: *const c_char,
     /// What the library chose for the context's last render or ray query where the caller
-    /// left the choice to it (`RT2_TRAVERSAL_AUTO`, `RT2_GPU_PATH_AUTO`), and why, on the
-    /// backend that ran the job, as `"<what> <choice>: <why>"` items joined by `"; "`, e.g.
-    /// `"GPU traversal ropes++: ...; GPU render path megakernel: ..."` or
-    /// `"CPU traversal standard: ..."`. NULL when the caller chose everything or no job ran
-    /// yet. Same job and same lifetime as `fallback`: a copy, valid until the next
-    /// `rt2_context_info` on this thread.
+    /// left the choice to it (`RT2_TRAVERSAL_AUTO`, `RT2_QUERY_MODE_AUTO`, `RT2_GPU_PATH_AUTO`),
+    /// and why, on the backend that ran the job, as `"<what> <choice>: <why>"` items joined by
+    /// `"; "`, e.g. `"GPU traversal ropes++: ...; GPU render path megakernel: ..."` or
+    /// `"CPU traversal standard: ...; CPU query mode packet: ..."`. NULL when the caller chose
+    /// everything or no job ran yet. Same job and same lifetime as `fallback`: a copy, valid
+    /// until the next `rt2_context_info` on this thread.
     pub auto_choice: *const c_char,
 }
 

@@ -62,7 +62,7 @@ pub enum Rt2Traversal {
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Rt2QueryMode {
-    /// One ray at a time with `rt2_query_options.traversal` (default).
+    /// One ray at a time with `rt2_query_options.traversal`.
     Single = 0,
     /// Packets of one octant (Wald) as wide as the CPU runs: 16 rays with AVX-512, 8 with
     /// AVX2, else 4; standard traversal order.
@@ -70,6 +70,12 @@ pub enum Rt2QueryMode {
     /// The n-ray traversal of the vectorised-traversal paper: all rays of a stream at once, in
     /// streams of one octant and at most 32768 rays (`cpu::query::STREAM_MAX`).
     Stream = 2,
+    /// The library chooses per batch (default): PACKET for 8 rays or more that come in runs of
+    /// one octant (16 rays long on average or more), as a camera's rays in scanline order do;
+    /// STREAM for 128 rays or more in mixed octants (incoherent); SINGLE for smaller batches
+    /// and whenever `traversal` names another traversal than STANDARD or AUTO.
+    /// `rt2_context_properties.auto_choice` says which it took and why.
+    Auto = 3,
 }
 
 /// How transparent materials pass light (`rt2_render_options.transparency`).
@@ -196,11 +202,13 @@ pub(crate) fn backend_from(v: u32) -> Result<BackendRequest> {
     }
 }
 
-pub(crate) fn query_mode_from(v: u32) -> Result<QueryMode> {
+/// A query mode; `None` is AUTO.
+pub(crate) fn query_mode_from(v: u32) -> Result<Option<QueryMode>> {
     match v {
-        0 => Ok(QueryMode::Single),
-        1 => Ok(QueryMode::Packet),
-        2 => Ok(QueryMode::Stream),
+        0 => Ok(Some(QueryMode::Single)),
+        1 => Ok(Some(QueryMode::Packet)),
+        2 => Ok(Some(QueryMode::Stream)),
+        3 => Ok(None),
         _ => Err(enum_error("rt2_query_mode", v)),
     }
 }

@@ -66,9 +66,10 @@ pub struct rt2_query_options {
     pub traversal: u32,
     /// Entries of the short stack, 1..=32 (default 3).
     pub short_stack_size: u32,
-    /// An `rt2_query_mode` value (default SINGLE). PACKET and STREAM follow the standard
-    /// traversal's order whatever `traversal` says, and return the same hits. The GPU ignores
-    /// `mode` and honours `traversal` (a job an AUTO context moves to the CPU takes `mode`).
+    /// An `rt2_query_mode` value (default AUTO; a zeroed struct says SINGLE). PACKET and STREAM
+    /// follow the standard traversal's order whatever `traversal` says, and return the same
+    /// hits. The GPU ignores `mode` and honours `traversal` (a job an AUTO context moves to the
+    /// CPU takes `mode`).
     pub mode: u32,
     /// An `rt2_intersector` value (default MOLLER_TRUMBORE).
     pub intersector: u32,
@@ -105,7 +106,7 @@ pub struct rt2_query_stats {
     pub prim_tests: u64,
 }
 
-/// Default query options (AUTO traversal).
+/// Default query options (AUTO traversal, AUTO mode).
 #[no_mangle]
 pub extern "C" fn rt2_query_options_default() -> rt2_query_options {
     let d = QueryOptions::default();
@@ -113,7 +114,7 @@ pub extern "C" fn rt2_query_options_default() -> rt2_query_options {
         struct_size: std::mem::size_of::<rt2_query_options>() as u32,
         traversal: 0,
         short_stack_size: d.short_stack_size as u32,
-        mode: Rt2QueryMode::Single as u32,
+        mode: Rt2QueryMode::Auto as u32,
         intersector: intersector_to(d.intersector),
         exclude: std::ptr::null(),
     }
@@ -290,8 +291,10 @@ unsafe fn run_query<T>(
         // Ropes (about 3x the tree) serve a rope traversal of single rays, and any GPU job
         // (its kernels take the traversal whatever the mode); the CPU's packets and streams
         // follow the standard order and never read them.
+        // AUTO runs a rope traversal one ray at a time (`dispatch::choose_query_mode`).
         let ropes = q.traversal.is_some_and(|t| t.needs_ropes())
-            && (q.mode == QueryMode::Single || c.inner.decision().backend == Backend::Gpu);
+            && (matches!(q.mode, None | Some(QueryMode::Single))
+                || c.inner.decision().backend == Backend::Gpu);
         let guard = s.prepared_with(
             ropes,
             q.intersector == crate::precision::Intersector::Watertight,

@@ -5,6 +5,7 @@
 use super::{embree_rows, find_set, median, mib, model_scene, shared, time_ms, Args};
 use crate::output::warn;
 use rt2::context::{Context, QueryOptions};
+use rt2::cpu::query::QueryMode;
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
 use rt2::error::Result;
@@ -146,7 +147,6 @@ fn median_build_ms(ctx: &Context, scene: &mut Scene, runs: usize) -> f64 {
 /// build time (2 threads), and Mrays/s (1 thread, standard traversal) of single rays, packets
 /// and streams on the incoherent and primary sets.
 fn traversal_cost_effect(a: &Args) -> Result<String> {
-    use rt2::cpu::query::QueryMode;
     let mut out = String::from(
         "\nEffect of the SAH traversal cost K_T (intersection cost 1; default marked *): tree \
          size, build time (2 threads) and Mrays/s (1 thread, standard traversal) on the \
@@ -196,7 +196,7 @@ fn traversal_cost_effect(a: &Args) -> Result<String> {
                 for mode in [QueryMode::Single, QueryMode::Packet, QueryMode::Stream] {
                     let q = QueryOptions {
                         traversal: Some(Traversal::Standard),
-                        mode,
+                        mode: Some(mode),
                         ..QueryOptions::default()
                     };
                     let mut hits = vec![Hit::MISS; rays.len()];
@@ -242,6 +242,7 @@ fn layout_effect(a: &Args) -> Result<String> {
             let c = scene.committed()?;
             let q = QueryOptions {
                 traversal: Some(Traversal::Standard),
+                mode: Some(QueryMode::Single),
                 ..QueryOptions::default()
             };
             let mut hits = vec![Hit::MISS; rays.len()];

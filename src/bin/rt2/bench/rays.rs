@@ -3,6 +3,7 @@
 
 use super::{embree_rows, model_scene, shared, time_ms, Args};
 use rt2::context::{Context, QueryOptions};
+use rt2::cpu::query::QueryMode;
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
 use rt2::error::{Error, Result, Rt2Status};
@@ -51,6 +52,7 @@ pub(super) fn rays(a: &Args) -> Result<String> {
             for how in Traversal::ALL {
                 let q = QueryOptions {
                     traversal: Some(how),
+                    mode: Some(QueryMode::Single),
                     ..QueryOptions::default()
                 };
                 let mut hits = vec![Hit::MISS; rays.len()];

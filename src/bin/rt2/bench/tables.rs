@@ -5,6 +5,7 @@ use super::{mib, shared, time_ms, Args};
 use crate::load_scene;
 use crate::output::warn;
 use rt2::context::{Context, QueryOptions};
+use rt2::cpu::query::QueryMode;
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
 use rt2::error::Result;
@@ -101,6 +102,7 @@ pub(super) fn tables(a: &Args) -> Result<String> {
         for (how, (_, thesis_nodes)) in Traversal::ALL.into_iter().zip(THESIS_NODES_BUNNY) {
             let q = QueryOptions {
                 traversal: Some(how),
+                mode: Some(QueryMode::Single),
                 ..QueryOptions::default()
             };
             let mut hits = vec![Hit::MISS; rays.len()];

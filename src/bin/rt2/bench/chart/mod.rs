@@ -78,8 +78,8 @@ impl Engine {
             traversal: Some(how),
             intersector,
             mode: match self {
-                Engine::Cpu(m) => m,
-                Engine::Gpu => QueryMode::Single,
+                Engine::Cpu(m) => Some(m),
+                Engine::Gpu => Some(QueryMode::Single),
             },
             ..QueryOptions::default()
         }
