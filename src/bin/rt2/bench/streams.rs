@@ -6,7 +6,7 @@
 
 use super::{embree_harness, embree_rows, median, model_scene, ray_generator, shared, Args};
 use crate::output::warn;
-use rt2::context::Context;
+use rt2::context::{Context, QueryOptions};
 use rt2::cpu::query::{self, QueryMode, STREAM_CHUNK, STREAM_MAX};
 use rt2::cpu::simd::Width;
 use rt2::cpu::traverse::{Traversal, TraverseOptions};
@@ -102,12 +102,16 @@ fn seconds(
     configs: &[(QueryMode, Width)],
     runs: usize,
 ) -> Vec<f64> {
-    let jobs: Vec<Job> = configs.iter().map(|&config| (batches, config)).collect();
+    let jobs: Vec<Job> = configs
+        .iter()
+        .map(|&config| (batches, Some(config)))
+        .collect();
     median_seconds(ctx, c, &jobs, runs, || {})
 }
 
-/// A timed job: batches traced once each per pass, in one mode and lane width.
-type Job<'a> = (&'a [Vec<Ray>], (QueryMode, Width));
+/// A timed job: batches traced once each per pass, in one mode and lane width, or (`None`)
+/// through `Context::intersect` with the default options, whose mode is AUTO's choice.
+type Job<'a> = (&'a [Vec<Ray>], Option<(QueryMode, Width)>);
 
 /// Median of `runs` timed passes of each job (after a warm-up pass of each), on `ctx`'s
 /// threads, in seconds. Each run calls `each_run` (the peer's run, where one is timed beside)
@@ -129,20 +133,19 @@ fn median_seconds(
         .unwrap_or(0);
     let mut hits = vec![Hit::MISS; longest];
     let opts = TraverseOptions::default();
-    let mut pass = |&(batches, (mode, width)): &Job| {
+    let mut pass = |&(batches, config): &Job| {
         let t = Instant::now();
         for b in batches {
-            ctx.install(|| {
-                query::trace(
-                    c,
-                    (b, None),
-                    &mut hits[..b.len()],
-                    Traversal::Standard,
-                    &opts,
-                    mode,
-                    width,
-                )
-            });
+            let hits = &mut hits[..b.len()];
+            match config {
+                Some((mode, width)) => {
+                    let how = Traversal::Standard;
+                    ctx.install(|| query::trace(c, (b, None), hits, how, &opts, mode, width));
+                }
+                None => {
+                    let _ = ctx.intersect(c, b, hits, &QueryOptions::default());
+                }
+            }
         }
         t.elapsed().as_secs_f64()
     };
@@ -369,8 +372,9 @@ fn primary_1024(mesh: &std::path::Path) -> Option<std::path::PathBuf> {
 fn raysets(a: &Args, one: &Context) -> Result<String> {
     let mut out = String::from(
         "#### Shared ray sets (`../shared/raysets`; `primary_1048576` is the bunny's camera at 1024², the issue's resolution, made by the peers' `rt2gen`), Mrays/s, 1 thread, Embree 3 measured in the same run\n\n\
-         | set | n-rays ×4 | n-rays ×8 | n-rays ×16 | packets ×4 | packets ×8 | packets ×16 | 1-ray | Embree `intersect1` | Embree `intersect8(coherent)` | best / Embree 1 | best / Embree 8 |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+         AUTO: `rt2_intersect`'s default options (`Context::intersect`, mode AUTO), with the mode it chose.\n\n\
+         | set | n-rays ×4 | n-rays ×8 | n-rays ×16 | packets ×4 | packets ×8 | packets ×16 | 1-ray | AUTO | Embree `intersect1` | Embree `intersect8(coherent)` | best / Embree 1 | best / Embree 8 |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for model in ["bunny", "dragon"] {
         let Some(mut scene) = model_scene(&format!("{model}.ply"))? else {
@@ -412,7 +416,13 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
             .flat_map(|&m| Width::ALL.map(|w| w.supported().then_some((m, w))))
             .chain([Some((QueryMode::Single, Width::W4))])
             .collect();
-        let configs: Vec<(QueryMode, Width)> = columns.iter().flatten().copied().collect();
+        // Every config, then AUTO (`None`).
+        let configs: Vec<Option<(QueryMode, Width)>> = columns
+            .iter()
+            .flatten()
+            .map(|&c| Some(c))
+            .chain([None])
+            .collect();
         let jobs: Vec<Job> = rays
             .iter()
             .flat_map(|r| configs.iter().map(move |&config| (r.as_slice(), config)))
@@ -444,6 +454,17 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
                     None => row += " — |",
                 }
             }
+            // AUTO's figure, and the mode it chose (asked again, untimed).
+            let auto = mrays.next().unwrap_or(0.0);
+            let mut hits = vec![Hit::MISS; rays_of(rays) as usize];
+            one.intersect(c, &rays[0], &mut hits, &QueryOptions::default())?;
+            let choice = one.last_auto_choice().unwrap_or_default();
+            let chosen = choice
+                .split("CPU query mode ")
+                .nth(1)
+                .and_then(|s| s.split(':').next())
+                .unwrap_or("?");
+            write!(row, " {auto:.2} ({chosen}) |").ok();
             // Embree's one-thread Mrays/s of this set and mode, the median of its runs.
             let find = |mode: &str| {
                 let runs: Vec<f64> = embree
