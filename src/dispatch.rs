@@ -242,7 +242,7 @@ pub const AUTO_STREAM_MIN: usize = 128;
 /// The query mode AUTO picks for a batch of rays on the CPU, and why. Every mode returns the
 /// same hits, so the choice is one of speed alone (`rt2 bench streams`, one thread): packets
 /// for rays that come in runs of one octant, as a camera's do (on primary rays 16-lane
-/// packets ran at 1.1–1.4× streams and 2.3–2.9× single rays); streams for rays in mixed
+/// packets ran at 1.1–1.4× streams and 1.6–2.9× single rays); streams for rays in mixed
 /// octants (on incoherent and diffuse rays at 1.1–1.8× packets and 1.2–2.3× single rays);
 /// single rays for batches too small to pay for a batch's setup. Packets and streams walk the
 /// tree in the standard traversal's order, so a batch whose caller asked for another
