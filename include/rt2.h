@@ -222,7 +222,8 @@ enum rt2_query_mode
    */
   RT2_QUERY_MODE_STREAM = 2,
   /**
-   * The library chooses per batch (default): PACKET for 8 rays or more that come in runs of
+   * The library chooses per batch (per step of 2^20 rays for a longer one; see
+   * `rt2_intersect`) (default): PACKET for 8 rays or more that come in runs of
    * one octant (16 rays long on average or more), as a camera's rays in scanline order do;
    * STREAM for 128 rays or more in mixed octants (incoherent); SINGLE for smaller batches
    * and whenever `traversal` names another traversal than STANDARD or AUTO.
@@ -636,7 +637,8 @@ typedef struct rt2_ray {
  * in every mode and on the GPU, the same nodes and leaves and, for each ray, the primitives
  * of a leaf up to the first in its way (equal on the shared bunny and dragon ray sets), but
  * for leaves that hold triangles and other primitives together: PACKET and STREAM may test
- * such a leaf's triangles first, and stop at another primitive than SINGLE.
+ * such a leaf's triangles first, and stop at another primitive than SINGLE (so under AUTO
+ * the count there depends on the mode it chose for the batch).
  */
 typedef struct rt2_query_stats {
   uint64_t nodes_visited;

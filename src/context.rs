@@ -350,7 +350,7 @@ impl Context {
     }
 
     /// A batch query of either answer (closest hits or occlusion) on the GPU, or on the CPU
-    /// (in `q.mode`) where the GPU cannot run it.
+    /// (in `q.mode`, or AUTO's choice for the batch) where the GPU cannot run it.
     fn answer<T: GpuAnswer>(
         &self,
         scene: &Committed,
@@ -379,7 +379,7 @@ impl Context {
             },
             |out, choices| {
                 let (how, opts) = self.query_setup(scene, q, choices);
-                let (mode, why) = dispatch::choose_query_mode(rays, q.mode, q.traversal);
+                let (mode, why) = dispatch::choose_query_mode(rays, q.mode, Some(how));
                 choices.mode(q.mode.is_none(), mode.name(), why);
                 let width = Width::best();
                 let mut trace =

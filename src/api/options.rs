@@ -70,7 +70,8 @@ pub enum Rt2QueryMode {
     /// The n-ray traversal of the vectorised-traversal paper: all rays of a stream at once, in
     /// streams of one octant and at most 32768 rays (`cpu::query::STREAM_MAX`).
     Stream = 2,
-    /// The library chooses per batch (default): PACKET for 8 rays or more that come in runs of
+    /// The library chooses per batch (per step of 2^20 rays for a longer one; see
+    /// `rt2_intersect`) (default): PACKET for 8 rays or more that come in runs of
     /// one octant (16 rays long on average or more), as a camera's rays in scanline order do;
     /// STREAM for 128 rays or more in mixed octants (incoherent); SINGLE for smaller batches
     /// and whenever `traversal` names another traversal than STANDARD or AUTO.

@@ -97,7 +97,8 @@ versioned!(rt2_query_options);
 /// in every mode and on the GPU, the same nodes and leaves and, for each ray, the primitives
 /// of a leaf up to the first in its way (equal on the shared bunny and dragon ray sets), but
 /// for leaves that hold triangles and other primitives together: PACKET and STREAM may test
-/// such a leaf's triangles first, and stop at another primitive than SINGLE.
+/// such a leaf's triangles first, and stop at another primitive than SINGLE (so under AUTO
+/// the count there depends on the mode it chose for the batch).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct rt2_query_stats {

@@ -143,6 +143,7 @@ fn median_seconds(
                     ctx.install(|| query::trace(c, (b, None), hits, how, &opts, mode, width));
                 }
                 None => {
+                    // A failure shows in the untimed call that asks for AUTO's choice.
                     let _ = ctx.intersect(c, b, hits, &QueryOptions::default());
                 }
             }
@@ -454,7 +455,7 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
                     None => row += " — |",
                 }
             }
-            // AUTO's figure, and the mode it chose (asked again, untimed).
+            // AUTO's figure, and the mode it chose (asked again, untimed; a set is one batch).
             let auto = mrays.next().unwrap_or(0.0);
             let mut hits = vec![Hit::MISS; rays_of(rays) as usize];
             one.intersect(c, &rays[0], &mut hits, &QueryOptions::default())?;
