@@ -379,7 +379,7 @@ impl Context {
             },
             |out, choices| {
                 let (how, opts) = self.query_setup(scene, q, choices);
-                let (mode, why) = dispatch::choose_query_mode(rays, q.mode, Some(how));
+                let (mode, why) = dispatch::choose_query_mode(rays, q.mode, how);
                 choices.mode(q.mode.is_none(), mode.name(), why);
                 let width = Width::best();
                 let mut trace =

@@ -246,17 +246,17 @@ pub const AUTO_STREAM_MIN: usize = 128;
 /// packets ran at 1.1–1.4× streams and 1.6–2.9× single rays); streams for rays in mixed
 /// octants (on incoherent and diffuse rays at 1.1–1.8× packets and 1.2–2.3× single rays);
 /// single rays for batches too small to pay for a batch's setup. Packets and streams walk the
-/// tree in the standard traversal's order, so a batch whose caller asked for another
-/// traversal runs one ray at a time.
+/// tree in the standard traversal's order, so a batch whose `traversal` (the one that will
+/// run, [`choose_traversal`]'s) is another runs one ray at a time.
 pub fn choose_query_mode(
     rays: &[crate::geometry::Ray],
     requested: Option<QueryMode>,
-    traversal: Option<Traversal>,
+    traversal: Traversal,
 ) -> (QueryMode, &'static str) {
     let coherent = || octant_runs_at_least(rays, AUTO_PACKET_RUN);
-    match (requested, traversal) {
-        (Some(m), _) => (m, "requested by the caller"),
-        (None, Some(t)) if t != Traversal::Standard => (
+    match requested {
+        Some(m) => (m, "requested by the caller"),
+        None if traversal != Traversal::Standard => (
             QueryMode::Single,
             "the requested traversal runs one ray at a time (packets and streams take the \
              standard traversal's order)",
@@ -396,30 +396,27 @@ mod tests {
     /// ray at a time, and takes the caller's mode as given.
     #[test]
     fn auto_query_mode_follows_coherence_size_and_traversal() {
-        let pick = |rays: &[crate::geometry::Ray], t| choose_query_mode(rays, None, t).0;
+        let pick =
+            |rays: &[crate::geometry::Ray]| choose_query_mode(rays, None, Traversal::Standard).0;
         let camera = rays_in_runs(4096, 512);
         let mixed = rays_in_runs(4096, 1);
-        assert_eq!(pick(&camera, None), QueryMode::Packet);
-        assert_eq!(pick(&camera, Some(Traversal::Standard)), QueryMode::Packet);
-        assert_eq!(pick(&mixed, None), QueryMode::Stream);
-        assert_eq!(pick(&camera[..AUTO_PACKET_MIN], None), QueryMode::Packet);
-        assert_eq!(
-            pick(&camera[..AUTO_PACKET_MIN - 1], None),
-            QueryMode::Single
-        );
-        assert_eq!(pick(&mixed[..AUTO_STREAM_MIN], None), QueryMode::Stream);
-        assert_eq!(pick(&mixed[..AUTO_STREAM_MIN - 1], None), QueryMode::Single);
+        assert_eq!(pick(&camera), QueryMode::Packet);
+        assert_eq!(pick(&mixed), QueryMode::Stream);
+        assert_eq!(pick(&camera[..AUTO_PACKET_MIN]), QueryMode::Packet);
+        assert_eq!(pick(&camera[..AUTO_PACKET_MIN - 1]), QueryMode::Single);
+        assert_eq!(pick(&mixed[..AUTO_STREAM_MIN]), QueryMode::Stream);
+        assert_eq!(pick(&mixed[..AUTO_STREAM_MIN - 1]), QueryMode::Single);
         for t in Traversal::ALL
             .into_iter()
             .filter(|&t| t != Traversal::Standard)
         {
-            let (mode, why) = choose_query_mode(&mixed, None, Some(t));
+            let (mode, why) = choose_query_mode(&mixed, None, t);
             assert_eq!(mode, QueryMode::Single, "{t:?}");
             assert!(why.contains("standard traversal's order"), "{why}");
         }
         let asked = Some(QueryMode::Stream);
         assert_eq!(
-            choose_query_mode(&camera, asked, None),
+            choose_query_mode(&camera, asked, Traversal::Standard),
             (QueryMode::Stream, "requested by the caller")
         );
     }

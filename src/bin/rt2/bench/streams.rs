@@ -11,7 +11,7 @@ use rt2::cpu::query::{self, QueryMode, STREAM_CHUNK, STREAM_MAX};
 use rt2::cpu::simd::Width;
 use rt2::cpu::traverse::{Traversal, TraverseOptions};
 use rt2::cpu::{stream, RayTests};
-use rt2::dispatch::BackendRequest;
+use rt2::dispatch::{choose_query_mode, BackendRequest};
 use rt2::error::Result;
 use rt2::geometry::{Hit, Ray};
 use rt2::rayset;
@@ -101,7 +101,7 @@ fn seconds(
     batches: &[Vec<Ray>],
     configs: &[(QueryMode, Width)],
     runs: usize,
-) -> Vec<f64> {
+) -> Result<Vec<f64>> {
     let jobs: Vec<Job> = configs
         .iter()
         .map(|&config| (batches, Some(config)))
@@ -125,7 +125,7 @@ fn median_seconds(
     jobs: &[Job],
     runs: usize,
     mut each_run: impl FnMut(),
-) -> Vec<f64> {
+) -> Result<Vec<f64>> {
     let longest = jobs
         .iter()
         .flat_map(|j| j.0.iter().map(Vec::len))
@@ -133,6 +133,7 @@ fn median_seconds(
         .unwrap_or(0);
     let mut hits = vec![Hit::MISS; longest];
     let opts = TraverseOptions::default();
+    let mut failed = None;
     let mut pass = |&(batches, config): &Job| {
         let t = Instant::now();
         for b in batches {
@@ -143,8 +144,9 @@ fn median_seconds(
                     ctx.install(|| query::trace(c, (b, None), hits, how, &opts, mode, width));
                 }
                 None => {
-                    // A failure shows in the untimed call that asks for AUTO's choice.
-                    let _ = ctx.intersect(c, b, hits, &QueryOptions::default());
+                    // The first failure is kept and returned once the timing is done.
+                    let done = ctx.intersect(c, b, hits, &QueryOptions::default());
+                    failed = failed.take().or(done.err());
                 }
             }
         }
@@ -160,7 +162,7 @@ fn median_seconds(
             t.push(pass(j));
         }
     }
-    times.into_iter().map(median).collect()
+    failed.map_or(Ok(times.into_iter().map(median).collect()), Err)
 }
 
 /// The paper's three modes at the default width ([`MODES`]), then 4-lane packets.
@@ -235,7 +237,7 @@ pub(super) fn streams(a: &Args) -> Result<String> {
                 )
             })
             .collect();
-        let secs = seconds(&one, c, &orbit, &with_packets4(width), a.runs);
+        let secs = seconds(&one, c, &orbit, &with_packets4(width), a.runs)?;
         let (secs4, secs) = (secs[3], &secs[..3]);
         let mr4 = rays_of(&orbit) / secs4 / 1e6;
         let mr: Vec<f64> = secs.iter().map(|s| rays_of(&orbit) / s / 1e6).collect();
@@ -275,7 +277,7 @@ pub(super) fn streams(a: &Args) -> Result<String> {
         )
         .ok();
         let inco = vec![incoherent_rays(c, 262_144)];
-        let mi: Vec<f64> = seconds(&one, c, &inco, &with_packets4(width), a.runs)
+        let mi: Vec<f64> = seconds(&one, c, &inco, &with_packets4(width), a.runs)?
             .iter()
             .map(|s| rays_of(&inco) / s / 1e6)
             .collect();
@@ -300,7 +302,7 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             })
             .collect();
         let configs = MODES.map(|m| (m, width));
-        let mw: Vec<f64> = seconds(&one, c, &big, &configs, a.runs.min(3))
+        let mw: Vec<f64> = seconds(&one, c, &big, &configs, a.runs.min(3))?
             .iter()
             .map(|s| rays_of(&big) / s / 1e6)
             .collect();
@@ -435,7 +437,7 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
             if peer {
                 embree.extend(embree_rows(&mesh, &sets, 1, "1"));
             }
-        });
+        })?;
         if !peer {
             warn("bench: Embree's harness is not built; Embree columns are empty");
         }
@@ -455,17 +457,11 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
                     None => row += " — |",
                 }
             }
-            // AUTO's figure, and the mode it chose (asked again, untimed; a set is one batch).
+            // AUTO's figure, and the mode it chose (the context's own choice; a set is one
+            // batch, traced with the standard traversal).
             let auto = mrays.next().unwrap_or(0.0);
-            let mut hits = vec![Hit::MISS; rays_of(rays) as usize];
-            one.intersect(c, &rays[0], &mut hits, &QueryOptions::default())?;
-            let choice = one.last_auto_choice().unwrap_or_default();
-            let chosen = choice
-                .split("CPU query mode ")
-                .nth(1)
-                .and_then(|s| s.split(':').next())
-                .unwrap_or("?");
-            write!(row, " {auto:.2} ({chosen}) |").ok();
+            let (chosen, _) = choose_query_mode(&rays[0], None, Traversal::Standard);
+            write!(row, " {auto:.2} ({}) |", chosen.name()).ok();
             // Embree's one-thread Mrays/s of this set and mode, the median of its runs.
             let find = |mode: &str| {
                 let runs: Vec<f64> = embree
