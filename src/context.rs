@@ -11,11 +11,10 @@ use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats};
 use crate::gpu::{self, Gpu, GpuOptions, GpuResult};
+use crate::job_record::{AutoChoices, JobRecord, LastJob};
 use crate::precision::Intersector;
 use crate::render::{GpuPathRequest, RenderOptions};
 use crate::scene::Committed;
-use std::borrow::Cow;
-use std::sync::Mutex;
 
 pub struct Context {
     pool: rayon::ThreadPool,
@@ -23,7 +22,7 @@ pub struct Context {
     /// The devices, when tracing runs on the GPU.
     gpu: Option<Gpu>,
     /// Where the last job ran and what AUTO chose for it.
-    last_job: Mutex<JobRecord>,
+    last_job: LastJob,
     /// Declared after `pool`, so dropped after it: waits for the workers to exit.
     _workers: Workers,
     /// The process that made the context. A `fork` copies the context into a child without
@@ -132,7 +131,7 @@ impl Context {
             pool,
             decision,
             gpu,
-            last_job: Mutex::new(JobRecord::default()),
+            last_job: LastJob::new(),
             _workers: workers,
             pid: crate::process::id(),
         })
@@ -179,10 +178,7 @@ impl Context {
 
     /// [`Context::last_fallback`] and [`Context::last_auto_choice`] of the same job.
     pub fn last_job(&self) -> (Option<String>, Option<String>) {
-        self.last_job
-            .lock()
-            .map(|r| (r.fallback.clone(), r.auto_choice.report()))
-            .unwrap_or_default()
+        self.last_job.get()
     }
 
     pub fn threads(&self) -> usize {
@@ -231,12 +227,10 @@ impl Context {
                 _ => Err(e.into_error()),
             },
         };
-        if let Ok(mut r) = self.last_job.lock() {
-            *r = JobRecord {
-                fallback,
-                auto_choice: choices,
-            };
-        }
+        self.last_job.set(JobRecord {
+            fallback,
+            auto_choice: choices,
+        });
         result
     }
 
@@ -453,77 +447,6 @@ fn gpu_query_traversal(
     let (how, why) = dispatch::choose_gpu_traversal(scene, q.traversal);
     choices.traversal(q.traversal.is_none(), "GPU traversal", how.name(), why);
     how
-}
-
-/// What the last job left for `rt2_context_info`; one lock, so both belong to the same job.
-#[derive(Clone, Debug, Default)]
-struct JobRecord {
-    fallback: Option<String>,
-    auto_choice: AutoChoices,
-}
-
-/// The choices a job left to AUTO, each with its reason: a traversal, and for a GPU render its
-/// path. Kept as given and put into words only when asked for ([`AutoChoices::report`]): a
-/// loop of one-ray queries would otherwise format a sentence per call, which cost about a
-/// sixth of such a call.
-#[derive(Clone, Debug, Default)]
-struct AutoChoices {
-    traversal: Option<Choice>,
-    mode: Option<Choice>,
-    gpu_path: Option<Choice>,
-}
-
-/// One choice AUTO made: `what` = `name` because of `why`.
-#[derive(Clone, Debug)]
-struct Choice {
-    what: &'static str,
-    name: &'static str,
-    why: Cow<'static, str>,
-}
-
-impl AutoChoices {
-    /// Notes the traversal `name` that `what` ("CPU traversal", "GPU traversal") runs, if
-    /// AUTO chose it (`auto`).
-    fn traversal(&mut self, auto: bool, what: &'static str, name: &'static str, why: &'static str) {
-        if auto {
-            self.traversal = Some(Choice {
-                what,
-                name,
-                why: why.into(),
-            });
-        }
-    }
-
-    /// Notes the CPU query mode `name`, if AUTO chose it (`auto`).
-    fn mode(&mut self, auto: bool, name: &'static str, why: &'static str) {
-        if auto {
-            self.mode = Some(Choice {
-                what: "CPU query mode",
-                name,
-                why: why.into(),
-            });
-        }
-    }
-
-    /// Notes the GPU render path `name`, if AUTO chose it (`auto`).
-    fn gpu_path(&mut self, auto: bool, name: &'static str, why: String) {
-        if auto {
-            self.gpu_path = Some(Choice {
-                what: "GPU render path",
-                name,
-                why: why.into(),
-            });
-        }
-    }
-
-    fn report(&self) -> Option<String> {
-        let said: Vec<String> = [&self.traversal, &self.mode, &self.gpu_path]
-            .into_iter()
-            .flatten()
-            .map(|c| format!("{} {}: {}", c.what, c.name, c.why))
-            .collect();
-        (!said.is_empty()).then(|| said.join("; "))
-    }
 }
 
 /// Why the GPU kernels cannot run a job with this ray–triangle test (`None`: they can). They
