@@ -23,6 +23,7 @@ pub mod kdtree;
 pub mod precision;
 mod process;
 pub mod rayset;
+mod read_mostly;
 pub mod render;
 pub mod scene;
 pub mod shading;

@@ -12,9 +12,10 @@ use crate::context::Context;
 use crate::error::{Error, Result, Rt2Status};
 use crate::fallible;
 use crate::precision::Intersector;
+use crate::read_mostly::{ReadGuard, ReadMostly, WriteGuard};
 use crate::scene::{loaders, Committed, PointLight, PrimLookup, Scene, Shape};
 use glam::{Affine3A, Mat3, Vec3};
-use std::sync::{Arc, RwLock, RwLockReadGuard, RwLockWriteGuard};
+use std::sync::Arc;
 
 /// Opaque scene handle. Material 0 exists from the start (the default material).
 #[repr(C)]
@@ -22,7 +23,9 @@ pub struct rt2_scene {
     /// First field of every handle, so checking it never reads past a handle of another type.
     magic: u64,
     pub(crate) context: Arc<Context>,
-    scene: RwLock<Scene>,
+    /// Read by every query and render, written by edits and commits ([`ReadMostly`]: threads
+    /// querying at once share no lock word).
+    scene: ReadMostly<Scene>,
 }
 
 // A scene commits on its context's worker threads.
@@ -33,12 +36,12 @@ handle_type!(rt2_scene, 0x7274_325f_7363_6e00, |s: &rt2_scene| s
 impl rt2_scene {
     /// A panic while holding the lock leaves the scene as it was before the failed edit (all
     /// edits validate before they change anything), so a poisoned lock is still usable.
-    pub(crate) fn read(&self) -> RwLockReadGuard<'_, Scene> {
-        self.scene.read().unwrap_or_else(|p| p.into_inner())
+    pub(crate) fn read(&self) -> ReadGuard<'_, Scene> {
+        self.scene.read()
     }
 
-    pub(crate) fn write(&self) -> RwLockWriteGuard<'_, Scene> {
-        self.scene.write().unwrap_or_else(|p| p.into_inner())
+    pub(crate) fn write(&self) -> WriteGuard<'_, Scene> {
+        self.scene.write()
     }
 
     /// The committed scene under the read lock, with what a job needs that is built on demand:
@@ -47,11 +50,7 @@ impl rt2_scene {
     /// thread may commit in between, and a new commit has neither (a watertight job would
     /// then run on corners rebuilt from the edges, unsound, with nothing to say so). Gives up
     /// after a few such commits in a row.
-    pub(crate) fn prepared(
-        &self,
-        ropes: bool,
-        watertight: bool,
-    ) -> Result<RwLockReadGuard<'_, Scene>> {
+    pub(crate) fn prepared(&self, ropes: bool, watertight: bool) -> Result<ReadGuard<'_, Scene>> {
         self.prepared_with(ropes, watertight, || {})
     }
 
@@ -62,7 +61,7 @@ impl rt2_scene {
         ropes: bool,
         watertight: bool,
         between: impl Fn(),
-    ) -> Result<RwLockReadGuard<'_, Scene>> {
+    ) -> Result<ReadGuard<'_, Scene>> {
         for _ in 0..PREPARE_ROUNDS {
             let guard = self.read();
             let c = guard.committed()?;
@@ -172,7 +171,7 @@ pub unsafe extern "C" fn rt2_scene_create(
         let h = Box::new(rt2_scene {
             magic: rt2_scene::MAGIC,
             context: c.inner.clone(),
-            scene: RwLock::new(Scene::new()),
+            scene: ReadMostly::new(Scene::new()),
         });
         write_out(out, "out", Box::into_raw(h))
     })
