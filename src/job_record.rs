@@ -140,24 +140,21 @@ impl LastJob {
         if known == Ok(true) {
             return;
         }
-        let Ok(mut stored) = self.record.lock() else {
-            return;
-        };
+        // Nothing under the lock panics; were it poisoned, the record would still be whole.
+        let mut stored = self.record.lock().unwrap_or_else(|p| p.into_inner());
+        let mut version = self.version.load(Ordering::Relaxed);
         if *stored != record {
             *stored = record.clone();
-            self.version.fetch_add(1, Ordering::Release);
+            version = self.version.fetch_add(1, Ordering::Release) + 1;
         }
-        let version = self.version.load(Ordering::Relaxed);
         drop(stored);
         let _ = SEEN.try_with(|seen| *seen.borrow_mut() = Some((self.store, version, record)));
     }
 
     /// The last job's fallback reason and choices, put into words.
     pub fn get(&self) -> (Option<String>, Option<String>) {
-        self.record
-            .lock()
-            .map(|r| (r.fallback.clone(), r.auto_choice.report()))
-            .unwrap_or_default()
+        let r = self.record.lock().unwrap_or_else(|p| p.into_inner());
+        (r.fallback.clone(), r.auto_choice.report())
     }
 }
 
@@ -166,8 +163,12 @@ mod tests {
     use super::*;
 
     fn chose(mode: &'static str) -> JobRecord {
+        chose_for(mode, "because")
+    }
+
+    fn chose_for(mode: &'static str, why: &'static str) -> JobRecord {
         let mut auto_choice = AutoChoices::default();
-        auto_choice.mode(true, mode, "because");
+        auto_choice.mode(true, mode, why);
         JobRecord {
             fallback: None,
             auto_choice,
@@ -212,6 +213,20 @@ mod tests {
         assert_eq!(a.get().0.as_deref(), Some("the GPU was lost"));
         a.set(chose("single"));
         assert_eq!(a.get().0, None);
+        // The same choice for another reason is another record.
+        a.set(chose_for("single", "other"));
+        assert_eq!(a.get().1.as_deref(), Some("CPU query mode single: other"));
+        let mut path = chose("single");
+        path.auto_choice
+            .gpu_path(true, "wavefront", "made at run time".to_string());
+        a.set(path.clone());
+        path.auto_choice
+            .gpu_path(true, "wavefront", "made again".to_string());
+        a.set(path);
+        assert!(a
+            .get()
+            .1
+            .is_some_and(|s| s.ends_with("wavefront: made again")));
     }
 
     /// Threads setting the same record write it once between them; a new record is written.
@@ -231,5 +246,45 @@ mod tests {
         a.set(chose("stream"));
         assert_eq!(a.version.load(Ordering::Relaxed), 2);
         assert_eq!(a.get().1, said("stream"));
+    }
+
+    /// A thread setting the record it last set, still current, does not take the lock: it
+    /// finishes while another thread holds it.
+    #[test]
+    fn a_current_record_is_set_without_the_lock() {
+        use std::sync::atomic::AtomicBool;
+        let a = LastJob::new();
+        let [seen, locked, release, done] = [(); 4].map(|_| AtomicBool::new(false));
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                a.set(chose("packet"));
+                seen.store(true, Ordering::SeqCst);
+                while !locked.load(Ordering::SeqCst) {
+                    std::thread::yield_now();
+                }
+                a.set(chose("packet"));
+                done.store(true, Ordering::SeqCst);
+            });
+            while !seen.load(Ordering::SeqCst) {
+                std::thread::yield_now();
+            }
+            s.spawn(|| {
+                let _held = a.record.lock();
+                locked.store(true, Ordering::SeqCst);
+                while !release.load(Ordering::SeqCst) {
+                    std::thread::yield_now();
+                }
+            });
+            let waited = std::time::Instant::now();
+            while !done.load(Ordering::SeqCst) && waited.elapsed().as_millis() < 200 {
+                std::thread::yield_now();
+            }
+            let without_lock = done.load(Ordering::SeqCst);
+            release.store(true, Ordering::SeqCst);
+            assert!(
+                without_lock,
+                "setting the current record waited for the lock"
+            );
+        });
     }
 }
