@@ -216,74 +216,63 @@ mod tests {
         assert_eq!(*lock.read(), (4000, 4000), "a write was lost");
     }
 
-    /// A writer waits for a reader on any shard (here the last one, which no writer takes
-    /// first).
-    #[test]
-    fn a_writer_waits_for_readers_of_every_shard() {
-        let lock = ReadMostly::with_shards(0u32, 4);
-        let (held, release) = (AtomicBool::new(false), AtomicBool::new(false));
-        let wrote = AtomicBool::new(false);
-        std::thread::scope(|s| {
-            s.spawn(|| {
-                let _r = lock.read_through(3);
-                held.store(true, Ordering::SeqCst);
-                while !release.load(Ordering::SeqCst) {
-                    std::thread::yield_now();
-                }
-                assert!(!wrote.load(Ordering::SeqCst), "a write ran under a read");
-            });
-            while !held.load(Ordering::SeqCst) {
+    /// Spawns a thread that reads through `shard` until `release` is raised; returns once it
+    /// holds the shard.
+    fn hold_shard<'scope, T: Send + Sync>(
+        s: &'scope std::thread::Scope<'scope, '_>,
+        lock: &'scope ReadMostly<T>,
+        shard: usize,
+        release: &'scope AtomicBool,
+    ) {
+        let (held, holds) = std::sync::mpsc::channel();
+        s.spawn(move || {
+            let _r = lock.read_through(shard);
+            let _ = held.send(());
+            while !release.load(Ordering::SeqCst) {
                 std::thread::yield_now();
             }
-            s.spawn(|| {
-                *lock.write() += 1;
-                wrote.store(true, Ordering::SeqCst);
-            });
-            std::thread::sleep(Duration::from_millis(20));
-            let waited = !wrote.load(Ordering::SeqCst);
-            release.store(true, Ordering::SeqCst);
-            assert!(waited, "the writer did not wait");
         });
-        assert_eq!(*lock.read(), 1);
+        holds.recv().expect("the reader holds its shard");
     }
 
-    /// A writer waiting for a reader holds off the readers that come after it, also on other
-    /// shards, and they then see its write.
+    /// A writer waits for a reader on any shard, and while it waits it holds off the readers
+    /// that come after it, also on other shards, which then see its write. With the reader on
+    /// the first shard, the writer holds none yet, so only its flag stops the later reader;
+    /// with it on the last, the writer must have taken every shard.
     #[test]
-    fn a_waiting_writer_goes_before_later_readers() {
-        let lock = ReadMostly::with_shards(0u32, 2);
-        let (held, release) = (AtomicBool::new(false), AtomicBool::new(false));
-        let read_in = AtomicBool::new(false);
-        std::thread::scope(|s| {
-            s.spawn(|| {
-                let _r = lock.read_through(0);
-                held.store(true, Ordering::SeqCst);
-                while !release.load(Ordering::SeqCst) {
+    fn a_writer_waits_for_readers_and_goes_before_later_ones() {
+        for (held, later) in [(0, 3), (3, 0)] {
+            let lock = ReadMostly::with_shards(0u32, 4);
+            let [release, wrote, read_in] = [(); 3].map(|_| AtomicBool::new(false));
+            std::thread::scope(|s| {
+                hold_shard(s, &lock, held, &release);
+                let writer = s.spawn(|| {
+                    *lock.write() += 1;
+                    wrote.store(true, Ordering::SeqCst);
+                });
+                // (A writer that finished did not wait: the assertion below fails.)
+                while !lock.writing.load(Ordering::SeqCst) && !writer.is_finished() {
                     std::thread::yield_now();
                 }
+                let later = s.spawn(|| {
+                    let seen = *lock.read_through(later);
+                    read_in.store(true, Ordering::SeqCst);
+                    seen
+                });
+                std::thread::sleep(Duration::from_millis(20));
+                let (waited, held_off) = (
+                    !wrote.load(Ordering::SeqCst),
+                    !read_in.load(Ordering::SeqCst),
+                );
+                release.store(true, Ordering::SeqCst);
+                assert!(
+                    waited,
+                    "the writer did not wait for the reader on shard {held}"
+                );
+                assert!(held_off, "a later reader went before the waiting writer");
+                let seen = later.join().ok();
+                assert_eq!(seen, Some(1), "the later reader missed the write");
             });
-            while !held.load(Ordering::SeqCst) {
-                std::thread::yield_now();
-            }
-            let writer = s.spawn(|| *lock.write() += 1);
-            // (A writer that finished did not wait for the reader: the assertion below fails.)
-            while !lock.writing.load(Ordering::SeqCst) && !writer.is_finished() {
-                std::thread::yield_now();
-            }
-            let later = s.spawn(|| {
-                let seen = *lock.read_through(1);
-                read_in.store(true, Ordering::SeqCst);
-                seen
-            });
-            std::thread::sleep(Duration::from_millis(20));
-            let held_off = !read_in.load(Ordering::SeqCst);
-            release.store(true, Ordering::SeqCst);
-            assert!(held_off, "a later reader went before the waiting writer");
-            assert_eq!(
-                later.join().ok(),
-                Some(1),
-                "the later reader missed the write"
-            );
-        });
+        }
     }
 }
