@@ -10,6 +10,7 @@ use super::traverse::{self, Traversal, TraverseOptions};
 use super::{packet, stream};
 use crate::geometry::{Hit, PrimIndex, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
+use crate::scene::builtin::Rng;
 use crate::scene::Committed;
 use rayon::prelude::*;
 
@@ -205,30 +206,23 @@ const RUN_SAMPLES: usize = 1024;
 /// Whether consecutive rays share an octant in runs of `run` rays or more on average, as a
 /// camera's rays in scanline order do: whether the octant changes at one neighbour pair in
 /// `run` or fewer. Judged from [`RUN_SAMPLES`] pairs in a larger batch, so that it costs the
-/// same for a million rays as for a thousand, at positions drawn by a fixed hash of the sample
-/// number (SplitMix64's finaliser): evenly spaced samples alias with an image's rows (all on
-/// the column where the octant changes, or none), and so did a Weyl sequence for some image
-/// heights (1920×1104 counted 46 changes in 1024 samples where about one is expected).
+/// same for a million rays as for a thousand, at positions drawn from a fixed SplitMix64
+/// sequence: evenly spaced samples alias with an image's rows (all on the column where the
+/// octant changes, or none), and so did a Weyl sequence for some image heights (1920×1104
+/// counted 46 changes in 1024 samples where about one is expected).
 pub fn octant_runs_at_least(rays: &[Ray], run: usize) -> bool {
     let pairs = rays.len().saturating_sub(1);
     let changed = |i: usize| octant(&rays[i]) != octant(&rays[i + 1]);
     let (samples, changes) = if pairs <= RUN_SAMPLES {
         (pairs, (0..pairs).filter(|&i| changed(i)).count())
     } else {
-        // A pair index below `pairs`: the hash's 64 bits scaled to [0, pairs).
-        let at = |k: usize| ((u128::from(splitmix64(k as u64)) * pairs as u128) >> 64) as usize;
-        let changes = (0..RUN_SAMPLES).filter(|&k| changed(at(k))).count();
+        // A pair index below `pairs`: 64 random bits scaled to [0, pairs).
+        let mut rng = Rng(0);
+        let mut at = || ((u128::from(rng.bits()) * pairs as u128) >> 64) as usize;
+        let changes = (0..RUN_SAMPLES).filter(|_| changed(at())).count();
         (RUN_SAMPLES, changes)
     };
     changes * run <= samples
-}
-
-/// SplitMix64's output function (Steele, Lea & Flood 2014): 64 well-mixed bits from a counter.
-fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 /// Streams of at most [`STREAM_MAX`] rays, no more than a thread's share (but at least

@@ -28,18 +28,24 @@ pub fn by_name(name: &str) -> Result<Builtin> {
     }
 }
 
-/// SplitMix64: a tiny deterministic generator, so built-in scenes are the same everywhere (the
-/// library's unit tests draw from it too).
+/// SplitMix64 (Steele, Lea & Flood 2014): a tiny deterministic generator, so built-in scenes
+/// are the same everywhere (the CPU queries' octant-run test draws its sample positions from
+/// it, and the library's unit tests their numbers).
 pub(crate) struct Rng(pub(crate) u64);
 
 impl Rng {
-    /// Uniform in `[0, 1)`, 24 bits.
-    pub(crate) fn next(&mut self) -> f32 {
+    /// 64 well-mixed bits.
+    pub(crate) fn bits(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[0, 1)`, 24 bits.
+    pub(crate) fn next(&mut self) -> f32 {
+        (self.bits() >> 40) as f32 / (1u64 << 24) as f32
     }
 
     fn range(&mut self, lo: f32, hi: f32) -> f32 {
