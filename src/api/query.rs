@@ -12,7 +12,7 @@ use super::options::{
 use super::scene::rt2_scene;
 use crate::context::QueryOptions;
 use crate::cpu::query::QueryMode;
-use crate::dispatch::Backend;
+use crate::dispatch::{choose_query_mode, Backend};
 use crate::error::{Error, Rt2Status};
 use crate::fallible;
 use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
@@ -292,10 +292,14 @@ unsafe fn run_query<T>(
         // Ropes (about 3x the tree) serve a rope traversal of single rays, and any GPU job
         // (its kernels take the traversal whatever the mode); the CPU's packets and streams
         // follow the standard order and never read them.
-        // AUTO runs a rope traversal one ray at a time (`dispatch::choose_query_mode`).
-        let ropes = q.traversal.is_some_and(|t| t.needs_ropes())
-            && (matches!(q.mode, None | Some(QueryMode::Single))
-                || c.inner.decision().backend == Backend::Gpu);
+        // Whether a rope traversal runs one ray at a time does not depend on the batch
+        // (`dispatch::choose_query_mode`: AUTO takes single rays for it), so it is asked here
+        // with none.
+        let ropes = q.traversal.is_some_and(|t| {
+            t.needs_ropes()
+                && (choose_query_mode(&[], q.mode, t).0 == QueryMode::Single
+                    || c.inner.decision().backend == Backend::Gpu)
+        });
         let guard = s.prepared_with(
             ropes,
             q.intersector == crate::precision::Intersector::Watertight,
