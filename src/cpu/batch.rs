@@ -503,7 +503,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
             for (l, id) in ids.iter_mut().enumerate() {
                 *id = (start + l) as u32;
             }
-            let r = RayLanes::<N>::gather(rays, &ids);
+            let r = RayLanes::<N>::gather(isa, rays, &ids);
             let mut inv = [[0.0f32; N]; 3];
             for (inv, dir) in inv.iter_mut().zip(&r.dir) {
                 for (i, d) in inv.iter_mut().zip(dir) {
@@ -564,8 +564,13 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
     /// The packet's rays `ids` (lanes `live`) gathered for [`Batch::visit_packet_leaf`] (an
     /// index past the end reads the last ray, as [`RayLanes::gather`]).
     #[inline(always)]
-    pub fn packet_lanes<const N: usize>(&self, ids: &[u32; N], live: u32) -> PacketLanes<N> {
-        let rays = RayLanes::gather(self.rays, ids);
+    pub fn packet_lanes<const N: usize>(
+        &self,
+        isa: Isa<N>,
+        ids: &[u32; N],
+        live: u32,
+    ) -> PacketLanes<N> {
+        let rays = RayLanes::gather(isa, self.rays, ids);
         let mut bounds = LaneBounds::of(&rays);
         self.answer.read_bounds(self.rays, (ids, live), &mut bounds);
         PacketLanes { rays, bounds }
@@ -590,7 +595,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         live: u32,
         t_exit: &[f32; N],
     ) {
-        let lanes = RayLanes::gather(self.rays, ids);
+        let lanes = RayLanes::gather(isa, self.rays, ids);
         self.leaf_rays(isa, leaf, (&lanes, None), ids, live, t_exit);
     }
 

@@ -10,7 +10,7 @@
 //! work: stop paying for lists when the rays no longer share nodes).
 
 use super::batch::{positive, run, Answer, Batch, Mode, RayTests, Root, Split};
-use super::simd::{Isa, LeafPrims, Width};
+use super::simd::{self, Isa, LeafPrims, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
 
@@ -92,9 +92,7 @@ pub(crate) fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
     // The packet's origins and reciprocal directions, gathered once (structure of arrays).
     let (mut org, mut inv) = ([[0.0f32; N]; 3], [[0.0f32; N]; 3]);
     for a in 0..3 {
-        for l in 0..N {
-            [org[a][l], inv[a][l]] = b.split[a][p.id[l] as usize];
-        }
+        [org[a], inv[a]] = simd::gather_columns(isa, &b.split[a], [0, 1], &p.id);
     }
     let tree = b.tree;
     let stack = &mut s.stack[..];
@@ -153,7 +151,7 @@ pub(crate) fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
         if rays_per_triangle(live, list) {
             let lanes = match lanes {
                 Some(ref mut lanes) => lanes,
-                None => lanes.insert(b.packet_lanes(&id, p.mask)),
+                None => lanes.insert(b.packet_lanes(isa, &id, p.mask)),
             };
             dead |= b.visit_packet_leaf(isa, list, lanes, &id, live, &cur.t1);
         } else {

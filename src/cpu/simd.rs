@@ -4,8 +4,9 @@
 //! stream compaction.
 //!
 //! The code is portable: fixed-size `[f32; N]` lanes written as straight-line loops that LLVM
-//! turns into vector instructions; only the compaction and the lane masks ([`lanes_less`]) have
-//! x86 intrinsics, each with a portable loop. [`dispatch`] picks `N` at run time from the CPU's
+//! turns into vector instructions; only the compaction, the lane masks ([`lanes_less`]) and the
+//! gathers of rays' values by index ([`gather_columns`]) have x86 intrinsics, each with a
+//! portable loop. [`dispatch`] picks `N` at run time from the CPU's
 //! features and runs the whole kernel (traversal included, inlined) inside a `#[target_feature]`
 //! function, so the same source becomes SSE (4 lanes), AVX2 (8) or AVX-512 (16) code. A function
 //! the kernel calls without inlining is compiled without those features: hot code here avoids
@@ -304,28 +305,16 @@ impl<const N: usize> RayLanes<N> {
     /// The rays `rays[ids[l]]` (an index past the end reads the last ray: lanes past a list's
     /// end hold stale indices).
     #[inline(always)]
-    pub fn gather(rays: &[Ray], ids: &[u32; N]) -> Self {
-        let last = rays.len() - 1;
-        // A loop, not `array::from_fn` (left as a call: see the module's note).
-        let mut rs = [&rays[last]; N];
-        for (r, &id) in rs.iter_mut().zip(ids) {
-            *r = &rays[(id as usize).min(last)];
-        }
-        // Columns built whole, as in `TriBlock::from_prims` (no store-forwarding stall).
-        let column = |f: fn(&Ray) -> f32| -> [f32; N] { std::array::from_fn(|l| f(rs[l])) };
+    pub fn gather(isa: Isa<N>, rays: &[Ray], ids: &[u32; N]) -> Self {
+        // A ray is the row `org, dir, tmin, tmax` of eight floats (`repr(C)`).
+        let rows: &[[f32; 8]] = bytemuck::cast_slice(rays);
+        let [ox, oy, oz, dx, dy, dz, tmin, tmax] =
+            gather_columns(isa, rows, [0, 1, 2, 3, 4, 5, 6, 7], ids);
         RayLanes {
-            org: [
-                column(|r| r.org.x),
-                column(|r| r.org.y),
-                column(|r| r.org.z),
-            ],
-            dir: [
-                column(|r| r.dir.x),
-                column(|r| r.dir.y),
-                column(|r| r.dir.z),
-            ],
-            tmin: column(|r| r.tmin),
-            tmax: column(|r| r.tmax),
+            org: [ox, oy, oz],
+            dir: [dx, dy, dz],
+            tmin,
+            tmax,
         }
     }
 
@@ -470,6 +459,47 @@ impl<const N: usize> LeafPrims<N> {
             count: prims.len(),
         }
     }
+}
+
+/// Columns of rows picked by ray index: lane `l` of column `k` is `rows[ids[l]][columns[k]]`
+/// (an index past the end reads the last row: lanes past a list's end hold stale indices).
+/// The stream's hot loop picks every ray's origin and reciprocal direction on a node's axis this
+/// way, and the leaves their rays. AVX2 and AVX-512 use the CPU's gather instruction, one per
+/// column; other widths and CPUs take a lane loop. Against that loop, 16-lane streams ran
+/// 1.05–1.10× as fast on the bunny's incoherent, primary and diffuse sets and the dragon's
+/// incoherent and primary sets, 8-lane streams 0.97–1.08× and packets 0.97–1.03× (Intel Xeon
+/// with AVX-512, the loop and the gathers alternating in one process, medians of 11–15 runs;
+/// not measured on AMD).
+#[inline(always)]
+pub fn gather_columns<const N: usize, const S: usize, const K: usize>(
+    _: Isa<N>,
+    rows: &[[f32; S]],
+    columns: [usize; K],
+    ids: &[u32; N],
+) -> [[f32; N]; K] {
+    assert!(!rows.is_empty() && columns.iter().all(|&c| c < S));
+    #[cfg(target_arch = "x86_64")]
+    {
+        // The instructions' indices are signed 32-bit element offsets.
+        let fits = rows.len() * S <= i32::MAX as usize;
+        if N == 16 && fits {
+            // SAFETY: an `Isa<16>` exists only where the CPU has AVX-512F; the rows are not
+            // empty, every column lies in a row and every element offset fits an `i32`.
+            return unsafe { x86::gather16(rows, columns, ids) };
+        }
+        if N == 8 && fits {
+            // SAFETY: an `Isa<8>` exists only where the CPU has AVX2; as above.
+            return unsafe { x86::gather8(rows, columns, ids) };
+        }
+    }
+    let last = rows.len() - 1;
+    let mut out = [[0.0; N]; K];
+    for (o, &c) in out.iter_mut().zip(&columns) {
+        for (x, &id) in o.iter_mut().zip(ids) {
+            *x = rows[(id as usize).min(last)][c];
+        }
+    }
+    out
 }
 
 /// Asks the cache for the line holding `x` (a hint: never faults, no effect off x86-64). The
@@ -638,6 +668,48 @@ mod x86 {
         assert!(N == 16);
         let (a, b) = (_mm512_loadu_ps(a.as_ptr()), _mm512_loadu_ps(b.as_ptr()));
         u32::from(_mm512_cmp_ps_mask::<P>(a, b))
+    }
+
+    /// [`super::gather_columns`] for 8 lanes.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn gather8<const N: usize, const S: usize, const K: usize>(
+        rows: &[[f32; S]],
+        columns: [usize; K],
+        ids: &[u32; N],
+    ) -> [[f32; N]; K] {
+        assert!(N == 8);
+        let last = _mm256_set1_epi32((rows.len() - 1) as i32);
+        let row = _mm256_min_epu32(_mm256_loadu_si256(ids.as_ptr().cast()), last);
+        let at = _mm256_mullo_epi32(row, _mm256_set1_epi32(S as i32));
+        let base = rows.as_ptr().cast::<f32>();
+        let mut out = [[0.0; N]; K];
+        for (o, &c) in out.iter_mut().zip(&columns) {
+            let offsets = _mm256_add_epi32(at, _mm256_set1_epi32(c as i32));
+            _mm256_storeu_ps(o.as_mut_ptr(), _mm256_i32gather_ps::<4>(base, offsets));
+        }
+        out
+    }
+
+    /// [`super::gather_columns`] for 16 lanes.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn gather16<const N: usize, const S: usize, const K: usize>(
+        rows: &[[f32; S]],
+        columns: [usize; K],
+        ids: &[u32; N],
+    ) -> [[f32; N]; K] {
+        assert!(N == 16);
+        let last = _mm512_set1_epi32((rows.len() - 1) as i32);
+        let row = _mm512_min_epu32(_mm512_loadu_si512(ids.as_ptr().cast()), last);
+        let at = _mm512_mullo_epi32(row, _mm512_set1_epi32(S as i32));
+        let base = rows.as_ptr().cast::<f32>();
+        let mut out = [[0.0; N]; K];
+        for (o, &c) in out.iter_mut().zip(&columns) {
+            let offsets = _mm512_add_epi32(at, _mm512_set1_epi32(c as i32));
+            _mm512_storeu_ps(o.as_mut_ptr(), _mm512_i32gather_ps::<4>(offsets, base));
+        }
+        out
     }
 
     /// [`super::compress`] for 16 lanes.
@@ -811,7 +883,8 @@ mod tests {
                     hits += want.is_hit() as usize;
 
                     let rays: Vec<Ray> = (0..N).map(|_| g.ray_near(&corners[..1])).collect();
-                    let lanes = RayLanes::<N>::gather(&rays, &std::array::from_fn(|l| l as u32));
+                    let lanes =
+                        RayLanes::<N>::gather(isa, &rays, &std::array::from_fn(|l| l as u32));
                     let rows = set.triangle_rows(0, intersector);
                     let (t, u, v) = lanes.triangle(rows, &lanes.tests(intersector), &lanes.tmax);
                     for (l, ray) in rays.iter().enumerate() {
@@ -850,6 +923,37 @@ mod tests {
         check::<4>();
         check::<8>();
         check::<16>();
+    }
+
+    /// Every width's gather (the CPU's gather instruction with AVX2 and AVX-512) against plain
+    /// indexing, with row indices past the end (which read the last row) and the largest index.
+    #[test]
+    fn gathers_read_what_indexing_reads() {
+        struct Job;
+        impl Kernel for Job {
+            type Out = ();
+            fn run<const M: usize>(self, isa: Isa<M>) {
+                let rows: Vec<[f32; 3]> = (0..37)
+                    .map(|r| [r as f32, -(r as f32), 0.5 + r as f32])
+                    .collect();
+                let mut rng = crate::scene::builtin::Rng(M as u64);
+                for round in 0..200 {
+                    let mut ids = [0u32; M];
+                    for id in &mut ids {
+                        *id = (rng.bits() % 45) as u32;
+                    }
+                    ids[round % M] = u32::MAX;
+                    let [third, first] = gather_columns(isa, &rows, [2, 0], &ids);
+                    for (l, &id) in ids.iter().enumerate() {
+                        let row = rows[(id as usize).min(rows.len() - 1)];
+                        assert_eq!((third[l], first[l]), (row[2], row[0]), "{M} lanes, id {id}");
+                    }
+                }
+            }
+        }
+        for w in [Width::W4, Width::W8, Width::W16] {
+            dispatch(w, Job);
+        }
     }
 
     /// Every width's own path against the plain comparisons, with the values a hit mask meets:

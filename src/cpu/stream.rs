@@ -225,11 +225,8 @@ fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
                 }
             }
             let (id, t0, t1) = lists.load::<N>(f.start + k);
-            let (mut org, mut inv) = ([0.0; N], [0.0; N]);
-            for l in 0..N {
-                // Lanes past the list's end hold stale ray indices: clamped, never out of bounds.
-                [org[l], inv[l]] = split[(id[l] as usize).min(last)];
-            }
+            // Lanes past the list's end hold stale ray indices: the gather clamps them.
+            let [org, inv] = simd::gather_columns(isa, split, [0, 1], &id);
             let live = first::<N>(count - k);
             let Split {
                 near: en,

@@ -4,8 +4,10 @@ use super::power_of_two_scale;
 use glam::Vec3;
 
 /// A ray segment `org + t * dir`, `t` in `[tmin, tmax)` (a hit at exactly `tmax` does not count,
-/// as in `../shared/raysets`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// as in `../shared/raysets`). Eight floats in this order (`repr(C)`): the SIMD leaf tests read
+/// a batch of rays as rows of floats (`cpu::simd::RayLanes::gather`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Ray {
     pub org: Vec3,
     pub dir: Vec3,
