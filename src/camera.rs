@@ -211,7 +211,7 @@ mod tests {
     /// view (a helper's 20,000 random views), skewing the image.
     #[test]
     fn the_basis_is_orthonormal_when_up_is_nearly_the_view() {
-        let mut rng = crate::scene::builtin::Rng(5);
+        let mut rng = crate::rng::Rng(5);
         let mut worst = 0.0f32;
         for _ in 0..20_000 {
             let mut v = || rng.next() * 2.0 - 1.0;

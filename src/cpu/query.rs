@@ -10,7 +10,7 @@ use super::traverse::{self, Traversal, TraverseOptions};
 use super::{packet, stream};
 use crate::geometry::{Hit, PrimIndex, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
-use crate::scene::builtin::Rng;
+use crate::rng::Rng;
 use crate::scene::Committed;
 use rayon::prelude::*;
 

@@ -769,7 +769,7 @@ mod tests {
     /// Random coordinates, half of them on a grid of step 1/4, so that many rays pass exactly
     /// through edges and corners and many triangles are degenerate, and the others round, so
     /// that an operation done in another order or fused changes the bits.
-    struct Grid(crate::scene::builtin::Rng);
+    struct Grid(crate::rng::Rng);
 
     impl Grid {
         fn coord(&mut self) -> f32 {
@@ -843,7 +843,7 @@ mod tests {
         impl Kernel for Job {
             type Out = (usize, usize);
             fn run<const N: usize>(self, isa: Isa<N>) -> (usize, usize) {
-                let mut g = Grid(crate::scene::builtin::Rng(N as u64));
+                let mut g = Grid(crate::rng::Rng(N as u64));
                 let (mut hits, mut on_edge) = (0, 0);
                 for round in 0..12000 {
                     let (intersector, exact) = WAYS[round % 3];
@@ -936,7 +936,7 @@ mod tests {
                 let rows: Vec<[f32; 3]> = (0..37)
                     .map(|r| [r as f32, -(r as f32), 0.5 + r as f32])
                     .collect();
-                let mut rng = crate::scene::builtin::Rng(M as u64);
+                let mut rng = crate::rng::Rng(M as u64);
                 for round in 0..200 {
                     let mut ids = [0u32; M];
                     for id in &mut ids {
@@ -974,7 +974,7 @@ mod tests {
                     f32::NEG_INFINITY,
                     f32::NAN,
                 ];
-                let mut rng = crate::scene::builtin::Rng(7);
+                let mut rng = crate::rng::Rng(7);
                 let mut set = 0;
                 for _ in 0..2000 {
                     let mut pick =

@@ -4,6 +4,7 @@
 use super::{Checker, Material, PointLight, Scene, Shape};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::rng::Rng;
 use glam::{Affine3A, Vec3};
 
 /// A built-in scene with the camera and trace depth it is meant to be seen with.
@@ -28,37 +29,13 @@ pub fn by_name(name: &str) -> Result<Builtin> {
     }
 }
 
-/// SplitMix64 (Steele, Lea & Flood 2014): a tiny deterministic generator, so built-in scenes
-/// are the same everywhere (the CPU queries' octant-run test draws its sample positions from
-/// it, and the library's unit tests their numbers).
-pub(crate) struct Rng(pub(crate) u64);
-
-impl Rng {
-    /// 64 well-mixed bits.
-    pub(crate) fn bits(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`, 24 bits.
-    pub(crate) fn next(&mut self) -> f32 {
-        (self.bits() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.next()
-    }
-
-    fn color(&mut self) -> Vec3 {
-        Vec3::new(
-            self.range(0.2, 1.0),
-            self.range(0.2, 1.0),
-            self.range(0.2, 1.0),
-        )
-    }
+/// A bright random colour for a built-in scene's material.
+fn color(rng: &mut Rng) -> Vec3 {
+    Vec3::new(
+        rng.range(0.2, 1.0),
+        rng.range(0.2, 1.0),
+        rng.range(0.2, 1.0),
+    )
 }
 
 fn two_lights(scene: &mut Scene, at: [Vec3; 2]) -> Result<()> {
@@ -237,7 +214,7 @@ fn spheres1() -> Result<Builtin> {
         Vec3::splat(50.0),
         (0.05, 0.25),
         |r| Material {
-            color: r.color(),
+            color: color(r),
             ..Material::default()
         },
     )?;
@@ -267,7 +244,7 @@ fn spheres2() -> Result<Builtin> {
         Vec3::splat(20.0),
         (0.2, 0.9),
         |r| Material {
-            color: r.color(),
+            color: color(r),
             reflectivity: r.range(0.2, 0.7),
             ..Material::default()
         },
@@ -296,7 +273,7 @@ fn spheres3() -> Result<Builtin> {
         Vec3::new(30.0, 8.0, 30.0),
         (0.3, 1.2),
         |r| Material {
-            color: r.color(),
+            color: color(r),
             reflectivity: r.range(0.0, 0.6),
             ..Material::default()
         },
