@@ -18,6 +18,7 @@ pub mod fallible;
 pub mod frame;
 pub mod geometry;
 pub mod gpu;
+mod huge_pages;
 mod job_record;
 pub mod kdtree;
 pub mod precision;
