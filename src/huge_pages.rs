@@ -45,7 +45,10 @@ pub(crate) fn advise<T>(data: &[T]) {
 #[cfg(all(test, target_os = "linux", target_env = "gnu"))]
 pub(crate) fn marked(addr: usize) -> (bool, bool) {
     let smaps = std::fs::read_to_string("/proc/self/smaps").expect("/proc/self/smaps");
-    let thp = std::path::Path::new("/sys/kernel/mm/transparent_hugepage/enabled").exists();
+    // `/proc/meminfo` counts `AnonHugePages` only on kernels built with transparent huge
+    // pages (visible in containers, where `/sys/kernel/mm` may not be).
+    let meminfo = std::fs::read_to_string("/proc/meminfo").expect("/proc/meminfo");
+    let thp = meminfo.lines().any(|l| l.starts_with("AnonHugePages:"));
     let mut inside = false;
     for line in smaps.lines() {
         let range = line
