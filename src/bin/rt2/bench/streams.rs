@@ -190,7 +190,8 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          bit-identical hits. A batch is sorted by octant and cut into streams of one \
          octant, at most {hi} rays (`STREAM_MAX`): longer streams of coherent rays outgrow the \
          caches. Trees: SAH with perfect splits (the library default; the \
-         paper used midpoint trees). Paper: Pentium-M, 1 core; its third model is the Buddha, the \
+         paper used midpoint trees); on Linux their arrays lie on transparent huge pages, as \
+         Embree's do (`huge_pages`). Paper: Pentium-M, 1 core; its third model is the Buddha, the \
          Snowden bust stands in for it. Ratios are measured in this run on a shared 2-core machine \
          (±10%); each figure is the median of the timed runs, as Embree's harness reports, \
          and each run times every mode in turn (on the shared sets after one run of Embree's \
