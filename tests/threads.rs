@@ -8,6 +8,8 @@
 use rt2::api::*;
 use rt2::error::Rt2Status;
 use std::ptr::{null, null_mut};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 /// Raw handles shared by the scoped threads: the library's handles are made for that.
 #[derive(Clone, Copy)]
@@ -109,32 +111,57 @@ fn renders_queries_and_commits_share_a_context_and_a_scene() {
         assert!(want_hits.iter().any(|k| k.1 != RT2_INVALID_ID));
 
         let (rays, want_image, want_hits) = (&rays, &want_image, &want_hits);
+        // Renders (0) and queries (1) that succeeded so far. The editor waits, after each
+        // commit, for one of each to succeed before its next edit (up to a few seconds), and
+        // the workers go on until it is done: calls then succeed between the edits on a busy
+        // machine too, where a fixed number of fast calls could all meet the scene between an
+        // edit and its commit.
+        let ok = [AtomicUsize::new(0), AtomicUsize::new(0)];
+        let editing = AtomicBool::new(true);
+        let (ok, editing) = (&ok, &editing);
+        let worker = move |kind: usize, at_least: usize, call: &dyn Fn() -> (Rt2Status, bool)| {
+            let mut out = Vec::new();
+            while out.len() < at_least || editing.load(Ordering::Acquire) {
+                let (st, same) = call();
+                if st == Rt2Status::Ok {
+                    ok[kind].fetch_add(1, Ordering::Release);
+                }
+                out.push((["render", "query"][kind], st, same));
+            }
+            out
+        };
         let results: Vec<(&str, Rt2Status, bool)> = std::thread::scope(|s| {
             let mut workers = Vec::new();
             for _ in 0..3 {
                 workers.push(s.spawn(move || {
-                    (0..6)
-                        .map(|_| {
-                            let (st, img) = render(h);
-                            ("render", st, &img == want_image)
-                        })
-                        .collect::<Vec<_>>()
+                    worker(0, 6, &|| {
+                        let (st, img) = render(h);
+                        (st, &img == want_image)
+                    })
                 }));
             }
             for _ in 0..2 {
                 workers.push(s.spawn(move || {
-                    (0..10)
-                        .map(|_| {
-                            let (st, hits) = query(h, rays);
-                            ("query", st, &hits == want_hits)
-                        })
-                        .collect::<Vec<_>>()
+                    worker(1, 10, &|| {
+                        let (st, hits) = query(h, rays);
+                        (st, &hits == want_hits)
+                    })
                 }));
             }
             workers.push(s.spawn(move || {
-                (0..8u32)
-                    .flat_map(|k| edit_and_commit(h, k))
-                    .collect::<Vec<_>>()
+                let mut out = Vec::new();
+                for k in 0..8u32 {
+                    let before = ok.each_ref().map(|n| n.load(Ordering::Acquire));
+                    out.extend(edit_and_commit(h, k));
+                    let start = Instant::now();
+                    while (0..2).any(|i| ok[i].load(Ordering::Acquire) == before[i])
+                        && start.elapsed() < Duration::from_secs(5)
+                    {
+                        std::thread::yield_now();
+                    }
+                }
+                editing.store(false, Ordering::Release);
+                out
             }));
             workers
                 .into_iter()
