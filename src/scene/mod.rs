@@ -95,8 +95,10 @@ fn next_commit_id() -> u64 {
 
 impl Committed {
     /// Asks for huge pages under the arrays every traversal reads at random (see
-    /// [`crate::huge_pages`]): the tree's nodes and leaf lists, the bounded primitives, and
-    /// the ropes and exact corners once built. Arrays under 2 MiB are passed over there.
+    /// [`crate::huge_pages`]): the tree's nodes and leaf lists, the bounded primitives and
+    /// their exact corners, and the ropes when the build made them. Arrays under 2 MiB are
+    /// passed over there. Ropes and corners built later on demand are advised as they are
+    /// made ([`Scene::ensure_ropes`], [`Scene::ensure_exact_vertices`]), not everything again.
     fn advise_huge_pages(&self) {
         use crate::huge_pages::advise;
         let p = &self.prims;
@@ -107,6 +109,12 @@ impl Committed {
         advise(&p.spheres);
         advise(&p.ellipsoids);
         advise(&p.boxes);
+        self.advise_rope_pages();
+    }
+
+    /// [`Self::advise_huge_pages`] for the ropes' arrays alone.
+    fn advise_rope_pages(&self) {
+        use crate::huge_pages::advise;
         if let Some(r) = &self.tree.ropes {
             advise(&r.links.words);
             advise(&r.leaf_bounds);
@@ -505,7 +513,7 @@ impl Scene {
         let mut tree = kdtree::build(&prims, &self.build)?;
         locality::renumber(&mut prims, &mut origins, &mut tree)?;
         let id = next_commit_id();
-        self.committed = Some(Committed {
+        let committed = Committed {
             bounds: prims.scene_bounds(),
             prims,
             tree,
@@ -526,8 +534,9 @@ impl Scene {
             commit_ms: start.elapsed().as_secs_f32() * 1e3,
             id,
             placement: id,
-        });
-        self.committed.iter().for_each(Committed::advise_huge_pages);
+        };
+        committed.advise_huge_pages();
+        self.committed = Some(committed);
         self.stale = Stale::Nothing;
         Ok(())
     }
@@ -536,9 +545,9 @@ impl Scene {
     /// there yet (ropes cost about 3x the tree, so they are made only on request).
     pub fn ensure_ropes(&mut self) -> Result<()> {
         self.committed()?;
-        if let Some(c) = &mut self.committed {
+        if let Some(c) = self.committed.as_mut().filter(|c| c.tree.ropes.is_none()) {
             c.tree.ensure_ropes()?;
-            c.advise_huge_pages();
+            c.advise_rope_pages();
         }
         Ok(())
     }
@@ -572,7 +581,7 @@ impl Scene {
                         .iter()
                         .map(|o| corners[first[o.object as usize] + o.prim as usize]),
                 )?;
-                c.advise_huge_pages();
+                crate::huge_pages::advise(&c.prims.vertices);
             }
         }
         Ok(())
