@@ -361,7 +361,9 @@ impl Answer for AnyHit<'_> {
             }
         }
         let found = found & live;
-        for_lanes(live, |l| self.0[ids[l] as usize] = found >> l & 1 == 1);
+        // Only the rays found: the others' flags are still false (as the finished flags in
+        // `Batch::leaf_rays`).
+        for_lanes(found, |l| self.0[ids[l] as usize] = true);
         found
     }
 
@@ -641,7 +643,11 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
             t_exit,
             &mut self.stats,
         );
-        for_lanes(live, |l| self.done[ids[l] as usize] = done >> l & 1 == 1);
+        // Only the lanes that finished: a ray's flag starts false and is never cleared, and
+        // most leaf visits finish no ray. Writing every live lane's flag (a loop whose length
+        // varies from visit to visit, its exit mispredicted) made 16-lane packets 7% slower on
+        // the bunny's and dragon's primary sets.
+        for_lanes(done, |l| self.done[ids[l] as usize] = true);
         self.finished += done.count_ones() as usize;
         done
     }
