@@ -26,6 +26,6 @@ mod process;
 pub mod rayset;
 mod read_mostly;
 pub mod render;
-mod rng;
+pub mod rng;
 pub mod scene;
 pub mod shading;

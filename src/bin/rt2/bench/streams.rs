@@ -66,21 +66,14 @@ fn orbit_rays(c: &Committed, w: u32, h: u32, angle: f32) -> Vec<Ray> {
 }
 
 /// Incoherent rays as the paper and `../shared/raysets` define them: origin and direction from
-/// two uniform points on the bounding sphere (SplitMix64 here; the sets use PCG32).
+/// two uniform points on the bounding sphere (the library's SplitMix64 here; the sets use PCG32).
 fn incoherent_rays(c: &Committed, n: usize) -> Vec<Ray> {
     use glam::Vec3;
-    let mut state = 0x5eed_u64;
-    let mut next = || {
-        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    };
+    let mut rng = rt2::rng::Rng(0x5eed);
     let (centre, radius) = (c.bounds.center(), 0.5 * c.bounds.diagonal());
     let mut point = || {
-        let z = 2.0 * next() - 1.0;
-        let phi = std::f32::consts::TAU * next();
+        let z = 2.0 * rng.next_f32() - 1.0;
+        let phi = std::f32::consts::TAU * rng.next_f32();
         let r = (1.0 - z * z).max(0.0).sqrt();
         centre + radius * Vec3::new(r * phi.cos(), r * phi.sin(), z)
     };
