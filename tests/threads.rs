@@ -151,8 +151,10 @@ fn renders_queries_and_commits_share_a_context_and_a_scene() {
             workers.push(s.spawn(move || {
                 let mut out = Vec::new();
                 for k in 0..8u32 {
-                    let before = ok.each_ref().map(|n| n.load(Ordering::Acquire));
                     out.extend(edit_and_commit(h, k));
+                    // Counted from the commit on: a call that succeeded before the edit says
+                    // nothing about the committed scene.
+                    let before = ok.each_ref().map(|n| n.load(Ordering::Acquire));
                     let start = Instant::now();
                     while (0..2).any(|i| ok[i].load(Ordering::Acquire) == before[i])
                         && start.elapsed() < Duration::from_secs(5)
