@@ -214,7 +214,7 @@ mod tests {
         let mut rng = crate::rng::Rng(5);
         let mut worst = 0.0f32;
         for _ in 0..20_000 {
-            let mut v = || rng.next_f32() * 2.0 - 1.0;
+            let mut v = || rng.unit() * 2.0 - 1.0;
             let forward = Vec3::new(v(), v(), v()).normalize();
             let across = forward.any_orthonormal_vector();
             let up = forward + (1e-6 + 2e-5 * v().abs()) * across;

@@ -1,12 +1,12 @@
 //! SplitMix64 (Steele, Lea & Flood 2014): a tiny deterministic generator, so that what draws
 //! from it is the same everywhere: the built-in scenes, the sample positions of the CPU
-//! queries' octant-run test, the benchmarks' incoherent rays, and the library's unit tests.
+//! queries' octant-run test, the benchmarks' incoherent rays, and the unit and integration tests.
 
 pub struct Rng(pub u64);
 
 impl Rng {
     /// 64 well-mixed bits.
-    pub fn bits(&mut self) -> u64 {
+    pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -15,12 +15,12 @@ impl Rng {
     }
 
     /// Uniform in `[0, 1)`, 24 bits.
-    pub fn next_f32(&mut self) -> f32 {
-        (self.bits() >> 40) as f32 / (1u64 << 24) as f32
+    pub fn unit(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
     }
 
     /// Uniform in `[lo, hi)`.
     pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.next_f32()
+        lo + (hi - lo) * self.unit()
     }
 }

@@ -1232,6 +1232,7 @@ fn random_edits(
     let rays = rays();
     let (mut checks, mut emptied, mut full) = (0, 0, 0);
     for seed in 1..=sequences {
+        use support::rng::Draws;
         let mut rng = support::rng::Rng(seed);
         let scene = rebuilt(ctx, &[]);
         let (mut held, mut removed) = (Vec::<Held>::new(), Vec::<u32>::new());

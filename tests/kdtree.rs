@@ -16,7 +16,7 @@ fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
 
 mod support;
 
-use support::rng::Rng;
+use support::rng::{Draws, Rng};
 
 /// `n` triangles of size up to `size` around centres uniform in the unit cube, mapped by
 /// `offset + scale * p`.

@@ -15,7 +15,7 @@ use rt2::scene::tessellate::{self, Mesh};
 use rt2::scene::{Committed, Scene, Shape};
 
 mod support;
-use support::rng::Rng;
+use support::rng::{Draws, Rng};
 
 /// A closed mesh and points strictly inside it.
 struct Case {

@@ -23,7 +23,7 @@ fn build(input: &dyn BuildInput, opts: &BuildOptions) -> KdTree {
 use rt2::precision::Intersector;
 
 mod support;
-use support::rng::Rng;
+use support::rng::{Draws, Rng};
 
 fn soup(rng: &mut Rng, n: usize, size: f32) -> PrimitiveSet {
     let mut prims = PrimitiveSet::default();

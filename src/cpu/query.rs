@@ -218,7 +218,7 @@ pub fn octant_runs_at_least(rays: &[Ray], run: usize) -> bool {
     } else {
         // A pair index below `pairs`: 64 random bits scaled to [0, pairs).
         let mut rng = Rng(0);
-        let mut at = || ((u128::from(rng.bits()) * pairs as u128) >> 64) as usize;
+        let mut at = || ((u128::from(rng.next_u64()) * pairs as u128) >> 64) as usize;
         let changes = (0..RUN_SAMPLES).filter(|_| changed(at())).count();
         (RUN_SAMPLES, changes)
     };

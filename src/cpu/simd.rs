@@ -773,8 +773,8 @@ mod tests {
 
     impl Grid {
         fn coord(&mut self) -> f32 {
-            let x = 2.0 * self.0.next_f32() - 1.0;
-            if self.0.next_f32() < 0.5 {
+            let x = 2.0 * self.0.unit() - 1.0;
+            if self.0.unit() < 0.5 {
                 (x * 4.0).round() / 4.0
             } else {
                 x
@@ -800,10 +800,10 @@ mod tests {
         /// other one), or [`Grid::ray`]: rays on an edge take the watertight test's f64 path.
         fn ray_near(&mut self, corners: &[[glam::Vec3; 3]]) -> Ray {
             let mut ray = self.ray();
-            if self.0.next_f32() < 0.5 {
+            if self.0.unit() < 0.5 {
                 let pick = |x: f32, n: usize| ((x * n as f32) as usize).min(n - 1);
-                let c = corners[pick(self.0.next_f32(), corners.len())];
-                let (i, j) = (pick(self.0.next_f32(), 3), pick(self.0.next_f32(), 3));
+                let c = corners[pick(self.0.unit(), corners.len())];
+                let (i, j) = (pick(self.0.unit(), 3), pick(self.0.unit(), 3));
                 ray.dir = (c[i] + c[j]) * 0.5 - ray.org;
             }
             ray
@@ -940,7 +940,7 @@ mod tests {
                 for round in 0..200 {
                     let mut ids = [0u32; M];
                     for id in &mut ids {
-                        *id = (rng.bits() % 45) as u32;
+                        *id = (rng.next_u64() % 45) as u32;
                     }
                     ids[round % M] = u32::MAX;
                     let [third, first] = gather_columns(isa, &rows, [2, 0], &ids);
@@ -978,7 +978,7 @@ mod tests {
                 let mut set = 0;
                 for _ in 0..2000 {
                     let mut pick =
-                        || values[(rng.next_f32() * values.len() as f32) as usize % values.len()];
+                        || values[(rng.unit() * values.len() as f32) as usize % values.len()];
                     let a: [f32; N] = std::array::from_fn(|_| pick());
                     let b: [f32; N] = std::array::from_fn(|_| pick());
                     let want = (0..N).filter(|&l| a[l] < b[l]).fold(0, |m, l| m | 1 << l);

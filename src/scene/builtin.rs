@@ -95,7 +95,7 @@ fn random_spheres(
             rng.range(lo.y, hi.y),
             rng.range(lo.z, hi.z),
         );
-        let m = palette[(rng.next_f32() * 16.0) as usize % 16];
+        let m = palette[(rng.unit() * 16.0) as usize % 16];
         scene.add_object(
             Shape::Sphere {
                 center,

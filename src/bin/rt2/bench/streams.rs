@@ -72,8 +72,8 @@ fn incoherent_rays(c: &Committed, n: usize) -> Vec<Ray> {
     let mut rng = rt2::rng::Rng(0x5eed);
     let (centre, radius) = (c.bounds.center(), 0.5 * c.bounds.diagonal());
     let mut point = || {
-        let z = 2.0 * rng.next_f32() - 1.0;
-        let phi = std::f32::consts::TAU * rng.next_f32();
+        let z = 2.0 * rng.unit() - 1.0;
+        let phi = std::f32::consts::TAU * rng.unit();
         let r = (1.0 - z * z).max(0.0).sqrt();
         centre + radius * Vec3::new(r * phi.cos(), r * phi.sin(), z)
     };
