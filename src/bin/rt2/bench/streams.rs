@@ -85,40 +85,63 @@ fn incoherent_rays(c: &Committed, n: usize) -> Vec<Ray> {
         .collect()
 }
 
-/// Median of `runs` timed passes (after a warm-up) tracing every batch once, for each of
-/// `configs` (a mode and a lane width), on `ctx`'s threads, in seconds: [`median_seconds`]
-/// with every config on the same batches.
+/// `runs` timed passes (after a warm-up) tracing every batch once, for each of `configs` (a
+/// mode and a lane width), on `ctx`'s threads: [`timed_runs`] with every config on the same
+/// batches.
 fn seconds(
     ctx: &Context,
     c: &Committed,
     batches: &[Vec<Ray>],
     configs: &[(QueryMode, Width)],
     runs: usize,
-) -> Result<Vec<f64>> {
+) -> Result<Timings> {
     let jobs: Vec<Job> = configs
         .iter()
         .map(|&config| (batches, Some(config)))
         .collect();
-    median_seconds(ctx, c, &jobs, runs, || {})
+    timed_runs(ctx, c, &jobs, runs, || {})
 }
 
 /// A timed job: batches traced once each per pass, in one mode and lane width, or (`None`)
 /// through `Context::intersect` with the default options, whose mode is AUTO's choice.
 type Job<'a> = (&'a [Vec<Ray>], Option<(QueryMode, Width)>);
 
-/// Median of `runs` timed passes of each job (after a warm-up pass of each), on `ctx`'s
-/// threads, in seconds. Each run calls `each_run` (the peer's run, where one is timed beside)
-/// and then times every job in turn, so that a busy spell of this shared machine slows them
-/// all rather than the one measured then: the tables compare ratios. The median, as Embree's
-/// harness reports: with the fastest run here against Embree's median, the ratios leaned
-/// towards RT2.
-fn median_seconds(
+/// Seconds of every timed run of each job: `self.0[job][run]`.
+struct Timings(Vec<Vec<f64>>);
+
+impl Timings {
+    /// The job's median time, as Embree's harness reports: with the fastest run here against
+    /// Embree's median, the ratios leaned towards RT2.
+    fn median(&self, job: usize) -> f64 {
+        median(self.0[job].clone())
+    }
+
+    /// How many times as fast job `a` is as job `b`: the median over the runs of `b`'s time
+    /// over `a`'s in the same run. A busy spell of this shared machine slows both jobs of a
+    /// run, so the ratio of one run's pair moves less than the ratio of the two medians,
+    /// which may come from different runs (two runs of the bench differed by up to 25% in a
+    /// ratio of medians).
+    fn speedup(&self, a: usize, b: usize) -> f64 {
+        paired_ratio(&self.0[b], &self.0[a])
+    }
+}
+
+/// The median over runs of `x[run] / y[run]`.
+fn paired_ratio(x: &[f64], y: &[f64]) -> f64 {
+    median(x.iter().zip(y).map(|(x, y)| x / y).collect())
+}
+
+/// `runs` timed passes of each job (after a warm-up pass of each), on `ctx`'s threads. Each
+/// run calls `each_run` (the peer's run, where one is timed beside) and then times every job in
+/// turn, so that a busy spell slows them all rather than the one measured then: the tables
+/// compare ratios.
+fn timed_runs(
     ctx: &Context,
     c: &Committed,
     jobs: &[Job],
     runs: usize,
     mut each_run: impl FnMut(),
-) -> Result<Vec<f64>> {
+) -> Result<Timings> {
     let longest = jobs
         .iter()
         .flat_map(|j| j.0.iter().map(Vec::len))
@@ -155,7 +178,7 @@ fn median_seconds(
             t.push(pass(j));
         }
     }
-    failed.map_or(Ok(times.into_iter().map(median).collect()), Err)
+    failed.map_or(Ok(Timings(times)), Err)
 }
 
 /// The paper's three modes at the default width ([`MODES`]), then 4-lane packets.
@@ -185,10 +208,12 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          caches. Trees: SAH with perfect splits (the library default; the \
          paper used midpoint trees); on Linux their arrays lie on transparent huge pages, as \
          Embree's do (`huge_pages`). Paper: Pentium-M, 1 core; its third model is the Buddha, the \
-         Snowden bust stands in for it. Ratios are measured in this run on a shared 2-core machine \
-         (±10%); each figure is the median of the timed runs, as Embree's harness reports, \
-         and each run times every mode in turn (on the shared sets after one run of Embree's \
-         harness), so that a busy spell slows them all.\n\n",
+         Snowden bust stands in for it. Everything is measured in this run, on a shared 2-core \
+         machine. Each run times every mode in turn (on the shared sets after one run of \
+         Embree's harness), so that a busy spell slows them all; each speed is the median of the \
+         timed runs, as Embree's harness reports, and each ratio the median of the runs' own \
+         ratios (both speeds of a ratio from the same run: two runs of the bench once differed \
+         by up to 25% in a ratio of two medians).\n\n",
         w = width.lanes(),
         hi = STREAM_MAX
     );
@@ -231,10 +256,11 @@ pub(super) fn streams(a: &Args) -> Result<String> {
                 )
             })
             .collect();
-        let secs = seconds(&one, c, &orbit, &with_packets4(width), a.runs)?;
-        let (secs4, secs) = (secs[3], &secs[..3]);
-        let mr4 = rays_of(&orbit) / secs4 / 1e6;
-        let mr: Vec<f64> = secs.iter().map(|s| rays_of(&orbit) / s / 1e6).collect();
+        // Jobs: n-rays, packets, 1-ray, packets ×4.
+        let t = seconds(&one, c, &orbit, &with_packets4(width), a.runs)?;
+        let mr: Vec<f64> = (0..4)
+            .map(|j| rays_of(&orbit) / t.median(j) / 1e6)
+            .collect();
         let paper = PAPER_COHERENT.iter().find(|p| p.0 == model).map(|p| p.1);
         let fmt3 = |p: Option<[f64; 3]>, scale: f64| {
             p.map_or("—".into(), |p| {
@@ -251,11 +277,11 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             "| {model} | {tris} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2}× | {:.2}× | {:.2}× | {} |",
             mr[0],
             mr[1],
-            mr4,
+            mr[3],
             mr[2],
-            mr[0] / mr[1],
-            mr[0] / mr4,
-            mr[0] / mr[2],
+            t.speedup(0, 1),
+            t.speedup(0, 3),
+            t.speedup(0, 2),
             fmt3(paper, 1.0)
         )
         .ok();
@@ -263,19 +289,16 @@ pub(super) fn streams(a: &Args) -> Result<String> {
         writeln!(
             t2,
             "| {model} | {:.1} | {:.1} | {:.1} | {:.1} | {} |",
-            FRAMES as f64 / secs[0],
-            FRAMES as f64 / secs[1],
-            FRAMES as f64 / secs4,
-            FRAMES as f64 / secs[2],
+            FRAMES as f64 / t.median(0),
+            FRAMES as f64 / t.median(1),
+            FRAMES as f64 / t.median(3),
+            FRAMES as f64 / t.median(2),
             fmt3(paper, 1.0 / frame_rays)
         )
         .ok();
         let inco = vec![incoherent_rays(c, 262_144)];
-        let mi: Vec<f64> = seconds(&one, c, &inco, &with_packets4(width), a.runs)?
-            .iter()
-            .map(|s| rays_of(&inco) / s / 1e6)
-            .collect();
-        let mi4 = mi[3];
+        let t = seconds(&one, c, &inco, &with_packets4(width), a.runs)?;
+        let mi: Vec<f64> = (0..4).map(|j| rays_of(&inco) / t.median(j) / 1e6).collect();
         let paper = PAPER_INCOHERENT.iter().find(|p| p.0 == model).map(|p| p.1);
         writeln!(
             t3,
@@ -283,9 +306,9 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             inco[0].len(),
             mi[0],
             mi[1],
-            mi4,
+            mi[3],
             mi[2],
-            mi[0] / mi[2],
+            t.speedup(0, 2),
             fmt3(paper, 1.0)
         )
         .ok();
@@ -296,18 +319,16 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             })
             .collect();
         let configs = MODES.map(|m| (m, width));
-        let mw: Vec<f64> = seconds(&one, c, &big, &configs, a.runs.min(3))?
-            .iter()
-            .map(|s| rays_of(&big) / s / 1e6)
-            .collect();
+        let t = seconds(&one, c, &big, &configs, a.runs.min(3))?;
+        let mw: Vec<f64> = (0..3).map(|j| rays_of(&big) / t.median(j) / 1e6).collect();
         writeln!(
             wide,
             "| {model} | {:.2} | {:.2} | {:.2} | {:.2}× | {:.2}× |",
             mw[0],
             mw[1],
             mw[2],
-            mw[0] / mw[1],
-            mw[0] / mw[2]
+            t.speedup(0, 1),
+            t.speedup(0, 2)
         )
         .ok();
         for (what, rays) in [("256² frame", &orbit[0]), ("incoherent", &inco[0])] {
@@ -425,53 +446,78 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
             .flat_map(|r| configs.iter().map(move |&config| (r.as_slice(), config)))
             .collect();
         let mesh = shared().join("models").join(format!("{model}.ply"));
-        let mut embree = Vec::new();
+        // Embree's rows of each run, kept apart so that each pairs with RT2's run after it.
+        let mut embree: Vec<Vec<Vec<String>>> = Vec::new();
         let peer = embree_harness().is_some();
-        let secs = median_seconds(one, c, &jobs, a.runs, || {
+        let t = timed_runs(one, c, &jobs, a.runs, || {
             if peer {
-                embree.extend(embree_rows(&mesh, &sets, 1, "1"));
+                embree.push(embree_rows(&mesh, &sets, 1, "1"));
             }
         })?;
         if !peer {
             warn("bench: Embree's harness is not built; Embree columns are empty");
         }
-        for ((set, rays), secs) in sets.iter().zip(&rays).zip(secs.chunks(configs.len())) {
+        for (k, (set, rays)) in sets.iter().zip(&rays).enumerate() {
             let stem = set
                 .file_stem()
                 .map_or(String::new(), |s| s.to_string_lossy().into());
             let mut row = format!("| {model} {stem} |");
-            let mut mrays = secs.iter().map(|s| rays_of(rays) / s / 1e6);
-            let mut best: f64 = 0.0;
+            // This set's jobs: one per config, in order.
+            let job = |j: usize| k * configs.len() + j;
+            let mrays = |j: usize| rays_of(rays) / t.median(job(j)) / 1e6;
+            let mut j = 0;
+            // The fastest config by its median, and its Mrays/s in each run.
+            let mut best: Option<(f64, usize)> = None;
             for column in &columns {
-                match column.and_then(|_| mrays.next()) {
-                    Some(m) => {
-                        best = best.max(m);
-                        write!(row, " {m:.2} |").ok();
-                    }
-                    None => row += " — |",
+                if column.is_none() {
+                    row += " — |";
+                    continue;
                 }
+                let m = mrays(j);
+                if best.is_none_or(|(b, _)| m > b) {
+                    best = Some((m, job(j)));
+                }
+                write!(row, " {m:.2} |").ok();
+                j += 1;
             }
+            let best_runs: Vec<f64> = best.map_or(Vec::new(), |(_, b)| {
+                t.0[b].iter().map(|s| rays_of(rays) / s / 1e6).collect()
+            });
             // AUTO's figure, and the mode it chose (the context's own choice; a set is one
             // batch, traced with the standard traversal).
-            let auto = mrays.next().unwrap_or(0.0);
+            let auto = mrays(j);
             let (chosen, _) = choose_query_mode(&rays[0], None, Traversal::Standard);
             write!(row, " {auto:.2} ({}) |", chosen.name()).ok();
-            // Embree's one-thread Mrays/s of this set and mode, the median of its runs.
-            let find = |mode: &str| {
-                let runs: Vec<f64> = embree
+            // Embree's one-thread Mrays/s of this set and mode in each run (`None` where its
+            // harness gave no row).
+            let find = |mode: &str| -> Vec<Option<f64>> {
+                embree
                     .iter()
-                    .filter(|r| {
-                        r.get(2).is_some_and(|s| *s == stem)
-                            && r.get(3).is_some_and(|s| s == mode)
-                            && r.get(4).is_some_and(|s| s == "1")
+                    .map(|rows| {
+                        rows.iter()
+                            .find(|r| {
+                                r.get(2).is_some_and(|s| *s == stem)
+                                    && r.get(3).is_some_and(|s| s == mode)
+                                    && r.get(4).is_some_and(|s| s == "1")
+                            })
+                            .and_then(|r| r.get(7).and_then(|x| x.parse::<f64>().ok()))
                     })
-                    .filter_map(|r| r.get(7).and_then(|x| x.parse::<f64>().ok()))
-                    .collect();
-                (!runs.is_empty()).then(|| median(runs))
+                    .collect()
             };
-            let (e1, e8) = (find("intersect1"), find("intersect8(coherent)"));
-            let cell = |x: Option<f64>| x.map_or("—".into(), |x| format!("{x:.2}"));
-            let ratio = |x: Option<f64>| x.map_or("—".into(), |x| format!("{:.2}×", best / x));
+            // Embree's median, and the best config's speed over Embree's paired run by run
+            // (runs where Embree gave no figure left out).
+            let versus = |mode: &str| -> Option<(f64, f64)> {
+                let pairs: (Vec<f64>, Vec<f64>) = find(mode)
+                    .into_iter()
+                    .zip(&best_runs)
+                    .filter_map(|(e, &ours)| e.map(|e| (ours, e)))
+                    .unzip();
+                (!pairs.1.is_empty())
+                    .then(|| (median(pairs.1.clone()), paired_ratio(&pairs.0, &pairs.1)))
+            };
+            let (e1, e8) = (versus("intersect1"), versus("intersect8(coherent)"));
+            let cell = |x: Option<(f64, f64)>| x.map_or("—".into(), |(e, _)| format!("{e:.2}"));
+            let ratio = |x: Option<(f64, f64)>| x.map_or("—".into(), |(_, r)| format!("{r:.2}×"));
             writeln!(
                 row,
                 " {} | {} | {} | {} |",
@@ -488,4 +534,22 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A ratio pairs the two speeds of each run: busy spells that slow one side in one run and
+    /// the other side in another leave the run-by-run ratio where it was, where the ratio of the
+    /// two medians (here 1/6) takes each side's median from a different run.
+    #[test]
+    fn ratios_pair_the_runs() {
+        let (ours, peer) = ([1.0, 1.0, 3.0], [2.0, 6.0, 6.0]);
+        assert_eq!(paired_ratio(&ours, &peer), 0.5);
+        let t = Timings(vec![peer.to_vec(), ours.to_vec()]);
+        // Job 1 takes half job 0's time in the runs that pair them: twice as fast.
+        assert_eq!(t.speedup(1, 0), 2.0);
+        assert_eq!(t.median(0), 6.0);
+    }
 }
