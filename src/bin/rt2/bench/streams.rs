@@ -132,9 +132,12 @@ fn paired_ratio(x: &[f64], y: &[f64]) -> f64 {
 }
 
 /// `runs` timed passes of each job (after a warm-up pass of each), on `ctx`'s threads. Each
-/// run calls `each_run` (the peer's run, where one is timed beside) and then times every job in
-/// turn, so that a busy spell slows them all rather than the one measured then: the tables
-/// compare ratios.
+/// run calls `each_run` (the peer's run, where one is timed beside) and then times the jobs
+/// batch by batch: the first batch of every job, then the second of every job, and so on, the
+/// jobs in turn forwards and backwards (so that none always runs on the caches another left).
+/// The load of this shared machine changes within seconds; timed a whole job after another,
+/// the 100-frame orbit's modes each took a second or more, and two runs of the bench differed
+/// by up to 25% in a ratio. Interleaved, a busy spell slows every job of a run about alike.
 fn timed_runs(
     ctx: &Context,
     c: &Committed,
@@ -147,35 +150,50 @@ fn timed_runs(
         .flat_map(|j| j.0.iter().map(Vec::len))
         .max()
         .unwrap_or(0);
+    let batches = jobs.iter().map(|j| j.0.len()).max().unwrap_or(0);
     let mut hits = vec![Hit::MISS; longest];
     let opts = TraverseOptions::default();
     let mut failed = None;
-    let mut pass = |&(batches, config): &Job| {
+    // Seconds of one batch of one job (none when the job has fewer batches).
+    let mut time = |&(batches, config): &Job, i: usize| {
+        let Some(b) = batches.get(i) else {
+            return 0.0;
+        };
+        let hits = &mut hits[..b.len()];
         let t = Instant::now();
-        for b in batches {
-            let hits = &mut hits[..b.len()];
-            match config {
-                Some((mode, width)) => {
-                    let how = Traversal::Standard;
-                    ctx.install(|| query::trace(c, (b, None), hits, how, &opts, mode, width));
-                }
-                None => {
-                    // The first failure is kept and returned once the timing is done.
-                    let done = ctx.intersect(c, b, hits, &QueryOptions::default());
-                    failed = failed.take().or(done.err());
-                }
+        match config {
+            Some((mode, width)) => {
+                let how = Traversal::Standard;
+                ctx.install(|| query::trace(c, (b, None), hits, how, &opts, mode, width));
+            }
+            None => {
+                // The first failure is kept and returned once the timing is done.
+                let done = ctx.intersect(c, b, hits, &QueryOptions::default());
+                failed = failed.take().or(done.err());
             }
         }
         t.elapsed().as_secs_f64()
     };
-    for j in jobs {
-        pass(j);
-    }
+    let mut pass = |times: &mut [f64]| {
+        for i in 0..batches {
+            let order: Vec<usize> = if i % 2 == 0 {
+                (0..jobs.len()).collect()
+            } else {
+                (0..jobs.len()).rev().collect()
+            };
+            for j in order {
+                times[j] += time(&jobs[j], i);
+            }
+        }
+    };
+    pass(&mut vec![0.0; jobs.len()]);
     let mut times = vec![Vec::with_capacity(runs); jobs.len()];
     for _ in 0..runs {
         each_run();
-        for (t, j) in times.iter_mut().zip(jobs) {
-            t.push(pass(j));
+        let mut run = vec![0.0; jobs.len()];
+        pass(&mut run);
+        for (t, r) in times.iter_mut().zip(run) {
+            t.push(r);
         }
     }
     failed.map_or(Ok(Timings(times)), Err)
@@ -209,11 +227,12 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          paper used midpoint trees); on Linux their arrays lie on transparent huge pages, as \
          Embree's do (`huge_pages`). Paper: Pentium-M, 1 core; its third model is the Buddha, the \
          Snowden bust stands in for it. Everything is measured in this run, on a shared 2-core \
-         machine. Each run times every mode in turn (on the shared sets after one run of \
-         Embree's harness), so that a busy spell slows them all; each speed is the median of the \
-         timed runs, as Embree's harness reports, and each ratio the median of the runs' own \
-         ratios (both speeds of a ratio from the same run: two runs of the bench once differed \
-         by up to 25% in a ratio of two medians).\n\n",
+         machine whose load changes within seconds. Each run times the modes frame by frame \
+         (each frame in every mode before the next frame), and on a shared set right after one \
+         run of Embree's harness on that set; each speed is the median of the timed runs, as \
+         Embree's harness reports, and each ratio the median of the runs' own ratios (both \
+         speeds of a ratio from the same run). Timed a whole mode after another, two runs of \
+         the bench once differed by up to 25% in a ratio of two medians.\n\n",
         w = width.lanes(),
         hi = STREAM_MAX
     );
@@ -427,8 +446,7 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
             .iter()
             .map(|set| Ok(vec![rayset::read_rays(set)?]))
             .collect::<Result<_>>()?;
-        // Streams and packets at every width (None where the CPU lacks it), then single rays,
-        // every set in each run, after one run of Embree's harness on every set.
+        // Streams and packets at every width (None where the CPU lacks it), then single rays.
         let columns: Vec<Option<(QueryMode, Width)>> = [QueryMode::Stream, QueryMode::Packet]
             .iter()
             .flat_map(|&m| Width::ALL.map(|w| w.supported().then_some((m, w))))
@@ -441,30 +459,26 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
             .map(|&c| Some(c))
             .chain([None])
             .collect();
-        let jobs: Vec<Job> = rays
-            .iter()
-            .flat_map(|r| configs.iter().map(move |&config| (r.as_slice(), config)))
-            .collect();
         let mesh = shared().join("models").join(format!("{model}.ply"));
-        // Embree's rows of each run, kept apart so that each pairs with RT2's run after it.
-        let mut embree: Vec<Vec<Vec<String>>> = Vec::new();
         let peer = embree_harness().is_some();
-        let t = timed_runs(one, c, &jobs, a.runs, || {
-            if peer {
-                embree.push(embree_rows(&mesh, &sets, 1, "1"));
-            }
-        })?;
         if !peer {
             warn("bench: Embree's harness is not built; Embree columns are empty");
         }
-        for (k, (set, rays)) in sets.iter().zip(&rays).enumerate() {
+        for (set, rays) in sets.iter().zip(&rays) {
             let stem = set
                 .file_stem()
                 .map_or(String::new(), |s| s.to_string_lossy().into());
             let mut row = format!("| {model} {stem} |");
-            // This set's jobs: one per config, in order.
-            let job = |j: usize| k * configs.len() + j;
-            let mrays = |j: usize| rays_of(rays) / t.median(job(j)) / 1e6;
+            // Each run: Embree's harness on this set, then every config of RT2 on it. Embree's
+            // rows of each run are kept apart so that each pairs with RT2's run after it.
+            let jobs: Vec<Job> = configs.iter().map(|&c| (rays.as_slice(), c)).collect();
+            let mut embree: Vec<Vec<Vec<String>>> = Vec::new();
+            let t = timed_runs(one, c, &jobs, a.runs, || {
+                if peer {
+                    embree.push(embree_rows(&mesh, std::slice::from_ref(set), 1, "1"));
+                }
+            })?;
+            let mrays = |j: usize| rays_of(rays) / t.median(j) / 1e6;
             let mut j = 0;
             // The fastest config by its median, and its Mrays/s in each run.
             let mut best: Option<(f64, usize)> = None;
@@ -475,7 +489,7 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
                 }
                 let m = mrays(j);
                 if best.is_none_or(|(b, _)| m > b) {
-                    best = Some((m, job(j)));
+                    best = Some((m, j));
                 }
                 write!(row, " {m:.2} |").ok();
                 j += 1;
