@@ -119,8 +119,7 @@ impl Timings {
     /// How many times as fast job `a` is as job `b`: the median over the runs of `b`'s time
     /// over `a`'s in the same run. A busy spell of this shared machine slows both jobs of a
     /// run, so the ratio of one run's pair moves less than the ratio of the two medians,
-    /// which may come from different runs (two runs of the bench differed by up to 25% in a
-    /// ratio of medians).
+    /// which may come from different runs.
     fn speedup(&self, a: usize, b: usize) -> f64 {
         paired_ratio(&self.0[b], &self.0[a])
     }
@@ -176,12 +175,8 @@ fn timed_runs(
     };
     let mut pass = |times: &mut [f64]| {
         for i in 0..batches {
-            let order: Vec<usize> = if i % 2 == 0 {
-                (0..jobs.len()).collect()
-            } else {
-                (0..jobs.len()).rev().collect()
-            };
-            for j in order {
+            for k in 0..jobs.len() {
+                let j = if i % 2 == 0 { k } else { jobs.len() - 1 - k };
                 times[j] += time(&jobs[j], i);
             }
         }
