@@ -218,7 +218,9 @@ enum rt2_query_mode
   RT2_QUERY_MODE_PACKET = 1,
   /**
    * The n-ray traversal of the vectorised-traversal paper: all rays of a stream at once, in
-   * streams of one octant and at most 32768 rays (`cpu::query::STREAM_MAX`).
+   * streams of one octant: at most 32768 rays when they come in runs of one octant
+   * (`cpu::query::STREAM_MAX`), else about one ray per leaf of the scene's tree, 32768 to
+   * 262144 (`cpu::query::incoherent_stream_max`).
    */
   RT2_QUERY_MODE_STREAM = 2,
   /**

@@ -1408,3 +1408,59 @@ fn shadow_rays_in_batches_answer_as_single_rays() {
         }
     }
 }
+
+/// Incoherent rays on a tree of more leaves than `STREAM_MAX` are streamed an octant at a time
+/// in streams longer than `STREAM_MAX` (`incoherent_stream_max`): the hits and occlusion flags
+/// are still the single rays', bit for bit.
+#[test]
+fn streams_longer_than_stream_max_give_the_single_ray_hits() {
+    use rt2::cpu::query::{self, incoherent_stream_max, QueryMode, STREAM_MAX};
+    use rt2::scene::{Scene, Shape};
+    let mut rng = Rng(0x10c0);
+    let prims = soup(&mut rng, 300_000, 0.004);
+    let mut scene = Scene::new();
+    let positions = prims.triangles.iter().flat_map(|t| t.vertices()).collect();
+    let triangles = (0..prims.triangles.len() as u32)
+        .map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
+        .collect();
+    scene
+        .add_object(
+            Shape::Mesh {
+                positions,
+                triangles,
+            },
+            0,
+        )
+        .expect("a valid mesh");
+    scene.commit().expect("the scene commits");
+    let c = scene.committed().expect("committed");
+    let most = incoherent_stream_max(&c.tree);
+    assert!(
+        most > STREAM_MAX + STREAM_MAX / 2,
+        "the soup's tree should allow streams well past STREAM_MAX, allows {most}"
+    );
+    // Eight octants of about 1.5 × STREAM_MAX rays each.
+    let rays = random_rays(&mut rng, 12 * STREAM_MAX);
+    let positive = rays
+        .iter()
+        .filter(|r| r.dir.cmpge(Vec3::ZERO).all())
+        .count();
+    assert!(positive > STREAM_MAX, "an octant of {positive} rays");
+    let opts = TraverseOptions::default();
+    let trace = |mode, hits: &mut [Hit], occ: &mut [bool]| {
+        let how = Traversal::Standard;
+        let w = Width::best();
+        query::trace(c, (&rays, None), hits, how, &opts, mode, w);
+        query::trace(c, (&rays, None), occ, how, &opts, mode, w);
+    };
+    let (mut single, mut single_occ) = (vec![Hit::MISS; rays.len()], vec![false; rays.len()]);
+    trace(QueryMode::Single, &mut single, &mut single_occ);
+    let (mut streamed, mut streamed_occ) = (vec![Hit::MISS; rays.len()], vec![true; rays.len()]);
+    trace(QueryMode::Stream, &mut streamed, &mut streamed_occ);
+    let hits = single.iter().filter(|h| h.is_hit()).count();
+    assert!(hits > rays.len() / 10, "only {hits} rays hit the soup");
+    for (i, (s, t)) in single.iter().zip(&streamed).enumerate() {
+        assert!(same_bits(s, t), "ray {i}: single {s:?}, stream {t:?}");
+    }
+    assert_eq!(single_occ, streamed_occ);
+}

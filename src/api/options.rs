@@ -68,7 +68,9 @@ pub enum Rt2QueryMode {
     /// AVX2, else 4; standard traversal order.
     Packet = 1,
     /// The n-ray traversal of the vectorised-traversal paper: all rays of a stream at once, in
-    /// streams of one octant and at most 32768 rays (`cpu::query::STREAM_MAX`).
+    /// streams of one octant: at most 32768 rays when they come in runs of one octant
+    /// (`cpu::query::STREAM_MAX`), else about one ray per leaf of the scene's tree, 32768 to
+    /// 262144 (`cpu::query::incoherent_stream_max`).
     Stream = 2,
     /// The library chooses per batch (per step of 2^20 rays for a longer one; see
     /// `rt2_intersect`) (default): PACKET for 8 rays or more that come in runs of

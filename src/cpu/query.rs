@@ -22,16 +22,40 @@ pub const CHUNK: usize = 4096;
 /// Fewest rays per stream when a batch is cut to keep every thread busy.
 pub const STREAM_CHUNK: usize = 16384;
 
-/// Most rays per stream. A stream walks the tree once per octant group (the paper), so the
-/// batch is first sorted by octant and cut into streams of one octant each: a stream then
-/// holds as many rays of its octant as a batch eight times its size would. Past this size
-/// coherent rays outgrow the caches: they cross both children of most upper nodes, so the
+/// Most rays per stream of rays that come in runs of one octant, as a camera's do (they are cut
+/// in their own order), and fewest that incoherent rays get ([`incoherent_stream_max`]). A
+/// stream walks the tree once per octant group (the paper), so incoherent batches are first
+/// sorted by octant and cut into streams of one octant each: a stream then holds as many rays
+/// of its octant as a batch eight times its size would. Past this size coherent rays outgrow the caches: they cross both children of most upper nodes, so the
 /// far children's lists pending on the ray stack hold about one copy of the stream per level,
 /// and the stream's ray arrays are written out before the walk reads them back. On 1376×768
 /// orbit frames (one thread, `rt2 bench streams`) one 1 M-ray stream ran at 0.55–0.65× the
 /// speed of 32 K-ray streams on the bunny and the Snowden bust, and 128 K-ray streams lost 40%
 /// on the bust.
 pub const STREAM_MAX: usize = 32768;
+
+/// Most rays per stream of incoherent rays (a batch in mixed octants, sorted by octant before
+/// it is cut; see [`incoherent_stream_max`]).
+pub const INCOHERENT_STREAM_MAX: usize = 262144;
+
+/// Most rays per stream of incoherent rays on `tree`: about one ray per leaf, from
+/// [`STREAM_MAX`] to [`INCOHERENT_STREAM_MAX`]. Incoherent rays spread over the tree as they
+/// descend, and a list that has thinned to a packet's worth of rays is finished ray by ray (or
+/// packet by packet); on the dragon's 2 M incoherent rays (one thread) those finishing walks
+/// took 68% of a 32 K-ray stream's time. The more rays a stream holds, the deeper its lists
+/// stay shared: one stream per octant (256 K rays) ran 1.3–1.5× as fast as 32 K-ray streams on
+/// the dragon (367 K leaves), while on the bunny (26 K leaves) and the Snowden bust (15 K) it
+/// was no faster at 128 K and slower at 256 K (2 M incoherent rays, one thread, 3–5 runs with
+/// the stream sizes interleaved; `rt2 bench streams` traces 2 M-ray batches in its table 3).
+/// Unlike a camera's rays, incoherent rays rarely cross both children of a node together, so
+/// the far lists pending on the ray stack stay small (31 bytes per ray, `rt2 bench streams`).
+pub fn incoherent_stream_max(tree: &KdTree) -> usize {
+    // Every inner node has two children: a tree of n nodes has (n + 1) / 2 leaves.
+    tree.nodes
+        .len()
+        .div_ceil(2)
+        .clamp(STREAM_MAX, INCOHERENT_STREAM_MAX)
+}
 
 /// How a batch is traced. Every mode returns the same closest hits, bit for bit (the packet and
 /// stream traversals take the standard traversal's decisions for every ray).
@@ -146,7 +170,7 @@ pub fn trace<T: RayAnswer>(
             let (r, e) = rays;
             T::STREAM(tree, prims, r, RayTests::new(intersector, e), out, width).0
         }
-        QueryMode::Stream => streamed(rays, out, |r, e, o| {
+        QueryMode::Stream => streamed(rays, out, incoherent_stream_max(tree), |r, e, o| {
             T::STREAM(tree, prims, r, RayTests::new(intersector, e), o, width).0
         }),
     }
@@ -225,22 +249,23 @@ pub fn octant_runs_at_least(rays: &[Ray], run: usize) -> bool {
     changes * run <= samples
 }
 
-/// Streams of at most [`STREAM_MAX`] rays, no more than a thread's share (but at least
-/// [`STREAM_CHUNK`]), traced in parallel. Rays that come in long octant runs are cut in their
-/// own order; others are sorted by octant (a stable counting sort) and each stream, of one
-/// octant, traced on a gathered copy, with `out` filled from its answers.
+/// Streams of no more than a thread's share (but at least [`STREAM_CHUNK`]), traced in
+/// parallel. Rays that come in long octant runs are cut in their own order, in streams of at
+/// most [`STREAM_MAX`] rays; others are sorted by octant (a stable counting sort) and each
+/// octant cut into streams of at most `incoherent_max` rays, each traced on a
+/// gathered copy, with `out` filled from its answers.
 fn streamed<T: RayAnswer>(
     (rays, exclude): Rays,
     out: &mut [T],
+    incoherent_max: usize,
     trace: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
-    let size = rays
-        .len()
-        .div_ceil(rayon::current_num_threads())
-        .clamp(STREAM_CHUNK, STREAM_MAX);
+    let share = rays.len().div_ceil(rayon::current_num_threads());
     if octant_runs_at_least(rays, LONG_RUNS) {
+        let size = share.clamp(STREAM_CHUNK, STREAM_MAX);
         return chunked((rays, exclude), out, size, trace);
     }
+    let most = share.clamp(STREAM_CHUNK, incoherent_max.max(STREAM_CHUNK));
     let octants: Vec<u8> = rays.iter().map(|r| octant(r) as u8).collect();
     let mut start = [0usize; 9];
     for &o in &octants {
@@ -257,7 +282,7 @@ fn streamed<T: RayAnswer>(
         next[o as usize] += 1;
     }
     let parts: Vec<&[usize]> = (0..8)
-        .flat_map(|o| order[start[o]..start[o + 1]].chunks(size))
+        .flat_map(|o| order[start[o]..start[o + 1]].chunks(most))
         .collect();
     let answers: Vec<(TraversalStats, Vec<T>)> = parts
         .par_iter()
