@@ -49,6 +49,8 @@ pub const INCOHERENT_STREAM_MAX: usize = 262144;
 /// the stream sizes interleaved; `rt2 bench streams` traces 2 M-ray batches in its table 3).
 /// Unlike a camera's rays, incoherent rays rarely cross both children of a node together, so
 /// the far lists pending on the ray stack stay small (31 bytes per ray, `rt2 bench streams`).
+/// Mirror reflections of the dragon's 2752×1536 camera rays (557 K rays in mixed octants) ran
+/// alike with either stream size (2.93 and 3.05 Mrays/s, 5 interleaved runs).
 pub fn incoherent_stream_max(tree: &KdTree) -> usize {
     // Every inner node has two children: a tree of n nodes has (n + 1) / 2 leaves.
     tree.nodes
