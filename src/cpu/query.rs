@@ -47,8 +47,8 @@ pub const INCOHERENT_STREAM_MAX: usize = 262144;
 /// the dragon (367 K leaves), while on the bunny (26 K leaves) and the Snowden bust (15 K) it
 /// was no faster at 128 K and slower at 256 K (2 M incoherent rays, one thread, 3–5 runs with
 /// the stream sizes interleaved; `rt2 bench streams` traces 2 M-ray batches in its table 3).
-/// Unlike a camera's rays, incoherent rays rarely cross both children of a node together, so
-/// the far lists pending on the ray stack stay small (31 bytes per ray, `rt2 bench streams`).
+/// A stream of one octant's incoherent rays takes 65–70 bytes per ray, ray stack and ray
+/// arrays (16 MiB for the dragon's 256 K; `rt2 bench streams`, memory table).
 /// Mirror reflections of the dragon's 2752×1536 camera rays (557 K rays in mixed octants) ran
 /// alike with either stream size (2.93 and 3.05 Mrays/s, 5 interleaved runs).
 pub fn incoherent_stream_max(tree: &KdTree) -> usize {
