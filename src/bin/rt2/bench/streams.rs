@@ -34,6 +34,9 @@ const PAPER_INCOHERENT: [(&str, [f64; 3]); 3] = [
 
 /// Frames of the orbit animation (the paper's 100).
 const FRAMES: usize = 100;
+/// Rays of the incoherent batches: the size of the bunny's shared set, and eight times that,
+/// which on the dragon's tree fills one stream per octant ([`query::incoherent_stream_max`]).
+const INCOHERENT_RAYS: [usize; 2] = [262_144, 2_097_152];
 /// Frames of the 1376×768 orbit (fewer: each is 16× the rays of a 256² frame).
 const WIDE_FRAMES: usize = 10;
 
@@ -216,9 +219,11 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          Modes: **n-rays** = `QueryMode::Stream`, **packets** = `QueryMode::Packet` at the \
          default width ({w} lanes), **packets ×4** = 4-lane packets (Wald's, the paper's 4-rays \
          column), **1-ray** = `QueryMode::Single` with the standard traversal; all return \
-         bit-identical hits. A batch is sorted by octant and cut into streams of one \
-         octant, at most {hi} rays (`STREAM_MAX`): longer streams of coherent rays outgrow the \
-         caches. Trees: SAH with perfect splits (the library default; the \
+         bit-identical hits. Streams: rays that come in runs of one octant (a camera's, in \
+         scanline order) are cut in their order into streams of at most {hi} rays \
+         (`STREAM_MAX`): longer streams of coherent rays outgrow the caches; rays in mixed \
+         octants are sorted by octant and cut into streams of one octant, at most about one ray \
+         per leaf of the tree, {hi} to {inco} rays (`incoherent_stream_max`). Trees: SAH with perfect splits (the library default; the \
          paper used midpoint trees); on Linux their arrays lie on transparent huge pages, as \
          Embree's do (`huge_pages`). Paper: Pentium-M, 1 core; its third model is the Buddha, the \
          Snowden bust stands in for it. Everything is measured in this run, on a shared 2-core \
@@ -229,7 +234,8 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          speeds of a ratio from the same run). Timed a whole mode after another, two runs of \
          the bench once differed by up to 25% in a ratio of two medians.\n\n",
         w = width.lanes(),
-        hi = STREAM_MAX
+        hi = STREAM_MAX,
+        inco = query::INCOHERENT_STREAM_MAX
     );
     let mut t1 = String::from(
         "#### Table 1 — coherent rays: 100-frame orbit at 256², Mrays/s (paper beside)\n\n\
@@ -242,8 +248,10 @@ pub(super) fn streams(a: &Args) -> Result<String> {
     );
     let mut t3 = String::from(
         "#### Table 3 — incoherent rays (two uniform points on the bounding sphere), Mrays/s\n\n\
-         | model | rays | n-rays | packets | packets ×4 | 1-ray | n-rays / 1-ray | paper n / 4 / 1 |\n\
-         |---|---|---|---|---|---|---|---|\n",
+         Rays per stream: the rays of one octant (about an eighth of the batch), up to the \
+         tree's `incoherent_stream_max`.\n\n\
+         | model | rays | rays per stream | n-rays | packets | packets ×4 | 1-ray | n-rays / 1-ray | paper n / 4 / 1 |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
     );
     let mut wide = String::from(
         "#### 1376×768 orbit (10 frames), Mrays/s\n\n\
@@ -310,22 +318,25 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             fmt3(paper, 1.0 / frame_rays)
         )
         .ok();
-        let inco = vec![incoherent_rays(c, 262_144)];
-        let t = seconds(&one, c, &inco, &with_packets4(width), a.runs)?;
-        let mi: Vec<f64> = (0..4).map(|j| rays_of(&inco) / t.median(j) / 1e6).collect();
         let paper = PAPER_INCOHERENT.iter().find(|p| p.0 == model).map(|p| p.1);
-        writeln!(
-            t3,
-            "| {model} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2}× | {} |",
-            inco[0].len(),
-            mi[0],
-            mi[1],
-            mi[3],
-            mi[2],
-            t.speedup(0, 2),
-            fmt3(paper, 1.0)
-        )
-        .ok();
+        let inco = incoherent_rays(c, *INCOHERENT_RAYS.last().expect("ray counts"));
+        for n in INCOHERENT_RAYS {
+            let batch = [inco[..n].to_vec()];
+            let t = seconds(&one, c, &batch, &with_packets4(width), a.runs)?;
+            let mi: Vec<f64> = (0..4).map(|j| n as f64 / t.median(j) / 1e6).collect();
+            writeln!(
+                t3,
+                "| {model} | {n} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2}× | {} |",
+                n.div_ceil(8).min(query::incoherent_stream_max(&c.tree)),
+                mi[0],
+                mi[1],
+                mi[3],
+                mi[2],
+                t.speedup(0, 2),
+                fmt3(paper, 1.0)
+            )
+            .ok();
+        }
         let big: Vec<Vec<Ray>> = (0..WIDE_FRAMES)
             .map(|k| {
                 let angle = std::f32::consts::TAU * k as f32 / WIDE_FRAMES as f32;
@@ -345,8 +356,28 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             t.speedup(0, 2)
         )
         .ok();
-        for (what, rays) in [("256² frame", &orbit[0]), ("incoherent", &inco[0])] {
-            for size in [STREAM_CHUNK, STREAM_MAX] {
+        // Incoherent streams as `query` cuts them: rays of one octant (all directions positive).
+        let octant: Vec<Ray> = inco
+            .iter()
+            .filter(|r| r.dir.cmpge(glam::Vec3::ZERO).all())
+            .copied()
+            .collect();
+        let incoherent_max = query::incoherent_stream_max(&c.tree);
+        for (what, rays, sizes) in [
+            (
+                "256² frame",
+                &orbit[0],
+                [STREAM_CHUNK, STREAM_MAX, STREAM_MAX],
+            ),
+            (
+                "incoherent, one octant",
+                &octant,
+                [STREAM_CHUNK, STREAM_MAX, incoherent_max],
+            ),
+        ] {
+            let mut sizes = sizes.to_vec();
+            sizes.dedup();
+            for size in sizes {
                 let chunk = &rays[..size.min(rays.len())];
                 let mut hits = vec![Hit::MISS; chunk.len()];
                 let (_, m) =
