@@ -26,12 +26,12 @@ pub const STREAM_CHUNK: usize = 16384;
 /// in their own order), and fewest that incoherent rays get ([`incoherent_stream_max`]). A
 /// stream walks the tree once per octant group (the paper), so incoherent batches are first
 /// sorted by octant and cut into streams of one octant each: a stream then holds as many rays
-/// of its octant as a batch eight times its size would. Past this size coherent rays outgrow the caches: they cross both children of most upper nodes, so the
-/// far children's lists pending on the ray stack hold about one copy of the stream per level,
-/// and the stream's ray arrays are written out before the walk reads them back. On 1376×768
-/// orbit frames (one thread, `rt2 bench streams`) one 1 M-ray stream ran at 0.55–0.65× the
-/// speed of 32 K-ray streams on the bunny and the Snowden bust, and 128 K-ray streams lost 40%
-/// on the bust.
+/// of its octant as a batch eight times its size would. Past this size coherent rays outgrow
+/// the caches: they cross both children of most upper nodes, so the far children's lists
+/// pending on the ray stack hold about one copy of the stream per level, and the stream's ray
+/// arrays are written out before the walk reads them back. On 1376×768 orbit frames (one
+/// thread, `rt2 bench streams`) one 1 M-ray stream ran at 0.55–0.65× the speed of 32 K-ray
+/// streams on the bunny and the Snowden bust, and 128 K-ray streams lost 40% on the bust.
 pub const STREAM_MAX: usize = 32768;
 
 /// Most rays per stream of incoherent rays (a batch in mixed octants, sorted by octant before
@@ -254,8 +254,8 @@ pub fn octant_runs_at_least(rays: &[Ray], run: usize) -> bool {
 /// Streams of no more than a thread's share (but at least [`STREAM_CHUNK`]), traced in
 /// parallel. Rays that come in long octant runs are cut in their own order, in streams of at
 /// most [`STREAM_MAX`] rays; others are sorted by octant (a stable counting sort) and each
-/// octant cut into streams of at most `incoherent_max` rays, each traced on a
-/// gathered copy, with `out` filled from its answers.
+/// octant cut into streams of at most `incoherent_max` rays, each traced on a gathered copy,
+/// with `out` filled from its answers.
 fn streamed<T: RayAnswer>(
     (rays, exclude): Rays,
     out: &mut [T],

@@ -223,11 +223,12 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          scanline order) are cut in their order into streams of at most {hi} rays \
          (`STREAM_MAX`): longer streams of coherent rays outgrow the caches; rays in mixed \
          octants are sorted by octant and cut into streams of one octant, at most about one ray \
-         per leaf of the tree, {hi} to {inco} rays (`incoherent_stream_max`). Trees: SAH with perfect splits (the library default; the \
-         paper used midpoint trees); on Linux their arrays lie on transparent huge pages, as \
-         Embree's do (`huge_pages`). Paper: Pentium-M, 1 core; its third model is the Buddha, the \
-         Snowden bust stands in for it. Everything is measured in this run, on a shared 2-core \
-         machine whose load changes within seconds. Each run times the modes frame by frame \
+         per leaf of the tree, {hi} to {inco} rays (`incoherent_stream_max`). Trees: SAH \
+         with perfect splits (the library default; the paper used midpoint trees); on Linux \
+         their arrays lie on transparent huge pages, as Embree's do (`huge_pages`). Paper: \
+         Pentium-M, 1 core; its third model is the Buddha, the Snowden bust stands in for it. \
+         Everything is measured in this run, on a shared 2-core machine whose load changes \
+         within seconds. Each run times the modes frame by frame \
          (each frame in every mode before the next frame), and on a shared set right after one \
          run of Embree's harness on that set; each speed is the median of the timed runs, as \
          Embree's harness reports, and each ratio the median of the runs' own ratios (both \
