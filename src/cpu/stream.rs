@@ -118,6 +118,15 @@ pub struct StreamMemory {
 /// packet. A packet of one or two live lanes pays for N. Tuned on the bunny's and dragon's
 /// sets (`rt2 bench streams`, 1 thread, 5 interleaved runs each): thresholds 0, 2, 3 and 4 were
 /// within the machine's noise of each other on primary, incoherent and diffuse rays.
+///
+/// Measured and dropped for the lists of at most N rays (16 lanes, one thread, the bunny's
+/// `incoherent_262144` and the dragon's `incoherent_131072`, where these finishing walks take
+/// 58% and 85% of the time): single rays taken in turns, 16 at once, each ray's next node and
+/// its leaf's triangles prefetched while the others step (same hits and statistics), ran at
+/// 0.68× on the bunny and 0.95–1.10× on the dragon: a lone ray's steps cost more than its cache
+/// misses. Lists of up to 2N and 4N rays as two or four packets: 0.92× and 0.86× on the bunny,
+/// no change on the dragon. Packets that finish their last one to four live lanes as single
+/// rays (Embree's switch to single rays): 0.90–0.94× on the dragon.
 const SINGLE_MAX: usize = 2;
 
 /// Walks the tree once with all the rays of one octant group.

@@ -38,7 +38,10 @@ pub enum Layout {
 /// of this many entries is always enough (GPU kernels size theirs statically).
 pub const MAX_DEPTH_LIMIT: u32 = 64;
 
-/// Midpoint trees default to depth 20, the best value of the vectorised-traversal paper.
+/// Midpoint trees default to depth 20, the best value of the vectorised-traversal paper. The
+/// paper's n-ray gain over single rays is not theirs alone: on the bunny's `incoherent_262144`
+/// (16 lanes, one thread, the two modes alternating) streams ran 2.1× as fast as single rays on
+/// this tree and 2.25× on the default SAH tree, which is faster for both.
 const MIDPOINT_DEFAULT_DEPTH: u32 = 20;
 
 #[derive(Clone, Copy, Debug)]
