@@ -320,7 +320,7 @@ pub(super) fn streams(a: &Args) -> Result<String> {
         )
         .ok();
         let paper = PAPER_INCOHERENT.iter().find(|p| p.0 == model).map(|p| p.1);
-        let inco = incoherent_rays(c, *INCOHERENT_RAYS.last().expect("ray counts"));
+        let inco = incoherent_rays(c, INCOHERENT_RAYS[INCOHERENT_RAYS.len() - 1]);
         for n in INCOHERENT_RAYS {
             let batch = [inco[..n].to_vec()];
             let t = seconds(&one, c, &batch, &with_packets4(width), a.runs)?;
@@ -364,21 +364,18 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             .copied()
             .collect();
         let incoherent_max = query::incoherent_stream_max(&c.tree);
+        let incoherent_sizes = [STREAM_CHUNK, STREAM_MAX, incoherent_max];
+        // A tree of at most `STREAM_MAX` leaves cuts incoherent streams at `STREAM_MAX` too.
+        let incoherent_sizes = if incoherent_max > STREAM_MAX {
+            &incoherent_sizes[..]
+        } else {
+            &incoherent_sizes[..2]
+        };
         for (what, rays, sizes) in [
-            (
-                "256² frame",
-                &orbit[0],
-                [STREAM_CHUNK, STREAM_MAX, STREAM_MAX],
-            ),
-            (
-                "incoherent, one octant",
-                &octant,
-                [STREAM_CHUNK, STREAM_MAX, incoherent_max],
-            ),
+            ("256² frame", &orbit[0], &[STREAM_CHUNK, STREAM_MAX][..]),
+            ("incoherent, one octant", &octant, incoherent_sizes),
         ] {
-            let mut sizes = sizes.to_vec();
-            sizes.dedup();
-            for size in sizes {
+            for &size in sizes {
                 let chunk = &rays[..size.min(rays.len())];
                 let mut hits = vec![Hit::MISS; chunk.len()];
                 let (_, m) =
