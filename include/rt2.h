@@ -619,9 +619,11 @@ typedef struct rt2_query_options {
  * One ray: `org + t * dir` for `t` in `[tmin, tmax)` (32 bytes, the `.rays` record). The
  * interval is half-open: a hit at exactly `tmax` does not count (Embree's `[tnear, tfar]` is
  * closed). `tmax = +inf` and `tmin = -inf` are accepted, and a negative `tmin` returns hits
- * behind the origin (the closest hit is the one of smallest `t`, not nearest the origin). A
- * ray with a NaN or infinite component of `org` or `dir`, a zero `dir`, a NaN `tmin` or
- * `tmax`, or `tmin > tmax` is a miss, not an error.
+ * behind the origin (the closest hit is the one of smallest `t`, not nearest the origin).
+ * Every hit has a finite `t`: a crossing beyond `±FLT_MAX` along the ray (a direction of
+ * 1e-45 reaches only 3e-7 from its origin) is a miss, whatever the window. A ray with a NaN
+ * or infinite component of `org` or `dir`, a zero `dir`, a NaN `tmin` or `tmax`, or
+ * `tmin > tmax` is a miss, not an error.
  */
 typedef struct rt2_ray {
   float org[3];

@@ -16,11 +16,16 @@ pub struct Ray {
 }
 
 impl Ray {
+    /// The ray `org + t * dir` over `[tmin, tmax)`, its window starting at `-f32::MAX` at the
+    /// earliest: a hit is a point of the ray, at a finite `t`. Every primitive test accepts
+    /// `t >= tmin`, so a window open to `-inf` let through a crossing whose `t` overflowed to
+    /// `-inf` (a direction of 1e-45, or products near `f32::MAX`), where `+inf` at the other
+    /// end was already excluded by `t < tmax`.
     pub fn new(org: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
         Ray {
             org,
             dir,
-            tmin,
+            tmin: finite_start(tmin),
             tmax,
         }
     }
@@ -50,12 +55,13 @@ impl Ray {
 
     /// This (non-degenerate) ray with its direction multiplied by the power of two `s` and
     /// its window divided by it, so that `t' * s` of a hit on it is the hit's `t` on this
-    /// ray. The window ends at `f32::MAX / s` at most: every hit's `t' * s` is finite.
+    /// ray. The window lies within `±f32::MAX / s` and `±f32::MAX`: every hit's `t'` and
+    /// `t' * s` are finite.
     pub(crate) fn scaled(&self, s: f32) -> Ray {
         Ray {
             org: self.org,
             dir: self.dir * s,
-            tmin: self.tmin / s,
+            tmin: finite_start(self.tmin / s),
             tmax: self.tmax.min(f32::MAX) / s,
         }
     }
@@ -69,6 +75,15 @@ impl Ray {
             || self.tmin.is_nan()
             || self.tmax.is_nan()
             || self.tmin > self.tmax
+    }
+}
+
+/// `tmin`, or `-f32::MAX` for `-inf` (NaN stays NaN: such a ray is degenerate).
+fn finite_start(tmin: f32) -> f32 {
+    if tmin == f32::NEG_INFINITY {
+        -f32::MAX
+    } else {
+        tmin
     }
 }
 
