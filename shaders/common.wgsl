@@ -181,7 +181,7 @@ fn pow2_scale(m: f32) -> f32 {
 // largest component (d·d and d·d r² would over- or underflow for long or short directions),
 // its roots scaled back; exact, so the roots are those of the unscaled direction wherever that
 // one is finite (l2 does not depend on the direction's length). (The CPU skips the scaling
-// where d·d and d·d r² are normal, which gives the same roots.)
+// where d·d and d·d r² are normal and o·d finite, which gives the same roots.)
 fn sphere_root(o: vec3<f32>, d_in: vec3<f32>, l2: f32, r2: f32, tmin: f32, tmax: f32) -> Tuv {
     let no = Tuv(false, 0.0, 0.0, 0.0);
     let r = sphere_roots(o, d_in, l2, r2);

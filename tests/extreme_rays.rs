@@ -334,3 +334,64 @@ fn extreme_rays_on_the_gpu_hit_only_points_of_the_ray() {
         }
     }
 }
+
+/// An ellipsoid whose thinnest semi-axis is far below 1 (1e-19: its inverse square is near
+/// `f32::MAX`) is hit on the CPU where the GPU hits it, or refused when added.
+#[test]
+fn very_flat_ellipsoids_are_hit_or_refused() {
+    let mut backends = vec![Rt2Backend::Cpu];
+    if support::c_gpu_or_skip() {
+        backends.push(Rt2Backend::Gpu);
+    }
+    for backend in backends {
+        for thin in [
+            1e-30f32, 1e-25, 1e-21, 1e-20, 7e-20, 1e-19, 3e-19, 1e-18, 1e-15, 1e-10,
+        ] {
+            let mut desc = rt2_context_desc_default();
+            desc.backend = backend as u32;
+            let (mut ctx, mut scene) = (null_mut(), null_mut());
+            unsafe {
+                ok(rt2_context_create(&desc, &mut ctx));
+                ok(rt2_scene_create(ctx, &mut scene));
+                let mut id = RT2_INVALID_ID;
+                let st = rt2_scene_add_ellipsoid(
+                    scene,
+                    [0.0f32; 3].as_ptr(),
+                    [thin, 1.0, 1.0].as_ptr(),
+                    0,
+                    &mut id,
+                );
+                if st == Rt2Status::Ok {
+                    ok(rt2_scene_commit(scene));
+                    let rays = [
+                        ray([5.0, 0.0, 0.0], 0.0, [-1.0, 0.0, 0.0], INF),
+                        ray([5.0, 0.25, -0.5], 0.0, [-1.0, 0.0, 0.0], INF),
+                    ];
+                    let mut hits = [NO_HIT; 2];
+                    ok(rt2_intersect(
+                        ctx,
+                        scene,
+                        rays.as_ptr(),
+                        2,
+                        hits.as_mut_ptr(),
+                        null(),
+                        null_mut(),
+                    ));
+                    for h in hits {
+                        assert_eq!(h.object, id, "{backend:?} radii ({thin}, 1, 1): {h:?}");
+                        assert!(
+                            (h.t - 5.0).abs() < 1e-5,
+                            "{backend:?} ({thin}, 1, 1): {h:?}"
+                        );
+                    }
+                } else {
+                    assert_eq!(st, Rt2Status::InvalidArgument);
+                    assert_eq!(id, RT2_INVALID_ID);
+                    assert!(thin < 1e-18, "radius {thin} refused: {}", last_error());
+                }
+                rt2_scene_destroy(scene);
+                rt2_context_destroy(ctx);
+            }
+        }
+    }
+}

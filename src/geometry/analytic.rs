@@ -15,8 +15,10 @@ use glam::{Mat3, Vec3};
 /// Directions need not be unit length, but the test squares them: `d·d` overflows for `|d|`
 /// past about 1e19 and underflows below about 1e-19, and `d·d · r²` overflows sooner for a
 /// large sphere (radius 1e5 at `|d|` = 1e15 "hit" at `t` = 0). Where either leaves the normal
-/// range, the direction is scaled by a power of two into [1, 2) for its largest component and
-/// the roots scaled back (`scaled_sphere_roots`). Every step is homogeneous in `d` and a power
+/// range, or `o·d` overflows (an ellipsoid 1e-19 thin stretches both `o` and `d` by 1e19 in
+/// its unit space: `d·d` stays normal, `o·d` does not, and such rays missed), the direction is
+/// scaled by a power of two into [1, 2) for its largest component and the roots scaled back
+/// (`scaled_sphere_roots`). Every step is homogeneous in `d` and a power
 /// of two scales exactly, so the roots are those the unscaled direction gives wherever nothing
 /// over- or underflows. Those rays keep the unscaled operations: scaling every ray made the
 /// spheres1 render 15% slower (1 thread), the range check costs it about 5%. Inlined: called
@@ -24,8 +26,9 @@ use glam::{Mat3, Vec3};
 #[inline(always)]
 fn sphere_root(o: Vec3, d: Vec3, line: Line, r2: f32, tmin: f32, tmax: f32) -> Option<f32> {
     let a = d.length_squared();
-    let (t0, t1) = if a.is_normal() && (a * r2).is_normal() {
-        sphere_roots(o, d, line, a, r2)?
+    let b = o.dot(d);
+    let (t0, t1) = if a.is_normal() && (a * r2).is_normal() && b.is_finite() {
+        sphere_roots(o, d, line, a, b, r2)?
     } else {
         scaled_sphere_roots(o, d, line, r2)?
     };
@@ -48,18 +51,17 @@ enum Line {
 fn scaled_sphere_roots(o: Vec3, d: Vec3, line: Line, r2: f32) -> Option<(f32, f32)> {
     let s = power_of_two_scale(d.abs().max_element())?;
     let d = d * s;
-    let (t0, t1) = sphere_roots(o, d, line, d.length_squared(), r2)?;
+    let (t0, t1) = sphere_roots(o, d, line, d.length_squared(), o.dot(d), r2)?;
     Some((t0 * s, t1 * s))
 }
 
 /// Both roots of the ray `o + t d` with the sphere of squared radius `r2`, ascending (`a` is
-/// `d·d`).
+/// `d·d`, `b` is `o·d`).
 #[inline(always)]
-fn sphere_roots(o: Vec3, d: Vec3, line: Line, a: f32, r2: f32) -> Option<(f32, f32)> {
+fn sphere_roots(o: Vec3, d: Vec3, line: Line, a: f32, b: f32, r2: f32) -> Option<(f32, f32)> {
     if a == 0.0 {
         return None;
     }
-    let b = o.dot(d);
     let l2 = match line {
         Line::Projected => (o - (b / a) * d).length_squared(),
         Line::Distance2(l2) => l2,
@@ -272,7 +274,8 @@ pub fn resolve_quadric(inv: Mat3, oc: Vec3, d: Vec3, t: f32, tmin: f32) -> Optio
     let k = power_of_two_scale(du.abs().max_element())?;
     let dk = du * k;
     let a = dk.length_squared();
-    let roots = sphere_roots(u, dk, Line::Projected, a, 1.0).map(|(s0, s1)| (s0 * k, s1 * k));
+    let roots = sphere_roots(u, dk, Line::Projected, a, u.dot(dk), 1.0);
+    let roots = roots.map(|(s0, s1)| (s0 * k, s1 * k));
     let s = match roots {
         Some((s0, s1)) if s1 - s0 <= 4.0 * t.abs() * f32::EPSILON => {
             let start = (inv * (oc + tmin * d)).length_squared();
