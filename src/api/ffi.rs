@@ -93,7 +93,10 @@ pub(crate) unsafe fn handle_mut<'a, T: Handle>(p: *mut T, arg: &str) -> Result<&
 
 /// Frees a handle made by `Box::into_raw`, ignoring NULL and handles that fail the check. The
 /// magic is cleared first, so a second destroy of the same pointer is ignored while the
-/// memory is not reused.
+/// memory is not reused (the header still calls it undefined, as `free` twice is). The
+/// clear is a volatile write: a plain store into memory freed right after is dead to the
+/// optimiser, which removed it for the camera (valgrind showed its second destroy freeing
+/// the block again).
 ///
 /// # Safety
 /// `p` must be NULL or point to a live RT2 handle (of any kind).
@@ -101,7 +104,7 @@ pub(crate) unsafe fn destroy<T: Handle>(p: *mut T) {
     if p.is_null() || !p.is_aligned() || magic_of(p) != T::MAGIC {
         return;
     }
-    p.cast::<u64>().write(0);
+    p.cast::<u64>().write_volatile(0);
     drop(Box::from_raw(p));
 }
 
