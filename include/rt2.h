@@ -782,6 +782,10 @@ enum rt2_status rt2_camera_set_fov(rt2_camera *camera, float vertical_degrees);
 /**
  * Sets the thin lens: `aperture` is the lens diameter (0 = pinhole), `focus_distance` the
  * distance of the sharp plane (> 0). Depth of field needs several samples per pixel.
+ * INVALID_ARGUMENT (and the camera unchanged) for a NaN or negative aperture, a NaN,
+ * negative or zero focus distance, or either length above 1e18 (a lens ray's squared length
+ * must fit in f32). A lens too small to move a ray off the eye at that focus gives the
+ * pinhole's rays.
  *
  * # Safety
  * `camera` is a live camera.

@@ -436,7 +436,9 @@ fn camera_ray(pixel: vec2<f32>, lens: vec2<f32>) -> Ray {
     let rad = 0.5 * aperture * sqrt(lens.x);
     let phi = 6.28318530717958647692 * lens.y;
     let org = eye + rad * (cos(phi) * right + sin(phi) * up);
-    return Ray(org, normalize_or_zero(focus_point - org), 0.0, inf(), INVALID);
+    let lens_dir = normalize_or_zero(focus_point - org);
+    if (all(lens_dir == vec3<f32>(0.0))) { return Ray(eye, dir, 0.0, inf(), INVALID); }
+    return Ray(org, lens_dir, 0.0, inf(), INVALID);
 }
 
 // Primary ray of sample s of the chunk's pixel i.

@@ -5,6 +5,10 @@ use crate::error::{Error, Result};
 use crate::geometry::{unit, Ray};
 use glam::{Vec2, Vec3};
 
+/// The largest aperture and focus distance: a lens ray's direction spans at most about the
+/// two, and its squared length must stay within f32 (1e36 against `f32::MAX` = 3.4e38).
+pub const LENS_MAX: f32 = 1e18;
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
     pub eye: Vec3,
@@ -88,15 +92,18 @@ impl Camera {
         Ok(())
     }
 
+    /// The thin lens. Both lengths are at most [`LENS_MAX`]: a lens ray's direction is
+    /// normalised by its squared length, and on the GPU one longer than about 1e19 overflows
+    /// to a zero direction (an aperture of 3e38 gave a blank image with an OK status).
     pub fn set_lens(&mut self, aperture: f32, focus_distance: f32) -> Result<()> {
-        if !(aperture.is_finite() && aperture >= 0.0) {
+        if !(0.0..=LENS_MAX).contains(&aperture) {
             return Err(Error::invalid_argument(format!(
-                "aperture is {aperture:?} (must be finite and >= 0)"
+                "aperture is {aperture:?} (must be in [0, {LENS_MAX:e}])"
             )));
         }
-        if !(focus_distance.is_finite() && focus_distance > 0.0) {
+        if !(focus_distance > 0.0 && focus_distance <= LENS_MAX) {
             return Err(Error::invalid_argument(format!(
-                "focus_distance is {focus_distance:?} (must be finite and > 0)"
+                "focus_distance is {focus_distance:?} (must be in (0, {LENS_MAX:e}])"
             )));
         }
         self.aperture = aperture;
@@ -156,13 +163,56 @@ impl CameraRays {
         let r = 0.5 * self.aperture * lens.x.sqrt();
         let phi = std::f32::consts::TAU * lens.y;
         let org = self.eye + r * (phi.cos() * self.right + phi.sin() * self.up);
-        Ray::new(org, (focus_point - org).normalize(), 0.0, f32::INFINITY)
+        // A lens too small to move the ray off the eye, with a focus too near to move the
+        // focus point off it (1e-45 each), leaves no direction: the pinhole's ray is the
+        // limit (`camera_ray` in shade.wgsl does the same).
+        match (focus_point - org).try_normalize() {
+            Some(lens_dir) => Ray::new(org, lens_dir, 0.0, f32::INFINITY),
+            None => Ray::new(self.eye, dir, 0.0, f32::INFINITY),
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Lenses whose rays f32 cannot hold are refused and change nothing; a lens of 1e-45
+    /// gives the pinhole's rays (it gave a zero direction, a blank image, with an OK status).
+    #[test]
+    fn lens_extremes_are_refused_or_give_the_pinhole_limit() {
+        let mut c = Camera::default();
+        c.set_lens(0.5, 4.0).unwrap();
+        for (aperture, focus) in [
+            (3e38, 6.0),
+            (0.5, 2e18),
+            (f32::NAN, 6.0),
+            (-1.0, 6.0),
+            (0.5, 0.0),
+        ] {
+            assert!(
+                c.set_lens(aperture, focus).is_err(),
+                "({aperture}, {focus})"
+            );
+            assert_eq!((c.aperture, c.focus_distance), (0.5, 4.0));
+        }
+        c.set_lens(LENS_MAX, LENS_MAX).unwrap();
+        let size = Vec2::new(64.0, 48.0);
+        let pinhole = Camera::default().rays(64, 48);
+        c.set_lens(1e-45, 1e-45).unwrap();
+        let tiny = c.rays(64, 48);
+        for (p, lens) in [
+            (Vec2::new(0.5, 0.5), Vec2::new(0.3, 0.7)),
+            (Vec2::new(40.5, 7.5), Vec2::ONE),
+        ] {
+            let (a, b) = (tiny.ray(p, size, lens), pinhole.ray(p, size, lens));
+            assert!(a.dir.is_normalized() && a.org.is_finite(), "{a:?}");
+            assert!(
+                a.dir.abs_diff_eq(b.dir, 1e-6) && a.org.abs_diff_eq(b.org, 1e-6),
+                "{a:?} {b:?}"
+            );
+        }
+    }
 
     /// Only the directions of the view and of `up` matter: a tiny or huge `up`, or an eye a
     /// hair from its target, gives the rays of the unit vectors (before, `up` = 1e-23 passed

@@ -775,6 +775,15 @@ fn lens_samples_and_straight_transparency_match_the_cpu() {
             assert!(mean <= MEAN_MAX && p99 <= P99_MAX, "{path:?}: {d:?}");
         }
     }
+    // A lens too small to move any ray off the eye at a focus as small (1e-45 each) gives the
+    // pinhole's image, as on the CPU (`camera::tests`): its lens rays had a zero direction and
+    // the frame came out blank.
+    b.camera.set_lens(1e-45, 1e-45).unwrap();
+    let d = image_diff(&render(&g, &mut scene, &b, &base, 64, 48), &sharp);
+    println!("lens of 1e-45 against the pinhole: (mean, p99) per channel {d:?}");
+    for (mean, p99) in d {
+        assert!(mean <= MEAN_MAX && p99 <= P99_MAX, "{d:?}");
+    }
 }
 
 /// Two logical devices on one adapter each render half the rows: the same image as one.
