@@ -394,6 +394,16 @@ fn query_outputs_overlapping_their_rays_are_errors() {
             last_error()
         );
         assert!((0..4).all(|k| (*hits_at.add(k)).t == 4.0));
+        // The statistics, written last, over the rays or the hits: refused before anything is
+        // written (rays and hits as they were).
+        let hits_before: Vec<rt2_hit> = (0..4).map(|k| *hits_at.add(k)).collect();
+        for (stats, over) in [(rays_at.cast(), "rays"), (hits_at.cast(), "hits")] {
+            let st = rt2_intersect(ctx, scene, rays_at, 4, hits_at, null(), stats);
+            assert_eq!(st, Rt2Status::InvalidArgument, "stats over {over}");
+            let e = last_error();
+            assert!(e.contains(&format!("stats overlaps {over}")), "{e}");
+            assert!((0..4).all(|k| *rays_at.add(k) == ray && *hits_at.add(k) == hits_before[k]));
+        }
         rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);
     }

@@ -645,9 +645,16 @@ fn bad_input_is_refused_and_writes_nothing() {
     ] {
         refused(&rays, &with(2, h), bad, "hits[2] has t");
     }
+    // Rays that always miss cannot have given a hit (a zero direction gave a zero normal).
     let mut far = rays;
     far[1].org[0] = f32::INFINITY;
-    refused(&far, &hits, bad, "rays[1] has org");
+    let mut zero = rays;
+    zero[1].dir = [0.0; 3];
+    let mut empty = rays;
+    (empty[1].tmin, empty[1].tmax) = (1.0, 0.5);
+    for rays in [far, zero, empty] {
+        refused(&rays, &hits, bad, "rays[1] is rt2_ray");
+    }
     let ok_now = scene.surfaces(&rays, &hits);
     assert_eq!(ok_now.0, Rt2Status::Ok, "{}", last_error());
     assert!(

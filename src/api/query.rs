@@ -279,6 +279,9 @@ unsafe fn run_query<T>(
         check_disjoint((out, count, out_name), (rays.as_ptr(), count, "rays"))?;
         if !stats.is_null() {
             check_out(stats, "stats")?;
+            // Written last, while the rays are still borrowed and over the finished hits.
+            check_disjoint((stats, 1, "stats"), (rays.as_ptr(), count, "rays"))?;
+            check_disjoint((stats, 1, "stats"), (out, count, out_name))?;
         }
         // A job the backend refuses is refused before anything is built for it.
         c.inner.check_query(&q)?;

@@ -47,10 +47,10 @@ const NO_SURFACE: rt2_surface = rt2_surface {
 /// Every entry is checked before anything is written; on any error `surfaces` is untouched:
 /// INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks (a
 /// disabled object's too, and a removed one's, which the message says), a hit with a
-/// non-finite `t`, `u` or `v` or a ray with a non-finite `org` or `dir` (a query never
-/// returns such a hit), NULL arrays when
-/// `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad handle; INVALID_OPERATION
-/// for a scene never committed or edited since its commit. `count = 0` with NULL arrays is
+/// non-finite `t`, `u` or `v` or a ray that always misses (a non-finite `org` or `dir`, a
+/// zero `dir`, a NaN `tmin` or `tmax`, `tmin > tmax`; a query never returns such a hit),
+/// NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad handle;
+/// INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0` with NULL arrays is
 /// fine (the scene is still checked, as `rt2_intersect` does). Runs on the calling thread
 /// under the scene's read lock, like a query, and allocates nothing but the lookup of
 /// `rt2_query_options.exclude`: the first call that names a primitive builds it under the
@@ -129,11 +129,10 @@ fn library_hit(
             h.t, h.u, h.v
         )));
     }
-    if !r.org.iter().chain(&r.dir).all(|x| x.is_finite()) {
+    if Ray::from(r).is_degenerate() {
         return Err(Error::invalid_argument(format!(
-            "rays[{i}] has org {:?}, dir {:?}, but hits[{i}] is a hit: a ray with a \
-             non-finite component misses",
-            r.org, r.dir
+            "rays[{i}] is {r:?}, but hits[{i}] is a hit: a ray with a non-finite or zero \
+             direction, a non-finite origin, a NaN window end or tmin > tmax misses"
         )));
     }
     let (u, v) = c.object_uv(h.object, h.u, h.v);
