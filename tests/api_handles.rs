@@ -4,16 +4,10 @@
 
 use rt2::api::*;
 use rt2::error::Rt2Status;
-use std::ffi::CStr;
 use std::ptr::{null, null_mut};
 
 mod support;
-
-fn last_error() -> String {
-    unsafe { CStr::from_ptr(rt2_last_error_message()) }
-        .to_string_lossy()
-        .into_owned()
-}
+use support::last_error;
 
 #[test]
 fn a_handle_of_another_type_is_rejected() {

@@ -6,10 +6,10 @@
 //! finiteness only (its arithmetic may round differently).
 
 mod support;
+use support::{last_error, ok};
 
 use rt2::api::*;
 use rt2::error::Rt2Status;
-use std::ffi::CStr;
 use std::ptr::{null, null_mut};
 use support::rng::{Draws, Rng};
 
@@ -29,16 +29,6 @@ const NO_SURFACE: rt2_surface = rt2_surface {
     normal: [f32::NAN; 3],
     material: 7,
 };
-
-fn last_error() -> String {
-    unsafe { CStr::from_ptr(rt2_last_error_message()) }
-        .to_string_lossy()
-        .into_owned()
-}
-
-fn ok(status: Rt2Status) {
-    assert_eq!(status, Rt2Status::Ok, "{}", last_error());
-}
 
 fn ray(org: [f32; 3], tmin: f32, dir: [f32; 3], tmax: f32) -> rt2_ray {
     rt2_ray {
@@ -205,8 +195,8 @@ fn extreme_rays(n: usize) -> Vec<rt2_ray> {
     ];
     const TMIN: [f32; 5] = [-INF, -MAX, -1.0, 0.0, 1e-45];
     const TMAX: [f32; 4] = [INF, MAX, 1.0, 10.0];
-    let mut rng = Rng(0x5eed_e7);
-    let mut part = |rng: &mut Rng| {
+    let mut rng = Rng(0x005e_ede7);
+    let part = |rng: &mut Rng| {
         let v = PARTS[rng.below(PARTS.len())];
         if rng.below(2) == 0 {
             -v
@@ -214,7 +204,7 @@ fn extreme_rays(n: usize) -> Vec<rt2_ray> {
             v
         }
     };
-    let mut v3 = |rng: &mut Rng| [part(rng), part(rng), part(rng)];
+    let v3 = |rng: &mut Rng| [part(rng), part(rng), part(rng)];
     (0..n)
         .map(|_| {
             let org = v3(&mut rng);

@@ -10,11 +10,11 @@
 
 use rt2::api::*;
 use rt2::error::Rt2Status;
-use std::ffi::CStr;
 use std::io::Write;
 use std::ptr::{null, null_mut};
 
 mod support;
+use support::last_error;
 
 /// The process's address space now (`VmSize`), in bytes.
 fn address_space() -> u64 {
@@ -33,12 +33,6 @@ fn limit_address_space(bytes: Option<u64>) {
         lim.rlim_cur = bytes.map_or(lim.rlim_max, |b| b.min(lim.rlim_max));
         assert_eq!(libc::setrlimit(libc::RLIMIT_AS, &lim), 0);
     }
-}
-
-fn last_error() -> String {
-    unsafe { CStr::from_ptr(rt2_last_error_message()) }
-        .to_string_lossy()
-        .into_owned()
 }
 
 /// A square grid of `k` × `k` cells, two triangles each, in the plane z = 1 over [0, 1]².

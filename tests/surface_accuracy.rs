@@ -7,19 +7,11 @@
 use glam::{DVec3, Vec3};
 use rt2::api::*;
 use rt2::error::Rt2Status;
-use std::ffi::CStr;
 use std::ptr::{null, null_mut};
 
 mod support;
+use support::{last_error, ok};
 
-fn last_error() -> String {
-    unsafe { CStr::from_ptr(rt2_last_error_message()) }
-        .to_string_lossy()
-        .into_owned()
-}
-fn ok(s: Rt2Status) {
-    assert_eq!(s, Rt2Status::Ok, "{}", last_error());
-}
 /// What no call writes: an output left untouched keeps it.
 const SENTINEL: rt2_surface = rt2_surface {
     position: [-7.0; 3],

@@ -5,22 +5,12 @@
 //! inverse transpose. Positions must lie on the surface and near `org + t * dir`.
 
 mod support;
+use support::{last_error, ok};
 
 use glam::{Affine3A, DAffine3, DVec3, Quat, Vec3};
 use rt2::api::*;
 use rt2::error::Rt2Status;
-use std::ffi::CStr;
 use std::ptr::{null, null_mut};
-
-fn last_error() -> String {
-    unsafe { CStr::from_ptr(rt2_last_error_message()) }
-        .to_string_lossy()
-        .into_owned()
-}
-
-fn ok(status: Rt2Status) {
-    assert_eq!(status, Rt2Status::Ok, "{}", last_error());
-}
 
 /// An object as this test gave it: the shape in object space, its transform and material.
 #[derive(Clone)]

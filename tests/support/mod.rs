@@ -14,6 +14,19 @@ pub mod shading_cases;
 
 use std::path::{Path, PathBuf};
 
+/// `rt2_last_error_message()` of this thread, as a `String`.
+pub fn last_error() -> String {
+    // SAFETY: the library returns a NUL-terminated message valid until its next call here.
+    unsafe { std::ffi::CStr::from_ptr(rt2::api::rt2_last_error_message()) }
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// Asserts that a C API call succeeded, with its message if it did not.
+pub fn ok(status: rt2::error::Rt2Status) {
+    assert_eq!(status, rt2::error::Rt2Status::Ok, "{}", last_error());
+}
+
 /// `target/<profile>/deps`, where the test executable lives.
 fn deps_dir() -> PathBuf {
     let exe = std::env::current_exe().expect("the test knows its own path");
