@@ -1227,12 +1227,12 @@ const char *rt2_last_error_message(void);
  * non-finite `t`, `u` or `v` or a ray that always misses (a non-finite `org` or `dir`, a
  * zero `dir`, a NaN `tmin` or `tmax`, `tmin > tmax`; a query never returns such a hit),
  * NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad handle;
- * INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0` with NULL arrays is
- * fine (the scene is still checked, as `rt2_intersect` does). Runs on the calling thread
- * under the scene's read lock, like a query, and allocates nothing but the lookup of
- * `rt2_query_options.exclude`: the first call that names a primitive builds it under the
- * write lock (4 bytes per primitive, kept until a commit places the objects again:
- * `bytes_prim_lookup`).
+ * INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0`
+ * with NULL arrays is fine (the scene is still checked, as `rt2_intersect` does). Runs on
+ * the calling thread under the scene's read lock, like a query, and allocates nothing but
+ * the lookup of `rt2_query_options.exclude`: the first call that names a primitive builds it
+ * under the write lock (4 bytes per primitive, kept until a commit places the objects
+ * again: `bytes_prim_lookup`).
  *
  * # Safety
  * `scene` is a live scene; `rays`, `hits` and `surfaces` hold `count` elements (may be NULL

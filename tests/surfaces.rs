@@ -643,7 +643,7 @@ fn bad_input_is_refused_and_writes_nothing() {
     let mut empty = rays;
     (empty[1].tmin, empty[1].tmax) = (1.0, 0.5);
     for rays in [far, zero, empty] {
-        refused(&rays, &hits, bad, "rays[1] is rt2_ray");
+        refused(&rays, &hits, bad, "rays[1] has org");
     }
     let ok_now = scene.surfaces(&rays, &hits);
     assert_eq!(ok_now.0, Rt2Status::Ok, "{}", last_error());

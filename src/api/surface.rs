@@ -50,12 +50,12 @@ const NO_SURFACE: rt2_surface = rt2_surface {
 /// non-finite `t`, `u` or `v` or a ray that always misses (a non-finite `org` or `dir`, a
 /// zero `dir`, a NaN `tmin` or `tmax`, `tmin > tmax`; a query never returns such a hit),
 /// NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad handle;
-/// INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0` with NULL arrays is
-/// fine (the scene is still checked, as `rt2_intersect` does). Runs on the calling thread
-/// under the scene's read lock, like a query, and allocates nothing but the lookup of
-/// `rt2_query_options.exclude`: the first call that names a primitive builds it under the
-/// write lock (4 bytes per primitive, kept until a commit places the objects again:
-/// `bytes_prim_lookup`).
+/// INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0`
+/// with NULL arrays is fine (the scene is still checked, as `rt2_intersect` does). Runs on
+/// the calling thread under the scene's read lock, like a query, and allocates nothing but
+/// the lookup of `rt2_query_options.exclude`: the first call that names a primitive builds it
+/// under the write lock (4 bytes per primitive, kept until a commit places the objects
+/// again: `bytes_prim_lookup`).
 ///
 /// # Safety
 /// `scene` is a live scene; `rays`, `hits` and `surfaces` hold `count` elements (may be NULL
@@ -88,11 +88,12 @@ pub unsafe extern "C" fn rt2_hit_surfaces(
             // a lookup and a few comparisons each, where keeping the converted hits would
             // allocate per call.
             for (i, (r, h)) in rays.iter().zip(hits).enumerate() {
-                library_hit(c, lookup, i, r, h)?;
+                library_hit(c, lookup, i, &Ray::from(r), h)?;
             }
             for (i, ((r, h), o)) in rays.iter().zip(hits).zip(out.iter_mut()).enumerate() {
-                let surface = library_hit(c, lookup, i, r, h)?
-                    .and_then(|hit| c.hit_surface(&Ray::from(r), &hit));
+                let ray = Ray::from(r);
+                let surface =
+                    library_hit(c, lookup, i, &ray, h)?.and_then(|hit| c.hit_surface(&ray, &hit));
                 *o = surface.map_or(NO_SURFACE, |s| rt2_surface {
                     position: s.position.to_array(),
                     normal: s.normal.to_array(),
@@ -109,7 +110,7 @@ fn library_hit(
     c: &Committed,
     lookup: &PrimLookup,
     i: usize,
-    r: &rt2_ray,
+    ray: &Ray,
     h: &rt2_hit,
 ) -> Result<Option<Hit>> {
     if h.is_miss() {
@@ -129,10 +130,12 @@ fn library_hit(
             h.t, h.u, h.v
         )));
     }
-    if Ray::from(r).is_degenerate() {
+    if ray.is_degenerate() {
         return Err(Error::invalid_argument(format!(
-            "rays[{i}] is {r:?}, but hits[{i}] is a hit: a ray with a non-finite or zero \
-             direction, a non-finite origin, a NaN window end or tmin > tmax misses"
+            "rays[{i}] has org {}, dir {}, window [{}, {}), but hits[{i}] is a hit: a ray with \
+             a non-finite or zero direction, a non-finite origin, a NaN window end or \
+             tmin > tmax misses",
+            ray.org, ray.dir, ray.tmin, ray.tmax
         )));
     }
     let (u, v) = c.object_uv(h.object, h.u, h.v);

@@ -18,9 +18,9 @@ use glam::{Mat3, Vec3};
 /// range, or `o·d` overflows (an ellipsoid 1e-19 thin stretches both `o` and `d` by 1e19 in
 /// its unit space: `d·d` stays normal, `o·d` does not, and such rays missed), the direction is
 /// scaled by a power of two into [1, 2) for its largest component and the roots scaled back
-/// (`scaled_sphere_roots`). Every step is homogeneous in `d` and a power
-/// of two scales exactly, so the roots are those the unscaled direction gives wherever nothing
-/// over- or underflows. Those rays keep the unscaled operations: scaling every ray made the
+/// (`scaled_sphere_roots`). Every step is homogeneous in `d` and a power of two scales
+/// exactly, so the roots are those the unscaled direction gives wherever nothing over- or
+/// underflows. Those rays keep the unscaled operations: scaling every ray made the
 /// spheres1 render 15% slower (1 thread), the range check costs it about 5%. Inlined: called
 /// across a function boundary, the origin went through memory and the render took 60% longer.
 #[inline(always)]
