@@ -15,15 +15,18 @@ use crate::job_record::{AutoChoices, JobRecord, LastJob};
 use crate::precision::Intersector;
 use crate::render::{GpuPathRequest, RenderOptions};
 use crate::scene::Committed;
+use crate::workers::Workers;
+use std::mem::ManuallyDrop;
 
 pub struct Context {
-    pool: rayon::ThreadPool,
+    /// Dropped by hand (`Context::drop`): never in a forked child.
+    pool: ManuallyDrop<rayon::ThreadPool>,
     decision: Decision,
     /// The devices, when tracing runs on the GPU.
     gpu: Option<Gpu>,
     /// Where the last job ran and what AUTO chose for it.
     last_job: LastJob,
-    /// Declared after `pool`, so dropped after it: waits for the workers to exit.
+    /// Dropped after the pool, which `Context::drop` stops first: waits for the workers to exit.
     _workers: Workers,
     /// The process that made the context. A `fork` copies the context into a child without
     /// its worker threads (or the GPU driver's): a job there would wait forever.
@@ -31,47 +34,19 @@ pub struct Context {
 }
 
 impl Drop for Context {
-    /// In a forked child, the workers to join and the devices to release belong to the
-    /// parent: they are left alone (their memory leaks) rather than waited for.
+    /// In a forked child, the pool to stop, the workers to join and the devices to release
+    /// belong to the parent: they are left alone (their memory leaks) rather than waited for.
+    /// Even stopping the pool would wait: it locks each worker's sleep state, which a worker
+    /// of the parent falling asleep at the fork left locked for good.
     fn drop(&mut self) {
-        if self.pid != crate::process::id() {
+        if self.pid == crate::process::id() {
+            // SAFETY: the pool is dropped here only, once; nothing uses it after.
+            unsafe { ManuallyDrop::drop(&mut self.pool) };
+        } else {
             std::mem::forget(self.gpu.take());
-            if let Ok(mut threads) = self._workers.threads.lock() {
-                std::mem::forget(std::mem::take(&mut *threads));
-            }
+            self._workers.abandon();
         }
     }
-}
-
-/// The pool's worker threads, spawned by the context itself so that it can join them. rayon's
-/// `ThreadPool::drop` only tells its workers to stop; joining them makes `rt2_context_destroy`
-/// leave no thread behind (under valgrind, the stacks and TLS of workers still exiting when a
-/// C program's `main` returned were reported as possibly lost).
-#[derive(Default)]
-struct Workers {
-    threads: std::sync::Arc<std::sync::Mutex<Vec<std::thread::JoinHandle<()>>>>,
-}
-
-impl Drop for Workers {
-    fn drop(&mut self) {
-        // A worker cannot join itself (nor its siblings, which may be joining it).
-        if IN_WORKER.get() {
-            return;
-        }
-        let threads = match self.threads.lock() {
-            Ok(mut t) => std::mem::take(&mut *t),
-            Err(_) => return,
-        };
-        for t in threads {
-            let _ = t.join();
-        }
-    }
-}
-
-thread_local! {
-    /// Set on the pools' worker threads (no destructor and no allocation, unlike
-    /// `thread::current()`, whose handle a C program's main thread never frees).
-    static IN_WORKER: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
 /// Most worker threads a context may ask for: far above any machine's cores, low enough that
@@ -99,36 +74,13 @@ impl Context {
         }
         let env = crate::env::var("RT2_BACKEND")?;
         let (decision, gpu) = dispatch::decide_backend(request, env.as_deref(), gpu_opts)?;
-        let workers = Workers::default();
-        let handles = workers.threads.clone();
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads as usize)
-            .thread_name(|i| format!("rt2-worker-{i}"))
-            .spawn_handler(move |worker| {
-                let mut b = std::thread::Builder::new();
-                if let Some(name) = worker.name() {
-                    b = b.name(name.to_owned());
-                }
-                if let Some(size) = worker.stack_size() {
-                    b = b.stack_size(size);
-                }
-                let handle = b.spawn(move || {
-                    IN_WORKER.set(true);
-                    worker.run()
-                })?;
-                if let Ok(mut t) = handles.lock() {
-                    t.push(handle);
-                }
-                Ok(())
-            })
-            .build()
-            .map_err(|e| {
-                // The system refused a thread (a process or memory limit): a resource
-                // failure, not a bug.
-                Error::out_of_memory(format!("cannot start {threads} worker threads: {e}"))
-            })?;
+        let (pool, workers) = Workers::pool(threads as usize).map_err(|e| {
+            // The system refused a thread (a process or memory limit): a resource failure,
+            // not a bug.
+            Error::out_of_memory(format!("cannot start {threads} worker threads: {e}"))
+        })?;
         Ok(Context {
-            pool,
+            pool: ManuallyDrop::new(pool),
             decision,
             gpu,
             last_job: LastJob::new(),

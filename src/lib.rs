@@ -29,3 +29,4 @@ pub mod render;
 pub mod rng;
 pub mod scene;
 pub mod shading;
+mod workers;

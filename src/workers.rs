@@ -1,0 +1,189 @@
+//! The worker threads of a context's pool, started and joined by the context itself.
+//!
+//! Joined: rayon's `ThreadPool::drop` only tells its workers to stop; joining them makes
+//! `rt2_context_destroy` leave no thread behind (under valgrind, the stacks and TLS of workers
+//! still exiting when a C program's `main` returned were reported as possibly lost).
+//!
+//! Started without `std::thread` on Unix: std's thread start and exit take a process-wide lock
+//! (the map of thread stack guards its stack-overflow handler reads). A `fork` while any thread
+//! of the parent holds it gives the child a copy held for good, and every `std::thread` the
+//! child starts waits for it forever: a child forked while a context started or stopped its
+//! workers hung in `rt2_context_create` (`tests/fork_during_calls.rs`). Workers made with
+//! `pthread_create` never take that lock, in the parent or the child. The price: a stack
+//! overflow in a worker is a plain SIGSEGV without std's message (C hosts never had it).
+//!
+//! For the same reason the one lazily made global the workers use, crossbeam-epoch's default
+//! collector (rayon's deques pin it), is made when the library is loaded: made on first use
+//! inside a `OnceLock`, a fork while a worker of the parent made it left the child a
+//! `OnceLock` being initialised for good, and the child's workers waited for it forever (one
+//! run in about a dozen of that test, once std's lock was out of the way).
+
+use std::io;
+
+/// Makes crossbeam-epoch's default collector at load time (before `main` for a program linked
+/// with RT2, inside `dlopen` for one that loads it), when no RT2 thread exists yet.
+#[cfg(target_os = "linux")]
+#[used]
+#[link_section = ".init_array"]
+static MAKE_COLLECTOR_WHEN_LOADED: extern "C" fn() = {
+    extern "C" fn make() {
+        crossbeam_epoch::default_collector();
+    }
+    make
+};
+
+/// A context's worker threads.
+#[derive(Default)]
+pub struct Workers {
+    threads: Vec<Thread>,
+}
+
+thread_local! {
+    /// Set on the pools' worker threads (no destructor and no allocation, unlike
+    /// `thread::current()`, whose handle a C program's main thread never frees).
+    static IN_WORKER: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+impl Workers {
+    /// A rayon pool of `threads` workers (`0`: rayon's default, one per core), and the workers
+    /// to join once the pool is dropped.
+    pub fn pool(
+        threads: usize,
+    ) -> Result<(rayon::ThreadPool, Workers), rayon::ThreadPoolBuildError> {
+        let mut workers = Workers::default();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("rt2-worker-{i}"))
+            .spawn_handler(|worker| {
+                let name = worker.name().map(str::to_owned);
+                let thread = Thread::spawn(name, worker.stack_size(), move || {
+                    IN_WORKER.set(true);
+                    worker.run()
+                })?;
+                workers.threads.push(thread);
+                Ok(())
+            })
+            .build()?;
+        Ok((pool, workers))
+    }
+
+    /// Forgets the threads without joining them: in a forked child they are the parent's and
+    /// do not exist here.
+    pub fn abandon(&mut self) {
+        std::mem::forget(std::mem::take(&mut self.threads));
+    }
+}
+
+impl Drop for Workers {
+    fn drop(&mut self) {
+        // A worker cannot join itself (nor its siblings, which may be joining it).
+        if IN_WORKER.get() {
+            return;
+        }
+        for t in self.threads.drain(..) {
+            t.join();
+        }
+    }
+}
+
+/// Stack of a worker whose pool names no size: std's default for its threads.
+const DEFAULT_STACK: usize = 2 << 20;
+
+/// One worker thread; joined only through [`Thread::join`].
+#[cfg(unix)]
+struct Thread(libc::pthread_t);
+
+#[cfg(unix)]
+impl Thread {
+    fn spawn(
+        name: Option<String>,
+        stack_size: Option<usize>,
+        run: impl FnOnce() + Send + 'static,
+    ) -> io::Result<Self> {
+        type Job = Box<dyn FnOnce() + Send>;
+        extern "C" fn start(job: *mut libc::c_void) -> *mut libc::c_void {
+            // SAFETY: `spawn` hands this thread alone the `Box<Job>` it leaked for it.
+            let job = unsafe { Box::from_raw(job.cast::<Job>()) };
+            // A panic must not unwind out of a C entry point (that aborts the process).
+            let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(job));
+            std::ptr::null_mut()
+        }
+        let job: Box<Job> = Box::new(Box::new(move || {
+            if let Some(name) = name {
+                set_name(&name);
+            }
+            run()
+        }));
+        let stack = stack_size
+            .unwrap_or(DEFAULT_STACK)
+            .max(libc::PTHREAD_STACK_MIN);
+        let os = |rc: libc::c_int| match rc {
+            0 => Ok(()),
+            rc => Err(io::Error::from_raw_os_error(rc)),
+        };
+        // SAFETY: the attributes are initialised before use and destroyed once; the job is
+        // leaked to the new thread only when `pthread_create` succeeds, else taken back.
+        unsafe {
+            let mut attr = std::mem::MaybeUninit::<libc::pthread_attr_t>::uninit();
+            os(libc::pthread_attr_init(attr.as_mut_ptr()))?;
+            let mut attr = attr.assume_init();
+            let mut id: libc::pthread_t = std::mem::zeroed();
+            let job = Box::into_raw(job);
+            let mut rc = libc::pthread_attr_setstacksize(&mut attr, stack);
+            if rc == 0 {
+                rc = libc::pthread_create(&mut id, &attr, start, job.cast());
+            }
+            libc::pthread_attr_destroy(&mut attr);
+            if rc != 0 {
+                drop(Box::from_raw(job));
+            }
+            os(rc).map(|()| Thread(id))
+        }
+    }
+
+    fn join(self) {
+        // SAFETY: a thread this process started and nobody joined or detached yet.
+        unsafe { libc::pthread_join(self.0, std::ptr::null_mut()) };
+    }
+}
+
+/// Names the calling thread (what `top -H` and debuggers show); Linux keeps 15 bytes.
+#[cfg(unix)]
+fn set_name(name: &str) {
+    #[cfg(target_os = "linux")]
+    {
+        let mut end = name.len().min(15);
+        while !name.is_char_boundary(end) {
+            end -= 1;
+        }
+        if let Ok(name) = std::ffi::CString::new(&name[..end]) {
+            // SAFETY: a NUL-terminated name of at most 16 bytes, for the calling thread.
+            unsafe { libc::pthread_setname_np(libc::pthread_self(), name.as_ptr()) };
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = name;
+}
+
+/// One worker thread (a std thread where there is no `fork`).
+#[cfg(not(unix))]
+struct Thread(std::thread::JoinHandle<()>);
+
+#[cfg(not(unix))]
+impl Thread {
+    fn spawn(
+        name: Option<String>,
+        stack_size: Option<usize>,
+        run: impl FnOnce() + Send + 'static,
+    ) -> io::Result<Self> {
+        let mut b = std::thread::Builder::new().stack_size(stack_size.unwrap_or(DEFAULT_STACK));
+        if let Some(name) = name {
+            b = b.name(name);
+        }
+        b.spawn(run).map(Thread)
+    }
+
+    fn join(self) {
+        let _ = self.0.join();
+    }
+}
