@@ -275,8 +275,9 @@ mod tests {
                     std::thread::yield_now();
                 }
             });
+            // Long enough for a busy machine to schedule the setter; passing ends the wait early.
             let waited = std::time::Instant::now();
-            while !done.load(Ordering::SeqCst) && waited.elapsed().as_millis() < 200 {
+            while !done.load(Ordering::SeqCst) && waited.elapsed().as_secs() < 5 {
                 std::thread::yield_now();
             }
             let without_lock = done.load(Ordering::SeqCst);
