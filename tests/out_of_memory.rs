@@ -182,6 +182,7 @@ fn calls_without_memory_fail_with_out_of_memory_and_can_be_retried() {
     }
     models_without_memory_fail_with_out_of_memory();
     streamed_object_ids_without_memory_fail_with_out_of_memory();
+    contexts_without_memory_for_their_threads_fail_with_out_of_memory();
 }
 
 /// Spheres added and removed one after another (`rt2_scene_remove`, ids never reused) under a
@@ -227,6 +228,51 @@ fn streamed_object_ids_without_memory_fail_with_out_of_memory() {
         rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);
     }
+}
+
+/// The threads of this process now (`Threads` in `/proc/self/status`).
+fn threads() -> usize {
+    let status = std::fs::read_to_string("/proc/self/status").expect("Linux /proc");
+    let field = status.lines().find_map(|l| l.strip_prefix("Threads:"));
+    field
+        .and_then(|n| n.trim().parse().ok())
+        .expect("Threads in /proc/self/status")
+}
+
+/// A context of 64 workers under a limit of 16 MiB more: their stacks (2 MiB each) do not
+/// fit, so a worker's start fails part way through the pool. The context says OUT_OF_MEMORY,
+/// writes no handle and leaves no thread behind (those already started are stopped and
+/// joined); with the memory back, the same request works.
+#[allow(clippy::explicit_write)]
+fn contexts_without_memory_for_their_threads_fail_with_out_of_memory() {
+    writeln!(std::io::stderr(), "a context of 64 workers").unwrap();
+    let before = threads();
+    let mut desc = rt2_context_desc_default();
+    desc.backend = 1;
+    desc.threads = 64;
+    let mut ctx = null_mut();
+    unsafe {
+        libc::malloc_trim(0);
+        limit_address_space(Some(address_space() + (16 << 20)));
+        let status = rt2_context_create(&desc, &mut ctx);
+        limit_address_space(None);
+        assert_eq!(status, Rt2Status::OutOfMemory, "{}", last_error());
+        assert!(
+            last_error().contains("64 worker threads"),
+            "{}",
+            last_error()
+        );
+        assert!(ctx.is_null(), "no handle on failure");
+        assert_eq!(threads(), before, "threads left behind");
+        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
+        assert_eq!(threads(), before + 64);
+        rt2_context_destroy(ctx);
+    }
+    assert_eq!(
+        threads(),
+        before,
+        "threads left behind by a destroyed context"
+    );
 }
 
 /// A model file of one polygon with ten million corners: 20 MB of file, 120 MB of fan
