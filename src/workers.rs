@@ -89,101 +89,113 @@ impl Drop for Workers {
 /// Stack of a worker whose pool names no size: std's default for its threads.
 const DEFAULT_STACK: usize = 2 << 20;
 
-/// One worker thread; joined only through [`Thread::join`].
-#[cfg(unix)]
-struct Thread(libc::pthread_t);
+/// One worker thread (a std thread where there is no `fork`); joined only through
+/// [`Thread::join`].
+struct Thread(
+    #[cfg(unix)] libc::pthread_t,
+    #[cfg(not(unix))] std::thread::JoinHandle<()>,
+);
 
-#[cfg(unix)]
 impl Thread {
     fn spawn(
         name: Option<String>,
         stack_size: Option<usize>,
         run: impl FnOnce() + Send + 'static,
     ) -> io::Result<Self> {
-        type Job = Box<dyn FnOnce() + Send>;
-        extern "C" fn start(job: *mut libc::c_void) -> *mut libc::c_void {
-            // SAFETY: `spawn` hands this thread alone the `Box<Job>` it leaked for it.
-            let job = unsafe { Box::from_raw(job.cast::<Job>()) };
-            // A panic must not unwind out of a C entry point (that aborts the process).
-            let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(job));
-            std::ptr::null_mut()
-        }
-        let job: Box<Job> = Box::new(Box::new(move || {
+        let stack = stack_size.unwrap_or(DEFAULT_STACK);
+        #[cfg(unix)]
+        let thread = pthread::spawn(stack, move || {
             if let Some(name) = name {
-                set_name(&name);
+                pthread::set_name(&name);
             }
             run()
-        }));
-        let stack = stack_size
-            .unwrap_or(DEFAULT_STACK)
-            .max(libc::PTHREAD_STACK_MIN);
+        });
+        #[cfg(not(unix))]
+        let thread = {
+            let b = std::thread::Builder::new().stack_size(stack);
+            match name {
+                Some(name) => b.name(name),
+                None => b,
+            }
+            .spawn(run)
+        };
+        thread.map(Thread)
+    }
+
+    fn join(self) {
+        // SAFETY: `self` is consumed: each thread is joined once.
+        #[cfg(unix)]
+        unsafe {
+            pthread::join(self.0)
+        };
+        #[cfg(not(unix))]
+        let _ = self.0.join();
+    }
+}
+
+#[cfg(unix)]
+mod pthread {
+    use std::io;
+
+    /// Starts a thread of `stack` bytes (at least the system's minimum) that runs `run`.
+    pub fn spawn<F: FnOnce() + Send + 'static>(
+        stack: usize,
+        run: F,
+    ) -> io::Result<libc::pthread_t> {
+        extern "C" fn start<F: FnOnce()>(run: *mut libc::c_void) -> *mut libc::c_void {
+            // SAFETY: `spawn` hands this thread alone the `Box<F>` it leaked for it.
+            let run = unsafe { Box::from_raw(run.cast::<F>()) };
+            // A panic must not unwind out of a C entry point (that aborts the process).
+            let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(run));
+            std::ptr::null_mut()
+        }
         let os = |rc: libc::c_int| match rc {
             0 => Ok(()),
             rc => Err(io::Error::from_raw_os_error(rc)),
         };
-        // SAFETY: the attributes are initialised before use and destroyed once; the job is
+        // SAFETY: the attributes are initialised before use and destroyed once; `run` is
         // leaked to the new thread only when `pthread_create` succeeds, else taken back.
         unsafe {
             let mut attr = std::mem::MaybeUninit::<libc::pthread_attr_t>::uninit();
             os(libc::pthread_attr_init(attr.as_mut_ptr()))?;
             let mut attr = attr.assume_init();
             let mut id: libc::pthread_t = std::mem::zeroed();
-            let job = Box::into_raw(job);
-            let mut rc = libc::pthread_attr_setstacksize(&mut attr, stack);
+            let run = Box::into_raw(Box::new(run));
+            let mut rc =
+                libc::pthread_attr_setstacksize(&mut attr, stack.max(libc::PTHREAD_STACK_MIN));
             if rc == 0 {
-                rc = libc::pthread_create(&mut id, &attr, start, job.cast());
+                rc = libc::pthread_create(&mut id, &attr, start::<F>, run.cast());
             }
             libc::pthread_attr_destroy(&mut attr);
             if rc != 0 {
-                drop(Box::from_raw(job));
+                drop(Box::from_raw(run));
             }
-            os(rc).map(|()| Thread(id))
+            os(rc).map(|()| id)
         }
     }
 
-    fn join(self) {
-        // SAFETY: a thread this process started and nobody joined or detached yet.
-        unsafe { libc::pthread_join(self.0, std::ptr::null_mut()) };
-    }
-}
-
-/// Names the calling thread (what `top -H` and debuggers show); Linux keeps 15 bytes.
-#[cfg(unix)]
-fn set_name(name: &str) {
-    #[cfg(target_os = "linux")]
-    {
-        let mut end = name.len().min(15);
-        while !name.is_char_boundary(end) {
-            end -= 1;
-        }
-        if let Ok(name) = std::ffi::CString::new(&name[..end]) {
-            // SAFETY: a NUL-terminated name of at most 16 bytes, for the calling thread.
-            unsafe { libc::pthread_setname_np(libc::pthread_self(), name.as_ptr()) };
-        }
-    }
-    #[cfg(not(target_os = "linux"))]
-    let _ = name;
-}
-
-/// One worker thread (a std thread where there is no `fork`).
-#[cfg(not(unix))]
-struct Thread(std::thread::JoinHandle<()>);
-
-#[cfg(not(unix))]
-impl Thread {
-    fn spawn(
-        name: Option<String>,
-        stack_size: Option<usize>,
-        run: impl FnOnce() + Send + 'static,
-    ) -> io::Result<Self> {
-        let mut b = std::thread::Builder::new().stack_size(stack_size.unwrap_or(DEFAULT_STACK));
-        if let Some(name) = name {
-            b = b.name(name);
-        }
-        b.spawn(run).map(Thread)
+    /// Waits for a thread `spawn` started.
+    ///
+    /// # Safety
+    /// Once per thread: a joined thread's id may name another thread.
+    pub unsafe fn join(thread: libc::pthread_t) {
+        libc::pthread_join(thread, std::ptr::null_mut());
     }
 
-    fn join(self) {
-        let _ = self.0.join();
+    /// Names the calling thread (what `top -H` and debuggers show); Linux keeps 15 bytes.
+    pub fn set_name(name: &str) {
+        #[cfg(target_os = "linux")]
+        {
+            let mut end = name.len().min(15);
+            while !name.is_char_boundary(end) {
+                end -= 1;
+            }
+            if let Ok(name) = std::ffi::CString::new(&name[..end]) {
+                // SAFETY: a NUL-terminated name of at most 16 bytes, for the calling thread.
+                unsafe { libc::pthread_setname_np(libc::pthread_self(), name.as_ptr()) };
+            }
+        }
+        #[cfg(not(target_os = "linux"))]
+        let _ = name;
     }
 }
