@@ -67,8 +67,8 @@ impl Workers {
         Ok((pool, workers))
     }
 
-    /// Forgets the threads without joining them: in a forked child they are the parent's and
-    /// do not exist here.
+    /// Forgets the threads without joining or detaching them: in a forked child they are the
+    /// parent's and do not exist here.
     pub fn abandon(&mut self) {
         std::mem::forget(std::mem::take(&mut self.threads));
     }
@@ -89,8 +89,9 @@ impl Drop for Workers {
 /// Stack of a worker whose pool names no size: std's default for its threads.
 const DEFAULT_STACK: usize = 2 << 20;
 
-/// One worker thread (a std thread where there is no `fork`); joined only through
-/// [`Thread::join`].
+/// One worker thread (a std thread where there is no `fork`): joined through [`Thread::join`],
+/// else detached when dropped (as std's `JoinHandle` is), so that its stack is freed when it
+/// exits (a context dropped on a worker of another pool cannot join its own workers).
 struct Thread(
     #[cfg(unix)] libc::pthread_t,
     #[cfg(not(unix))] std::thread::JoinHandle<()>,
@@ -123,15 +124,31 @@ impl Thread {
     }
 
     fn join(self) {
-        // SAFETY: `self` is consumed: each thread is joined once.
         #[cfg(unix)]
-        unsafe {
-            pthread::join(self.0)
-        };
+        {
+            let thread = std::mem::ManuallyDrop::new(self);
+            // SAFETY: `self` is consumed and not dropped (no detach): joined once.
+            unsafe { pthread::join(thread.0) };
+        }
         #[cfg(not(unix))]
         let _ = self.0.join();
     }
 }
+
+#[cfg(unix)]
+impl Drop for Thread {
+    fn drop(&mut self) {
+        // SAFETY: a thread neither joined (`join` does not drop) nor detached before.
+        unsafe { libc::pthread_detach(self.0) };
+    }
+}
+
+// SAFETY: a pthread id is a handle any thread may join or detach (on musl it is a pointer,
+// which is not `Send` by default).
+#[cfg(unix)]
+unsafe impl Send for Thread {}
+#[cfg(unix)]
+unsafe impl Sync for Thread {}
 
 #[cfg(unix)]
 mod pthread {

@@ -9,9 +9,8 @@
 //! `valgrind --error-exitcode=99 --leak-check=full --errors-for-leak-kinds=definite,indirect`
 //! with `scripts/valgrind.supp` (reports that are not RT2's, each with its reason):
 //! a memory error or a definite/indirect leak then makes the example exit with 99 and the test
-//! fail with valgrind's report. "Possibly lost" blocks are not counted: they are the stacks,
-//! TLS and crossbeam-epoch records of the context's rayon workers, which a destroyed context
-//! signals to stop but does not join, so they can still be running when `main` returns.
+//! fail with valgrind's report. "Possibly lost" blocks are not counted: crossbeam-epoch's
+//! records of the rayon workers' threads, which its global collector keeps after they exit.
 //! (`load_model` renders 69k triangles; under valgrind that takes minutes.)
 
 mod support;

@@ -128,6 +128,9 @@ fn rounds(rounds: usize, round: impl Fn() -> usize) {
         let pid = unsafe { libc::fork() };
         assert!(pid >= 0, "fork failed");
         if pid == 0 {
+            // Forked beside the harness's other test threads: a lock one of them held would
+            // hang the round, which its alarm then ends.
+            unsafe { libc::alarm(120) };
             let bad = std::panic::catch_unwind(std::panic::AssertUnwindSafe(&round));
             unsafe { libc::_exit(bad.unwrap_or(255).min(255) as i32) };
         }
