@@ -15,36 +15,27 @@ use crate::job_record::{AutoChoices, JobRecord, LastJob};
 use crate::precision::Intersector;
 use crate::render::{GpuPathRequest, RenderOptions};
 use crate::scene::Committed;
-use crate::workers::Workers;
-use std::mem::ManuallyDrop;
+use crate::workers::Pool;
 
 pub struct Context {
-    /// Dropped by hand (`Context::drop`): never in a forked child.
-    pool: ManuallyDrop<rayon::ThreadPool>,
+    pool: Pool,
     decision: Decision,
     /// The devices, when tracing runs on the GPU.
     gpu: Option<Gpu>,
     /// Where the last job ran and what AUTO chose for it.
     last_job: LastJob,
-    /// Dropped after the pool, which `Context::drop` stops first: waits for the workers to exit.
-    _workers: Workers,
     /// The process that made the context. A `fork` copies the context into a child without
     /// its worker threads (or the GPU driver's): a job there would wait forever.
     pid: u32,
 }
 
 impl Drop for Context {
-    /// In a forked child, the pool to stop, the workers to join and the devices to release
-    /// belong to the parent: they are left alone (their memory leaks) rather than waited for.
-    /// Even stopping the pool would wait: it locks each worker's sleep state, which a worker
-    /// of the parent falling asleep at the fork left locked for good.
+    /// In a forked child, the pool and the devices belong to the parent: they are left alone
+    /// (their memory leaks) rather than waited for.
     fn drop(&mut self) {
-        if self.pid == crate::process::id() {
-            // SAFETY: the pool is dropped here only, once; nothing uses it after.
-            unsafe { ManuallyDrop::drop(&mut self.pool) };
-        } else {
+        if self.pid != crate::process::id() {
             std::mem::forget(self.gpu.take());
-            self._workers.abandon();
+            self.pool.abandon();
         }
     }
 }
@@ -74,17 +65,16 @@ impl Context {
         }
         let env = crate::env::var("RT2_BACKEND")?;
         let (decision, gpu) = dispatch::decide_backend(request, env.as_deref(), gpu_opts)?;
-        let (pool, workers) = Workers::pool(threads as usize).map_err(|e| {
+        let pool = Pool::new(threads as usize).map_err(|e| {
             // The system refused a thread (a process or memory limit): a resource failure,
             // not a bug.
             Error::out_of_memory(format!("cannot start {threads} worker threads: {e}"))
         })?;
         Ok(Context {
-            pool: ManuallyDrop::new(pool),
+            pool,
             decision,
             gpu,
             last_job: LastJob::new(),
-            _workers: workers,
             pid: crate::process::id(),
         })
     }

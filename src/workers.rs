@@ -1,4 +1,4 @@
-//! The worker threads of a context's pool, started and joined by the context itself.
+//! A context's rayon pool and its worker threads, started, stopped and joined by RT2 itself.
 //!
 //! Joined: rayon's `ThreadPool::drop` only tells its workers to stop; joining them makes
 //! `rt2_context_destroy` leave no thread behind (under valgrind, the stacks and TLS of workers
@@ -19,6 +19,7 @@
 //! run in about a dozen of that test, once std's lock was out of the way).
 
 use std::io;
+use std::mem::ManuallyDrop;
 
 /// Makes crossbeam-epoch's default collector at load time (before `main` for a program linked
 /// with RT2, inside `dlopen` for one that loads it), when no RT2 thread exists yet.
@@ -32,10 +33,13 @@ static MAKE_COLLECTOR_WHEN_LOADED: extern "C" fn() = {
     make
 };
 
-/// A context's worker threads.
-#[derive(Default)]
-pub struct Workers {
+/// A context's rayon pool and its worker threads, stopped and joined in that order when
+/// dropped.
+pub struct Pool {
+    /// Dropped by hand (`Pool::drop`), never once abandoned.
+    pool: ManuallyDrop<rayon::ThreadPool>,
     threads: Vec<Thread>,
+    abandoned: bool,
 }
 
 thread_local! {
@@ -44,14 +48,11 @@ thread_local! {
     static IN_WORKER: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-impl Workers {
-    /// A rayon pool of `threads` workers (`0`: rayon's default, one per core), and the workers
-    /// to join once the pool is dropped.
-    pub fn pool(
-        threads: usize,
-    ) -> Result<(rayon::ThreadPool, Workers), rayon::ThreadPoolBuildError> {
-        let mut workers = Workers::default();
-        let pool = rayon::ThreadPoolBuilder::new()
+impl Pool {
+    /// A pool of `threads` workers (`0`: rayon's default, one per core).
+    pub fn new(threads: usize) -> Result<Pool, rayon::ThreadPoolBuildError> {
+        let mut started = Vec::new();
+        let built = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .thread_name(|i| format!("rt2-worker-{i}"))
             .spawn_handler(|worker| {
@@ -60,28 +61,52 @@ impl Workers {
                     IN_WORKER.set(true);
                     worker.run()
                 })?;
-                workers.threads.push(thread);
+                started.push(thread);
                 Ok(())
             })
-            .build()?;
-        Ok((pool, workers))
+            .build();
+        match built {
+            Ok(pool) => Ok(Pool {
+                pool: ManuallyDrop::new(pool),
+                threads: started,
+                abandoned: false,
+            }),
+            Err(e) => {
+                // rayon has told the workers that did start to stop.
+                started.into_iter().for_each(Thread::join);
+                Err(e)
+            }
+        }
     }
 
-    /// Forgets the threads without joining or detaching them: in a forked child they are the
-    /// parent's and do not exist here.
+    /// Leaves the pool and its threads as they are, neither stopped nor joined (their memory
+    /// leaks): in a forked child they are the parent's, and even stopping the pool would wait,
+    /// since it locks each worker's sleep state, which a worker of the parent falling asleep at
+    /// the fork left locked for good.
     pub fn abandon(&mut self) {
         std::mem::forget(std::mem::take(&mut self.threads));
+        self.abandoned = true;
     }
 }
 
-impl Drop for Workers {
+impl std::ops::Deref for Pool {
+    type Target = rayon::ThreadPool;
+    fn deref(&self) -> &rayon::ThreadPool {
+        &self.pool
+    }
+}
+
+impl Drop for Pool {
     fn drop(&mut self) {
-        // A worker cannot join itself (nor its siblings, which may be joining it).
-        if IN_WORKER.get() {
+        if self.abandoned {
             return;
         }
-        for t in self.threads.drain(..) {
-            t.join();
+        // SAFETY: dropped here only, once; nothing uses it after.
+        unsafe { ManuallyDrop::drop(&mut self.pool) };
+        // A worker cannot join itself (nor its siblings, which may be joining it): dropped
+        // unjoined, they are detached.
+        if !IN_WORKER.get() {
+            self.threads.drain(..).for_each(Thread::join);
         }
     }
 }
