@@ -69,7 +69,7 @@ enum rt2_backend
    * than one sample, a software adapter takes the wavefront path, which traces one ray per
    * invocation). The kernels detect the cut (their last loop stops early too), and such a
    * query or render returns that status, saying the driver cut its rays or pixels short,
-   * with no answers written (but those of a query's earlier steps of 2^20 rays: see
+   * with no answers written (but those of a query's earlier steps of up to 2^20 rays: see
    * `rt2_intersect`). Hardware drivers have no such budget.
    */
   RT2_BACKEND_GPU = 2,
@@ -213,7 +213,8 @@ enum rt2_query_mode
   RT2_QUERY_MODE_SINGLE = 0,
   /**
    * Packets of one octant (Wald) as wide as the CPU runs: 16 rays with AVX-512, 8 with
-   * AVX2, else 4; standard traversal order.
+   * AVX2, else 4; standard traversal order. Rays that form a camera image in scanline order
+   * (found in the rays) are packed in tiles, 4×4, 4×2 or 2×2, else N consecutive rays.
    */
   RT2_QUERY_MODE_PACKET = 1,
   /**
@@ -224,7 +225,7 @@ enum rt2_query_mode
    */
   RT2_QUERY_MODE_STREAM = 2,
   /**
-   * The library chooses per batch (per step of 2^20 rays for a longer one; see
+   * The library chooses per batch (per step of up to 2^20 rays for a longer one; see
    * `rt2_intersect`) (default): PACKET for 8 rays or more that come in runs of
    * one octant (16 rays long on average or more), as a camera's rays in scanline order do;
    * STREAM for 128 rays or more in mixed octants (incoherent); SINGLE for smaller batches
@@ -817,7 +818,8 @@ void rt2_context_destroy(rt2_context *ctx);
 /**
  * Reports the backend tracing runs on and why, why the last job ran on the CPU instead
  * (`fallback`, NULL when it did not), and what AUTO chose for that job (`auto_choice`). A query
- * of more than 2^20 rays runs as several jobs (see `rt2_intersect`): this reports its last.
+ * of more than 2^20 rays runs as several jobs, steps of up to 2^20 rays (see `rt2_intersect`):
+ * this reports its last.
  * On failure `*out` is untouched.
  *
  * # Safety
@@ -910,8 +912,9 @@ struct rt2_query_options rt2_query_options_default(void);
 
 /**
  * Closest hits of `count` rays into `hits`. `opt` may be NULL (defaults); `stats` may be NULL
- * (not collected). Rays are traced in steps of 2^20: on failure `hits` is untouched unless the
- * backend failed part-way (internal error, GPU lost or out of memory, or on lavapipe a later
+ * (not collected). Rays are traced in steps of at most 2^20 (whole bands of four rows when they
+ * are a camera image in scanline order, so that packets and streams take the image in tiles
+ * across the steps): on failure `hits` is untouched unless the backend failed part-way (internal error, GPU lost or out of memory, or on lavapipe a later
  * step's rays cut short by the driver: `RT2_BACKEND_GPU`), which leaves the earlier steps'
  * hits written.
  *

@@ -1,6 +1,6 @@
 //! SplitMix64 (Steele, Lea & Flood 2014): a tiny deterministic generator, so that what draws
 //! from it is the same everywhere: the built-in scenes, the sample positions of the CPU
-//! queries' octant-run test, the benchmarks' incoherent rays, and the unit and integration tests.
+//! queries' octant-run and image tests, the benchmarks' incoherent rays, and the unit and integration tests.
 
 pub struct Rng(pub u64);
 
@@ -17,6 +17,11 @@ impl Rng {
     /// Uniform in `[0, 1)`, 24 bits.
     pub fn unit(&mut self) -> f32 {
         (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// An index uniform in `0..n` (`n > 0`): 64 random bits scaled to the range.
+    pub fn index(&mut self, n: usize) -> usize {
+        ((u128::from(self.next_u64()) * n as u128) >> 64) as usize
     }
 
     /// Uniform in `[lo, hi)`.

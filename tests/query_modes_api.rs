@@ -977,3 +977,135 @@ fn auto_mode_chooses_by_coherence_and_size_and_says_why() {
         rt2_context_destroy(ctx);
     }
 }
+
+/// A camera image longer than one step of the API (2^20 rays) whose width does not divide
+/// 2^20: the API steps through it in whole bands of rows, where packets and streams take
+/// tiles, and every mode returns the single rays' hits bit for bit, excluding each ray's
+/// primitive from the right place of `opt.exclude` in every step.
+#[test]
+fn an_image_of_several_steps_gives_every_mode_the_same_hits() {
+    unsafe {
+        let mut ctx = null_mut();
+        assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
+        let mut scene = null_mut();
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        // A checkerboard of unit squares at z = 0 over a full grid of them at z = -1.
+        let n = 16u32;
+        for (z, every) in [(0.0f32, false), (-1.0, true)] {
+            let positions: Vec<f32> = (0..=n)
+                .flat_map(|y| (0..=n).flat_map(move |x| [x as f32, y as f32, z]))
+                .collect();
+            let corner = |x: u32, y: u32| y * (n + 1) + x;
+            let indices: Vec<u32> = (0..n)
+                .flat_map(|y| (0..n).map(move |x| (x, y)))
+                .filter(|(x, y)| every || (x + y) % 2 == 0)
+                .flat_map(|(x, y)| {
+                    let (a, b) = (corner(x, y), corner(x + 1, y));
+                    let (c, d) = (corner(x, y + 1), corner(x + 1, y + 1));
+                    [a, b, d, a, d, c]
+                })
+                .collect();
+            let mut id = 0;
+            let st = rt2_scene_add_mesh(
+                scene,
+                positions.as_ptr(),
+                positions.len() / 3,
+                indices.as_ptr(),
+                indices.len() / 3,
+                0,
+                &mut id,
+            );
+            assert_eq!(st, Rt2Status::Ok);
+        }
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        // A pinhole camera above the grid, 1376 × 770 pixels in scanline order (1,059,520
+        // rays; 2^20 is 762.05 of its rows).
+        let (w, h) = (1376usize, 770usize);
+        let eye = [8.3f32, 8.1, 12.0];
+        let rays: Vec<rt2_ray> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+                let at = [-1.0 + 18.0 * x / w as f32, 17.0 - 18.0 * y / h as f32, 0.0];
+                let d = [at[0] - eye[0], at[1] - eye[1], at[2] - eye[2]];
+                let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                rt2_ray {
+                    org: eye,
+                    tmin: 0.0,
+                    dir: d.map(|c| c / len),
+                    tmax: f32::INFINITY,
+                }
+            })
+            .collect();
+        let miss = rt2_hit {
+            t: -1.0,
+            u: 0.0,
+            v: 0.0,
+            object: 7,
+            prim: 7,
+        };
+        let run = |opt: &rt2_query_options| {
+            let mut hits = vec![miss; rays.len()];
+            assert_eq!(
+                intersect_all(ctx, scene, &rays, &mut hits, opt),
+                Rt2Status::Ok
+            );
+            hits
+        };
+        let first = run(&standard_in(Rt2QueryMode::Single));
+        let on = |object: u32| first.iter().filter(|h| h.object == object).count();
+        assert!(
+            on(0) > rays.len() / 4 && on(1) > rays.len() / 4,
+            "both layers seen"
+        );
+        // Every third ray ignores its first hit and finds the lower layer, or nothing.
+        let exclude: Vec<rt2_hit> = first
+            .iter()
+            .enumerate()
+            .map(|(i, h)| if i % 3 == 0 { *h } else { miss_of(h) })
+            .collect();
+        for excluding in [false, true] {
+            let with = |mode| {
+                let mut opt = standard_in(mode);
+                if excluding {
+                    opt.exclude = exclude.as_ptr();
+                }
+                opt
+            };
+            let want = run(&with(Rt2QueryMode::Single));
+            if excluding {
+                let moved = (0..rays.len()).filter(|&i| want[i].t != first[i].t);
+                assert!(moved.count() > rays.len() / 8, "exclusions changed hits");
+            }
+            for mode in [
+                Rt2QueryMode::Packet,
+                Rt2QueryMode::Stream,
+                Rt2QueryMode::Auto,
+            ] {
+                let got = run(&with(mode));
+                for (i, (g, s)) in got.iter().zip(&want).enumerate() {
+                    let bits = |h: &rt2_hit| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits());
+                    assert!(
+                        bits(g) == bits(s) && (g.object, g.prim) == (s.object, s.prim),
+                        "{mode:?}, excluding {excluding}: ray {i} (pixel {}, {}) got {:?}, \
+                         single rays {:?}",
+                        i % w,
+                        i / w,
+                        (g.t, g.object, g.prim),
+                        (s.t, s.object, s.prim)
+                    );
+                }
+            }
+        }
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
+/// The exclusion of nothing: a hit record whose ids are both `RT2_INVALID_ID`.
+fn miss_of(h: &rt2_hit) -> rt2_hit {
+    rt2_hit {
+        object: RT2_INVALID_ID,
+        prim: RT2_INVALID_ID,
+        ..*h
+    }
+}

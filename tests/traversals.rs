@@ -7,6 +7,7 @@
 //! own test.
 
 use glam::{DVec3, Mat3, Vec3};
+use rt2::cpu::ray_order::{self, RayOrder};
 use rt2::cpu::simd::Width;
 use rt2::cpu::traverse::{intersect, occluded, Traversal, TraverseOptions};
 use rt2::cpu::{packet, stream, Excluded, RayTests};
@@ -402,11 +403,25 @@ fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ra
                     "{what}: excluding the first hits changed no hit: nothing was checked"
                 );
             }
-            for width in Width::ALL.into_iter().filter(|w| w.supported()) {
+            // Rays as given, and in tiles: of the rows `query` would find, or of 7 rays,
+            // which cuts most batches across their rows.
+            let orders = [
+                RayOrder::AsGiven,
+                match ray_order::detect(rays) {
+                    RayOrder::AsGiven => RayOrder::Rows(7),
+                    rows => rows,
+                },
+            ];
+            let configs = Width::ALL
+                .into_iter()
+                .filter(|w| w.supported())
+                .flat_map(|w| orders.map(|o| (w, o)));
+            for (width, order) in configs {
                 for mode in ["packet", "stream"] {
-                    let (occ, hits, stats) = batch(mode, (tree, prims), rays, tests, width);
+                    let (occ, hits, stats) =
+                        batch(mode, (tree, prims), (rays, order), tests, width);
                     let how = format!(
-                        "{what}, {mode} x{}, {}{}",
+                        "{what}, {mode} x{} {order:?}, {}{}",
                         width.lanes(),
                         intersector.name(),
                         match exclude {
@@ -460,12 +475,12 @@ fn same_bits(a: &Hit, b: &Hit) -> bool {
 fn batch(
     mode: &str,
     (tree, prims): (&KdTree, &PrimitiveSet),
-    rays: &[Ray],
+    rays: (&[Ray], RayOrder),
     tests: RayTests,
     width: Width,
 ) -> (Vec<bool>, Vec<Hit>, TraversalStats) {
-    let mut hits = vec![Hit::MISS; rays.len()];
-    let mut occ = vec![false; rays.len()];
+    let mut hits = vec![Hit::MISS; rays.0.len()];
+    let mut occ = vec![false; rays.0.len()];
     let stats = match mode {
         "packet" => {
             packet::occluded(tree, prims, rays, tests, &mut occ, width);
@@ -566,6 +581,8 @@ fn camera_rays_match_reference() {
             Ray::new(eye, (at - eye).normalize(), 0.0, f32::INFINITY)
         })
         .collect();
+    // Packets and streams take these rays in tiles (`check_batch_modes`).
+    assert_eq!(ray_order::detect(&rays), RayOrder::Rows(side));
     for (n, size) in [(200, 0.3), (2000, 0.05)] {
         let prims = soup(&mut rng, n, size);
         check_rays(
@@ -926,11 +943,12 @@ fn degenerate_rays_miss_without_touching_the_tree() {
             };
             let mut hits = vec![Hit::MISS; rays.len()];
             let mut occ = vec![true; rays.len()];
+            let given = (&rays[..], RayOrder::AsGiven);
             let stats = [
-                packet::intersect(&tree, &prims, &rays, t, &mut hits, width),
-                packet::occluded(&tree, &prims, &rays, t, &mut occ, width),
-                stream::intersect(&tree, &prims, &rays, t, &mut hits, width).0,
-                stream::occluded(&tree, &prims, &rays, t, &mut occ, width).0,
+                packet::intersect(&tree, &prims, given, t, &mut hits, width),
+                packet::occluded(&tree, &prims, given, t, &mut occ, width),
+                stream::intersect(&tree, &prims, given, t, &mut hits, width).0,
+                stream::occluded(&tree, &prims, given, t, &mut occ, width).0,
             ];
             assert!(hits.iter().all(|h| !h.is_hit()) && !occ.contains(&true));
             assert!(stats.iter().all(|s| *s == TraversalStats::default()));
@@ -1380,7 +1398,8 @@ fn shadow_rays_in_batches_answer_as_single_rays() {
                                     ..tests
                                 },
                             };
-                            let (occ, h, _) = batch(mode, (tree, &prims), chunk, tests, width);
+                            let rays = (chunk, RayOrder::AsGiven);
+                            let (occ, h, _) = batch(mode, (tree, &prims), rays, tests, width);
                             got.extend(occ);
                             hits.extend(h);
                         }

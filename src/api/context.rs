@@ -123,7 +123,8 @@ pub unsafe extern "C" fn rt2_context_destroy(ctx: *mut rt2_context) {
 
 /// Reports the backend tracing runs on and why, why the last job ran on the CPU instead
 /// (`fallback`, NULL when it did not), and what AUTO chose for that job (`auto_choice`). A query
-/// of more than 2^20 rays runs as several jobs (see `rt2_intersect`): this reports its last.
+/// of more than 2^20 rays runs as several jobs, steps of up to 2^20 rays (see `rt2_intersect`):
+/// this reports its last.
 /// On failure `*out` is untouched.
 ///
 /// # Safety

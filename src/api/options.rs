@@ -33,7 +33,7 @@ pub enum Rt2Backend {
     /// than one sample, a software adapter takes the wavefront path, which traces one ray per
     /// invocation). The kernels detect the cut (their last loop stops early too), and such a
     /// query or render returns that status, saying the driver cut its rays or pixels short,
-    /// with no answers written (but those of a query's earlier steps of 2^20 rays: see
+    /// with no answers written (but those of a query's earlier steps of up to 2^20 rays: see
     /// `rt2_intersect`). Hardware drivers have no such budget.
     Gpu = 2,
 }
@@ -65,14 +65,15 @@ pub enum Rt2QueryMode {
     /// One ray at a time with `rt2_query_options.traversal`.
     Single = 0,
     /// Packets of one octant (Wald) as wide as the CPU runs: 16 rays with AVX-512, 8 with
-    /// AVX2, else 4; standard traversal order.
+    /// AVX2, else 4; standard traversal order. Rays that form a camera image in scanline order
+    /// (found in the rays) are packed in tiles, 4×4, 4×2 or 2×2, else N consecutive rays.
     Packet = 1,
     /// The n-ray traversal of the vectorised-traversal paper: all rays of a stream at once, in
     /// streams of one octant: at most 32768 rays when they come in runs of one octant
     /// (`cpu::query::STREAM_MAX`), else about one ray per leaf of the scene's tree, 32768 to
     /// 262144 (`cpu::query::incoherent_stream_max`).
     Stream = 2,
-    /// The library chooses per batch (per step of 2^20 rays for a longer one; see
+    /// The library chooses per batch (per step of up to 2^20 rays for a longer one; see
     /// `rt2_intersect`) (default): PACKET for 8 rays or more that come in runs of
     /// one octant (16 rays long on average or more), as a camera's rays in scanline order do;
     /// STREAM for 128 rays or more in mixed octants (incoherent); SINGLE for smaller batches

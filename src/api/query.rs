@@ -12,6 +12,7 @@ use super::options::{
 use super::scene::rt2_scene;
 use crate::context::QueryOptions;
 use crate::cpu::query::QueryMode;
+use crate::cpu::ray_order::{self, whole_bands};
 use crate::dispatch::{choose_query_mode, Backend};
 use crate::error::{Error, Rt2Status};
 use crate::fallible;
@@ -325,15 +326,13 @@ unsafe fn run_query<T>(
         let exclude = exclude.map(|(e, _)| e);
         let mut st = TraversalStats::default();
         let mut step = Staging::new(Ray::new(Vec3::ZERO, Vec3::ZERO, 0.0, 0.0));
-        for (k, (rays, out)) in rays
-            .chunks(QUERY_CHUNK)
-            .zip(out.chunks_mut(QUERY_CHUNK))
-            .enumerate()
-        {
+        // Steps of whole bands of an image's rows: each step's packets and streams then take
+        // the image in tiles, as one call over the whole image would (`cpu::ray_order`).
+        let order = ray_order::detect_in(rays.len(), |i| Ray::from(&rays[i]));
+        let size = whole_bands(order, QUERY_CHUNK);
+        for (k, (rays, out)) in rays.chunks(size).zip(out.chunks_mut(size)).enumerate() {
             let step = step.hold(rays.iter().map(Ray::from));
-            let step_exclude = exclude
-                .as_ref()
-                .map(|e| &e[k * QUERY_CHUNK..][..rays.len()]);
+            let step_exclude = exclude.as_ref().map(|e| &e[k * size..][..rays.len()]);
             st.add(&f(&c.inner, committed, (step, step_exclude), out, &q)?);
         }
         if !stats.is_null() {
@@ -352,8 +351,9 @@ unsafe fn run_query<T>(
 }
 
 /// Closest hits of `count` rays into `hits`. `opt` may be NULL (defaults); `stats` may be NULL
-/// (not collected). Rays are traced in steps of 2^20: on failure `hits` is untouched unless the
-/// backend failed part-way (internal error, GPU lost or out of memory, or on lavapipe a later
+/// (not collected). Rays are traced in steps of at most 2^20 (whole bands of four rows when they
+/// are a camera image in scanline order, so that packets and streams take the image in tiles
+/// across the steps): on failure `hits` is untouched unless the backend failed part-way (internal error, GPU lost or out of memory, or on lavapipe a later
 /// step's rays cut short by the driver: `RT2_BACKEND_GPU`), which leaves the earlier steps'
 /// hits written.
 ///

@@ -9,6 +9,7 @@
 //!
 //! [`Traversal::Standard`]: super::traverse::Traversal::Standard
 
+use super::ray_order::{Blocks, RayOrder};
 use super::simd::{
     self, lanes_less, lanes_less_eq, prefetch, Isa, Kernel, PreparedLeaf, RayLanes, Width,
 };
@@ -480,6 +481,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         tree: &'a KdTree,
         prims: &'a PrimitiveSet,
         rays: &'a [Ray],
+        order: RayOrder,
         exclude: Excluded<'a>,
         mut answer: A,
     ) -> (Self, [Vec<Root>; 8]) {
@@ -494,33 +496,33 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         }
         // The single-ray traversal's box: padded for the watertight test.
         let bounds = scene_box(tree, tests.intersector);
-        let mut split = [(); 3].map(|_| Vec::with_capacity(n));
+        let mut split = [(); 3].map(|_| vec![[0.0; 2]; n]);
         let mut groups: [Vec<Root>; 8] = Default::default();
         answer.reset();
-        for start in (0..n).step_by(N) {
-            let live = first::<N>(n - start);
+        // The groups keep the order of the blocks (`RayOrder`): packets and streams take their
+        // rays in it.
+        for (ids, live) in Blocks::<N>::new(n, order) {
+            let r = RayLanes::<N>::gather(isa, rays, &ids);
             // Loops rather than `array::from_fn` and `array::map`, which LLVM left as calls here,
             // compiled without the kernel's SIMD features (see `simd`).
-            let mut ids = [0u32; N];
-            for (l, id) in ids.iter_mut().enumerate() {
-                *id = (start + l) as u32;
-            }
-            let r = RayLanes::<N>::gather(isa, rays, &ids);
             let mut inv = [[0.0f32; N]; 3];
             for (inv, dir) in inv.iter_mut().zip(&r.dir) {
                 for (i, d) in inv.iter_mut().zip(dir) {
                     *i = 1.0 / d;
                 }
             }
-            for a in 0..3 {
-                split[a].extend((0..(n - start).min(N)).map(|l| [r.org[a][l], inv[a][l]]));
-            }
+            for_lanes(live, |l| {
+                for a in 0..3 {
+                    split[a][ids[l] as usize] = [r.org[a][l], inv[a][l]];
+                }
+            });
             let valid = live & sound(isa, &r);
             let mut todo = valid;
             if !prims.planes.is_empty() {
                 // The planes are outside the tree, tested before it as the single-ray query does.
                 for_lanes(valid, |l| {
-                    let (i, ray) = (start + l, &rays[start + l]);
+                    let i = ids[l] as usize;
+                    let ray = &rays[i];
                     if !answer.planes(prims, i, ray, &tests.of(i, ray)) {
                         todo &= !(1 << l);
                     }
@@ -531,9 +533,8 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
             }
             let (t0, t1, inside) = clip_lanes(isa, &bounds, &r.org, &inv, r.tmin, r.tmax);
             for_lanes(todo & inside, |l| {
-                let i = start + l;
-                groups[octant(&rays[i])].push(Root {
-                    id: i as u32,
+                groups[octant(&rays[ids[l] as usize])].push(Root {
+                    id: ids[l],
                     t0: t0[l],
                     t1: t1[l],
                 });
@@ -761,7 +762,7 @@ pub(crate) trait Mode {
 pub(crate) fn run<M: Mode, A: Answer>(
     tree: &KdTree,
     prims: &PrimitiveSet,
-    rays: &[Ray],
+    (rays, order): (&[Ray], RayOrder),
     tests: RayTests,
     answer: A,
     width: Width,
@@ -770,6 +771,7 @@ pub(crate) fn run<M: Mode, A: Answer>(
         tree: &'a KdTree,
         prims: &'a PrimitiveSet,
         rays: &'a [Ray],
+        order: RayOrder,
         exclude: Excluded<'a>,
         answer: A,
         mode: std::marker::PhantomData<M>,
@@ -783,6 +785,7 @@ pub(crate) fn run<M: Mode, A: Answer>(
                 self.tree,
                 self.prims,
                 self.rays,
+                self.order,
                 self.exclude,
                 self.answer,
             );
@@ -790,7 +793,7 @@ pub(crate) fn run<M: Mode, A: Answer>(
         }
     }
     fn job<'a, A, M, const WATERTIGHT: bool>(
-        (tree, prims, rays): (&'a KdTree, &'a PrimitiveSet, &'a [Ray]),
+        (tree, prims, rays, order): (&'a KdTree, &'a PrimitiveSet, &'a [Ray], RayOrder),
         exclude: Excluded<'a>,
         answer: A,
     ) -> Job<'a, A, M, WATERTIGHT> {
@@ -798,6 +801,7 @@ pub(crate) fn run<M: Mode, A: Answer>(
             tree,
             prims,
             rays,
+            order,
             exclude,
             answer,
             mode: std::marker::PhantomData,
@@ -806,7 +810,7 @@ pub(crate) fn run<M: Mode, A: Answer>(
     // One kernel per intersector (see `Batch`), each its own function: both in one made the
     // default path's code slower (a function too large for LLVM to keep its values in
     // registers).
-    let scene = (tree, prims, rays);
+    let scene = (tree, prims, rays, order);
     match tests.intersector {
         Intersector::MollerTrumbore => {
             simd::dispatch(width, job::<A, M, false>(scene, tests.exclude, answer))

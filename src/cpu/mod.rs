@@ -4,6 +4,7 @@
 mod batch;
 pub mod packet;
 pub mod query;
+pub mod ray_order;
 pub mod simd;
 pub mod stream;
 pub mod traverse;

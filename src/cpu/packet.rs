@@ -10,6 +10,7 @@
 //! work: stop paying for lists when the rays no longer share nodes).
 
 use super::batch::{positive, run, Answer, Batch, Mode, RayTests, Root, Split};
+use super::ray_order::RayOrder;
 use super::simd::{self, Isa, LeafPrims, Width};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
@@ -203,15 +204,16 @@ fn rays_per_triangle(live: u32, prims: &[u32]) -> bool {
     2 * live.count_ones() as usize >= prims.len()
 }
 
-/// The packet mode of a batch: rays grouped by octant, each group cut into packets of N
-/// consecutive rays (consecutive rays of an image are coherent), each packet traversed at once.
+/// The packet mode of a batch: rays grouped by octant, each group cut into packets of N rays
+/// in the batch's [`RayOrder`] (N consecutive rays, or a tile of an image's rows: neighbours
+/// of an image are coherent), each packet traversed at once.
 ///
 /// Measured and dropped (the bunny's 1024² primary rays, one thread, 16 lanes, where inner
-/// steps take about half the time): packets of 4×4 pixels ran 1.17× as fast as a scanline's
-/// 16×1, but a batch does not tell its image's width, and sorting each 4096-ray piece by a
-/// Morton code of its directions (the same 1.16× on the traversal) cost more than it saved
-/// (a comparison sort: 36 ns per ray against 6 ns per ray gained). Packets of 32 lanes (two
-/// AVX-512 vectors per value) ran at 0.92× of 16.
+/// steps take about half the time): sorting each 4096-ray piece by a Morton code of its
+/// directions (1.16× on the traversal, as 4×4 tiles) cost more than it saved (a comparison
+/// sort: 36 ns per ray against 6 ns per ray gained); tiles of rows found in the rays
+/// (`ray_order::detect`) cost nothing of the kind. Packets of 32 lanes (two AVX-512 vectors
+/// per value) ran at 0.92× of 16.
 struct PacketMode;
 
 impl Mode for PacketMode {
@@ -246,7 +248,8 @@ pub(crate) fn lanes_of<const N: usize>(roots: &[Root]) -> Lanes<N> {
 }
 
 /// Closest hits of `rays` (primitive tests `tests`) with N-ray packets (one thread).
-/// Traced as given, as `traverse::intersect`.
+/// Traced as given, as `traverse::intersect`, N rays at a time in the order `rays.1` says
+/// (the answers are the same in any order).
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
@@ -255,7 +258,7 @@ pub(crate) fn lanes_of<const N: usize>(roots: &[Root]) -> Lanes<N> {
 pub fn intersect(
     tree: &KdTree,
     prims: &PrimitiveSet,
-    rays: &[Ray],
+    rays: (&[Ray], RayOrder),
     tests: RayTests,
     hits: &mut [Hit],
     width: Width,
@@ -264,7 +267,8 @@ pub fn intersect(
 }
 
 /// Any-hit queries of `rays` (primitive tests `tests`) with N-ray packets (one thread).
-/// Traced as given, as `traverse::intersect`.
+/// Traced as given, as `traverse::intersect`, N rays at a time in the order `rays.1` says
+/// (the answers are the same in any order).
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
@@ -273,7 +277,7 @@ pub fn intersect(
 pub fn occluded(
     tree: &KdTree,
     prims: &PrimitiveSet,
-    rays: &[Ray],
+    rays: (&[Ray], RayOrder),
     tests: RayTests,
     found: &mut [bool],
     width: Width,

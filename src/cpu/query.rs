@@ -4,6 +4,7 @@
 //! by octant ([`STREAM_MAX`]).
 
 use super::batch::{octant, Excluded, RayTests};
+use super::ray_order::{self, whole_bands, RayOrder};
 use super::simd::Width;
 use super::stream::StreamMemory;
 use super::traverse::{self, Traversal, TraverseOptions};
@@ -89,7 +90,8 @@ pub type SingleFn<T> =
 
 /// A packet or stream traversal answering a slice of rays on the calling thread, at a lane
 /// width; `S` is what it reports.
-pub type BatchFn<T, S> = fn(&KdTree, &PrimitiveSet, &[Ray], RayTests, &mut [T], Width) -> S;
+pub type BatchFn<T, S> =
+    fn(&KdTree, &PrimitiveSet, (&[Ray], RayOrder), RayTests, &mut [T], Width) -> S;
 
 /// What a query answers for each ray: its closest hit ([`Hit`]) or whether anything lies in
 /// its window (`bool`, shadow rays), and the traversals of each mode that compute it, so that
@@ -165,12 +167,32 @@ pub fn trace<T: RayAnswer>(
                 T::SINGLE(tree, prims, ray, how, &opts, stats)
             })
         }),
-        QueryMode::Packet => chunked(rays, out, CHUNK, |r, e, o| {
-            T::PACKETS(tree, prims, r, RayTests::new(intersector, e), o, width)
-        }),
+        QueryMode::Packet => {
+            // Pieces of whole bands of an image's rows, so that each piece's packets are tiles.
+            let order = ray_order::detect(rays.0);
+            chunked(rays, out, whole_bands(order, CHUNK), |r, e, o| {
+                T::PACKETS(
+                    tree,
+                    prims,
+                    (r, order),
+                    RayTests::new(intersector, e),
+                    o,
+                    width,
+                )
+            })
+        }
         QueryMode::Stream if rays.0.len() <= CHUNK => {
             let (r, e) = rays;
-            T::STREAM(tree, prims, r, RayTests::new(intersector, e), out, width).0
+            let order = ray_order::detect(r);
+            T::STREAM(
+                tree,
+                prims,
+                (r, order),
+                RayTests::new(intersector, e),
+                out,
+                width,
+            )
+            .0
         }
         QueryMode::Stream => streamed(rays, out, incoherent_stream_max(tree), |r, e, o| {
             T::STREAM(tree, prims, r, RayTests::new(intersector, e), o, width).0
@@ -242,10 +264,10 @@ pub fn octant_runs_at_least(rays: &[Ray], run: usize) -> bool {
     let (samples, changes) = if pairs <= RUN_SAMPLES {
         (pairs, (0..pairs).filter(|&i| changed(i)).count())
     } else {
-        // A pair index below `pairs`: 64 random bits scaled to [0, pairs).
         let mut rng = Rng(0);
-        let mut at = || ((u128::from(rng.next_u64()) * pairs as u128) >> 64) as usize;
-        let changes = (0..RUN_SAMPLES).filter(|_| changed(at())).count();
+        let changes = (0..RUN_SAMPLES)
+            .filter(|_| changed(rng.index(pairs)))
+            .count();
         (RUN_SAMPLES, changes)
     };
     changes * run <= samples
@@ -253,19 +275,22 @@ pub fn octant_runs_at_least(rays: &[Ray], run: usize) -> bool {
 
 /// Streams of no more than a thread's share (but at least [`STREAM_CHUNK`]), traced in
 /// parallel. Rays that come in long octant runs are cut in their own order, in streams of at
-/// most [`STREAM_MAX`] rays; others are sorted by octant (a stable counting sort) and each
+/// most [`STREAM_MAX`] rays (whole bands of an image's rows, `ray_order`); others are sorted by octant (a stable counting sort) and each
 /// octant cut into streams of at most `incoherent_max` rays, each traced on a gathered copy,
 /// with `out` filled from its answers.
 fn streamed<T: RayAnswer>(
     (rays, exclude): Rays,
     out: &mut [T],
     incoherent_max: usize,
-    trace: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
+    trace: impl Fn((&[Ray], RayOrder), Excluded, &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
     let share = rays.len().div_ceil(rayon::current_num_threads());
     if octant_runs_at_least(rays, LONG_RUNS) {
-        let size = share.clamp(STREAM_CHUNK, STREAM_MAX);
-        return chunked((rays, exclude), out, size, trace);
+        let order = ray_order::detect(rays);
+        let size = whole_bands(order, share.clamp(STREAM_CHUNK, STREAM_MAX));
+        return chunked((rays, exclude), out, size, |r, e, o| {
+            trace((r, order), e, o)
+        });
     }
     let most = share.clamp(STREAM_CHUNK, incoherent_max.max(STREAM_CHUNK));
     let octants: Vec<u8> = rays.iter().map(|r| octant(r) as u8).collect();
@@ -299,7 +324,7 @@ fn streamed<T: RayAnswer>(
                 all => all,
             };
             let mut answers = vec![T::MISS; part.len()];
-            let stats = trace(&part_rays, part_exclude, &mut answers);
+            let stats = trace((&part_rays, RayOrder::AsGiven), part_exclude, &mut answers);
             (stats, answers)
         })
         .collect();

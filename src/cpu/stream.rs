@@ -22,6 +22,7 @@ use super::batch::{
     first, lanes_where, positive, run, Answer, AnyHit, Batch, Closest, Mode, RayTests, Root, Split,
 };
 use super::packet::{self, Lanes};
+use super::ray_order::RayOrder;
 use super::simd::{self, Isa, Width};
 use super::traverse::Entry;
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
@@ -330,7 +331,8 @@ impl Mode for StreamMode {
 }
 
 /// Closest hits of `rays` (primitive tests `tests`) with the n-ray traversal (one thread).
-/// Traced as given, as `traverse::intersect`.
+/// Traced as given, as `traverse::intersect`, N rays at a time in the order `rays.1` says
+/// (the answers are the same in any order).
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
@@ -339,7 +341,7 @@ impl Mode for StreamMode {
 pub fn intersect(
     tree: &KdTree,
     prims: &PrimitiveSet,
-    rays: &[Ray],
+    rays: (&[Ray], RayOrder),
     tests: RayTests,
     hits: &mut [Hit],
     width: Width,
@@ -348,7 +350,8 @@ pub fn intersect(
 }
 
 /// Any-hit queries of `rays` (primitive tests `tests`) with the n-ray traversal (one thread).
-/// Traced as given, as `traverse::intersect`.
+/// Traced as given, as `traverse::intersect`, N rays at a time in the order `rays.1` says
+/// (the answers are the same in any order).
 ///
 /// # Panics
 /// With more than `u32::MAX` rays (ray indices are 32-bit: `query` cuts batches smaller), or
@@ -357,7 +360,7 @@ pub fn intersect(
 pub fn occluded(
     tree: &KdTree,
     prims: &PrimitiveSet,
-    rays: &[Ray],
+    rays: (&[Ray], RayOrder),
     tests: RayTests,
     found: &mut [bool],
     width: Width,

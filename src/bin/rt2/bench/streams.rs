@@ -10,7 +10,7 @@ use rt2::context::{Context, QueryOptions};
 use rt2::cpu::query::{self, QueryMode, STREAM_CHUNK, STREAM_MAX};
 use rt2::cpu::simd::Width;
 use rt2::cpu::traverse::{Traversal, TraverseOptions};
-use rt2::cpu::{stream, RayTests};
+use rt2::cpu::{ray_order, stream, RayTests};
 use rt2::dispatch::{choose_query_mode, BackendRequest};
 use rt2::error::Result;
 use rt2::geometry::{Hit, Ray};
@@ -378,8 +378,11 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             for &size in sizes {
                 let chunk = &rays[..size.min(rays.len())];
                 let mut hits = vec![Hit::MISS; chunk.len()];
+                // In the order `query` would take them (an orbit frame's rows in tiles).
+                let order = ray_order::detect(chunk);
+                let rays = (chunk, order);
                 let (_, m) =
-                    stream::intersect(&c.tree, &c.prims, chunk, RayTests::PLAIN, &mut hits, width);
+                    stream::intersect(&c.tree, &c.prims, rays, RayTests::PLAIN, &mut hits, width);
                 writeln!(
                     mem,
                     "| {model} {what} ({} rays) | {:.0} | {:.0} | {:.0} |",
