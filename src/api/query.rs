@@ -326,8 +326,8 @@ unsafe fn run_query<T>(
         let exclude = exclude.map(|(e, _)| e);
         let mut st = TraversalStats::default();
         let mut step = Staging::new(Ray::new(Vec3::ZERO, Vec3::ZERO, 0.0, 0.0));
-        // Steps of whole bands of an image's rows: each step's packets and streams then take
-        // the image in tiles, as one call over the whole image would (`cpu::ray_order`).
+        // Steps of whole bands of an image's rows: each step's packets then take the image in
+        // tiles, as one call over the whole image would (`cpu::ray_order`).
         let order = ray_order::detect_in(rays.len(), |i| Ray::from(&rays[i]));
         let size = whole_bands(order, QUERY_CHUNK);
         for (k, (rays, out)) in rays.chunks(size).zip(out.chunks_mut(size)).enumerate() {
@@ -352,8 +352,8 @@ unsafe fn run_query<T>(
 
 /// Closest hits of `count` rays into `hits`. `opt` may be NULL (defaults); `stats` may be NULL
 /// (not collected). Rays are traced in steps of at most 2^20 (whole bands of four rows when they
-/// are a camera image in scanline order, so that packets and streams take the image in tiles
-/// across the steps): on failure `hits` is untouched unless the backend failed part-way (internal error, GPU lost or out of memory, or on lavapipe a later
+/// are a camera image in scanline order, so that packets take the image in tiles across the
+/// steps): on failure `hits` is untouched unless the backend failed part-way (internal error, GPU lost or out of memory, or on lavapipe a later
 /// step's rays cut short by the driver: `RT2_BACKEND_GPU`), which leaves the earlier steps'
 /// hits written.
 ///

@@ -1,9 +1,9 @@
-//! The order in which packets and streams take a batch's rays. A camera's rays come in scanline
-//! order, where N consecutive rays are an N × 1 strip of the image; a tile of the same image
-//! (4 × 4 at 16 lanes) holds rays closer together, which share more of their nodes and leaves.
-//! On the bunny's 1024² primary rays (one thread, 16 lanes, an Intel Xeon) packets of 4 × 4
-//! tiles ran 1.17× as fast as 16 × 1 strips, 2 × 8 alike, 8 × 2 1.09×; streams 1.04× (their
-//! lists keep the tiles' order, and their last few rays go on in packets).
+//! The order in which packets (and streams, when asked) take a batch's rays. A camera's rays
+//! come in scanline order, where N consecutive rays are an N × 1 strip of the image; a tile of
+//! the same image (4 × 4 at 16 lanes) holds rays closer together, which share more of their
+//! nodes and leaves. On the bunny's 1024² primary rays (one thread, 16 lanes, an Intel Xeon)
+//! packets of 4 × 4 tiles ran 1.17× as fast as 16 × 1 strips, 2 × 8 alike, 8 × 2 1.09×.
+//! `query` gives streams their rays as given (see there).
 //!
 //! A batch does not say whether it is an image, nor how wide, so [`detect`] reads that from the
 //! rays: along a row a camera's rays move by about one pixel, and from a row's last ray to the

@@ -8,9 +8,10 @@ use super::{embree_harness, embree_rows, median, model_scene, ray_generator, sha
 use crate::output::warn;
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::query::{self, QueryMode, STREAM_CHUNK, STREAM_MAX};
+use rt2::cpu::ray_order::RayOrder;
 use rt2::cpu::simd::Width;
 use rt2::cpu::traverse::{Traversal, TraverseOptions};
-use rt2::cpu::{ray_order, stream, RayTests};
+use rt2::cpu::{stream, RayTests};
 use rt2::dispatch::{choose_query_mode, BackendRequest};
 use rt2::error::Result;
 use rt2::geometry::{Hit, Ray};
@@ -102,7 +103,7 @@ fn seconds(
         .iter()
         .map(|&config| (batches, Some(config)))
         .collect();
-    timed_runs(ctx, c, &jobs, runs, || {})
+    timed_runs(ctx, c, &jobs, runs, || false)
 }
 
 /// A timed job: batches traced once each per pass, in one mode and lane width, or (`None`)
@@ -134,18 +135,20 @@ fn paired_ratio(x: &[f64], y: &[f64]) -> f64 {
 }
 
 /// `runs` timed passes of each job (after a warm-up pass of each), on `ctx`'s threads. Each
-/// run calls `each_run` (the peer's run, where one is timed beside) and then times the jobs
-/// batch by batch: the first batch of every job, then the second of every job, and so on, the
+/// run calls `each_run` (the peer's run, where one is timed beside; it says whether it ran),
+/// makes one more warm-up pass after a peer's run, and then times the jobs batch by batch: the first batch of every job, then the second of every job, and so on, the
 /// jobs in turn forwards and backwards (so that none always runs on the caches another left).
 /// The load of this shared machine changes within seconds; timed a whole job after another,
 /// the 100-frame orbit's modes each took a second or more, and two runs of the bench differed
 /// by up to 25% in a ratio. Interleaved, a busy spell slows every job of a run about alike.
+/// Without the warm-up after Embree's harness, the job timed first after it (a shared set's
+/// 4-lane streams) ran at a quarter to two thirds of its speed timed alone.
 fn timed_runs(
     ctx: &Context,
     c: &Committed,
     jobs: &[Job],
     runs: usize,
-    mut each_run: impl FnMut(),
+    mut each_run: impl FnMut() -> bool,
 ) -> Result<Timings> {
     let longest = jobs
         .iter()
@@ -187,7 +190,9 @@ fn timed_runs(
     pass(&mut vec![0.0; jobs.len()]);
     let mut times = vec![Vec::with_capacity(runs); jobs.len()];
     for _ in 0..runs {
-        each_run();
+        if each_run() {
+            pass(&mut vec![0.0; jobs.len()]);
+        }
         let mut run = vec![0.0; jobs.len()];
         pass(&mut run);
         for (t, r) in times.iter_mut().zip(run) {
@@ -219,7 +224,10 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          Modes: **n-rays** = `QueryMode::Stream`, **packets** = `QueryMode::Packet` at the \
          default width ({w} lanes), **packets ×4** = 4-lane packets (Wald's, the paper's 4-rays \
          column), **1-ray** = `QueryMode::Single` with the standard traversal; all return \
-         bit-identical hits. Streams: rays that come in runs of one octant (a camera's, in \
+         bit-identical hits. Packets take rays that form a camera image in scanline order \
+         (the orbit frames, the primary sets) in tiles of the image, which RT2 finds in the \
+         rays (4×4 at 16 lanes, 2×2 at 4; `ray_order`); Embree's harness packs 8 consecutive \
+         rays for its `intersect8`. Streams: rays that come in runs of one octant (a camera's, in \
          scanline order) are cut in their order into streams of at most {hi} rays \
          (`STREAM_MAX`): longer streams of coherent rays outgrow the caches; rays in mixed \
          octants are sorted by octant and cut into streams of one octant, at most about one ray \
@@ -378,9 +386,7 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             for &size in sizes {
                 let chunk = &rays[..size.min(rays.len())];
                 let mut hits = vec![Hit::MISS; chunk.len()];
-                // In the order `query` would take them (an orbit frame's rows in tiles).
-                let order = ray_order::detect(chunk);
-                let rays = (chunk, order);
+                let rays = (chunk, RayOrder::AsGiven);
                 let (_, m) =
                     stream::intersect(&c.tree, &c.prims, rays, RayTests::PLAIN, &mut hits, width);
                 writeln!(
@@ -504,6 +510,7 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
                 if peer {
                     embree.push(embree_rows(&mesh, std::slice::from_ref(set), 1, "1"));
                 }
+                peer
             })?;
             let mrays = |j: usize| rays_of(rays) / t.median(j) / 1e6;
             let mut j = 0;
