@@ -14,6 +14,15 @@ const MODES: [Rt2QueryMode; 4] = [
     Rt2QueryMode::Auto,
 ];
 
+/// A hit record no query writes: outputs start as it, so that an answer left unwritten shows.
+const UNWRITTEN: rt2_hit = rt2_hit {
+    t: -1.0,
+    u: 0.0,
+    v: 0.0,
+    object: 7,
+    prim: 7,
+};
+
 /// Query options of the standard traversal in `mode`.
 fn standard_in(mode: Rt2QueryMode) -> rt2_query_options {
     let mut opt = rt2_query_options_default();
@@ -23,6 +32,7 @@ fn standard_in(mode: Rt2QueryMode) -> rt2_query_options {
 }
 
 mod support;
+use support::add_mesh;
 
 /// A context of the default backend and a committed scene of the spheres `(centre, radius)`,
 /// with their object ids.
@@ -32,15 +42,21 @@ unsafe fn sphere_scene(
     sphere_scene_on(null(), spheres)
 }
 
+/// A context made from `desc` (NULL: the defaults) and an empty scene of it.
+unsafe fn empty_scene_on(desc: *const rt2_context_desc) -> (*mut rt2_context, *mut rt2_scene) {
+    let mut ctx = null_mut();
+    assert_eq!(rt2_context_create(desc, &mut ctx), Rt2Status::Ok);
+    let mut scene = null_mut();
+    assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+    (ctx, scene)
+}
+
 /// [`sphere_scene`] on a context made from `desc` (NULL: the defaults).
 unsafe fn sphere_scene_on(
     desc: *const rt2_context_desc,
     spheres: impl Iterator<Item = ([f32; 3], f32)>,
 ) -> (*mut rt2_context, *mut rt2_scene, Vec<u32>) {
-    let mut ctx = null_mut();
-    assert_eq!(rt2_context_create(desc, &mut ctx), Rt2Status::Ok);
-    let mut scene = null_mut();
-    assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+    let (ctx, scene) = empty_scene_on(desc);
     let ids = spheres
         .map(|(c, r)| {
             let mut id = 0;
@@ -53,6 +69,25 @@ unsafe fn sphere_scene_on(
         .collect();
     assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
     (ctx, scene, ids)
+}
+
+/// The unit squares (two triangles each) of an `n` × `n` grid at height `z` for which
+/// `keep(x, y)` holds: positions and triangle indices.
+fn grid(n: u32, z: f32, keep: impl Fn(u32, u32) -> bool) -> (Vec<f32>, Vec<u32>) {
+    let positions = (0..=n)
+        .flat_map(|y| (0..=n).flat_map(move |x| [x as f32, y as f32, z]))
+        .collect();
+    let corner = |x: u32, y: u32| y * (n + 1) + x;
+    let indices = (0..n)
+        .flat_map(|y| (0..n).map(move |x| (x, y)))
+        .filter(|&(x, y)| keep(x, y))
+        .flat_map(|(x, y)| {
+            let (a, b) = (corner(x, y), corner(x + 1, y));
+            let (c, d) = (corner(x, y + 1), corner(x + 1, y + 1));
+            [a, b, d, a, d, c]
+        })
+        .collect();
+    (positions, indices)
 }
 
 /// `rt2_intersect` of every ray of `rays` into `hits` (as long), no statistics.
@@ -245,16 +280,7 @@ fn a_query_longer_than_one_step_answers_every_ray_in_place() {
         for mode in [Rt2QueryMode::Single, Rt2QueryMode::Stream] {
             let mut opt = rt2_query_options_default();
             opt.mode = mode as u32;
-            let mut hits = vec![
-                rt2_hit {
-                    t: -1.0,
-                    u: 0.0,
-                    v: 0.0,
-                    object: 7,
-                    prim: 7
-                };
-                n
-            ];
+            let mut hits = vec![UNWRITTEN; n];
             let status = rt2_intersect(
                 ctx,
                 scene,
@@ -325,14 +351,7 @@ fn small_calls_answer_every_ray() {
             for size in 1..=20 {
                 for (k, (rays, heights)) in rays.chunks(size).zip(heights.chunks(size)).enumerate()
                 {
-                    let miss = rt2_hit {
-                        t: -1.0,
-                        u: 0.0,
-                        v: 0.0,
-                        object: 7,
-                        prim: 7,
-                    };
-                    let mut hits = vec![miss; rays.len()];
+                    let mut hits = vec![UNWRITTEN; rays.len()];
                     let mut occ = vec![9u8; rays.len()];
                     assert_eq!(
                         intersect_all(ctx, scene, rays, &mut hits, &opt),
@@ -633,40 +652,12 @@ fn any_hit_statistics_agree_in_every_mode_and_traversal() {
 #[test]
 fn excluded_primitives_are_ignored_in_every_mode() {
     unsafe {
-        let mut ctx = null_mut();
-        assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
-        let mut scene = null_mut();
-        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
-        // An n × n grid of unit squares, two triangles each, at height z.
+        let (ctx, scene) = empty_scene_on(null());
+        // Two 8 × 8 grids of unit squares, at heights 0 and -1.
         let n = 8u32;
-        let grid = |z: f32| {
-            let positions: Vec<f32> = (0..=n)
-                .flat_map(|y| (0..=n).flat_map(move |x| [x as f32, y as f32, z]))
-                .collect();
-            let corner = |x: u32, y: u32| y * (n + 1) + x;
-            let indices: Vec<u32> = (0..n)
-                .flat_map(|y| (0..n).map(move |x| (x, y)))
-                .flat_map(|(x, y)| {
-                    let (a, b) = (corner(x, y), corner(x + 1, y));
-                    let (c, d) = (corner(x, y + 1), corner(x + 1, y + 1));
-                    [a, b, d, a, d, c]
-                })
-                .collect();
-            (positions, indices)
-        };
         for (z, want_id) in [(0.0, 0), (-1.0, 1)] {
-            let (p, i) = grid(z);
-            let mut id = u32::MAX;
-            let st = rt2_scene_add_mesh(
-                scene,
-                p.as_ptr(),
-                p.len() / 3,
-                i.as_ptr(),
-                i.len() / 3,
-                0,
-                &mut id,
-            );
-            assert_eq!((st, id), (Rt2Status::Ok, want_id));
+            let (p, i) = grid(n, z, |_, _| true);
+            assert_eq!(add_mesh(scene, &p, &i), want_id);
         }
         assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
         // Rays inside the grid, off its edges (0.1 + 0.37 k mod 8).
@@ -979,43 +970,17 @@ fn auto_mode_chooses_by_coherence_and_size_and_says_why() {
 }
 
 /// A camera image longer than one step of the API (2^20 rays) whose width does not divide
-/// 2^20: the API steps through it in whole bands of rows, where packets and streams take
-/// tiles, and every mode returns the single rays' hits bit for bit, excluding each ray's
-/// primitive from the right place of `opt.exclude` in every step.
+/// 2^20: the API steps through it in whole bands of rows, where packets take tiles, and every
+/// mode returns the single rays' hits bit for bit, excluding each ray's primitive from the
+/// right place of `opt.exclude` in every step.
 #[test]
 fn an_image_of_several_steps_gives_every_mode_the_same_hits() {
     unsafe {
-        let mut ctx = null_mut();
-        assert_eq!(rt2_context_create(null(), &mut ctx), Rt2Status::Ok);
-        let mut scene = null_mut();
-        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let (ctx, scene) = empty_scene_on(null());
         // A checkerboard of unit squares at z = 0 over a full grid of them at z = -1.
-        let n = 16u32;
-        for (z, every) in [(0.0f32, false), (-1.0, true)] {
-            let positions: Vec<f32> = (0..=n)
-                .flat_map(|y| (0..=n).flat_map(move |x| [x as f32, y as f32, z]))
-                .collect();
-            let corner = |x: u32, y: u32| y * (n + 1) + x;
-            let indices: Vec<u32> = (0..n)
-                .flat_map(|y| (0..n).map(move |x| (x, y)))
-                .filter(|(x, y)| every || (x + y) % 2 == 0)
-                .flat_map(|(x, y)| {
-                    let (a, b) = (corner(x, y), corner(x + 1, y));
-                    let (c, d) = (corner(x, y + 1), corner(x + 1, y + 1));
-                    [a, b, d, a, d, c]
-                })
-                .collect();
-            let mut id = 0;
-            let st = rt2_scene_add_mesh(
-                scene,
-                positions.as_ptr(),
-                positions.len() / 3,
-                indices.as_ptr(),
-                indices.len() / 3,
-                0,
-                &mut id,
-            );
-            assert_eq!(st, Rt2Status::Ok);
+        for (z, checkerboard) in [(0.0, true), (-1.0, false)] {
+            let (p, i) = grid(16, z, |x, y| !checkerboard || (x + y) % 2 == 0);
+            add_mesh(scene, &p, &i);
         }
         assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
         // A pinhole camera above the grid, 1376 × 770 pixels in scanline order (1,059,520
@@ -1036,15 +1001,8 @@ fn an_image_of_several_steps_gives_every_mode_the_same_hits() {
                 }
             })
             .collect();
-        let miss = rt2_hit {
-            t: -1.0,
-            u: 0.0,
-            v: 0.0,
-            object: 7,
-            prim: 7,
-        };
         let run = |opt: &rt2_query_options| {
-            let mut hits = vec![miss; rays.len()];
+            let mut hits = vec![UNWRITTEN; rays.len()];
             assert_eq!(
                 intersect_all(ctx, scene, &rays, &mut hits, opt),
                 Rt2Status::Ok

@@ -13,6 +13,8 @@ use std::sync::atomic::{AtomicIsize, Ordering};
 use rt2::api::*;
 use rt2::error::Rt2Status;
 
+mod support;
+
 struct Counting;
 
 /// Bytes the process holds (allocated minus freed, through the Rust allocator).
@@ -139,17 +141,7 @@ fn streaming_a_mesh_in_and_out_gives_its_memory_back() {
         let sphere_only = placed_bytes(scene);
         let mut after_first = 0;
         for round in 0..8 {
-            let mut id = 0;
-            let st = rt2_scene_add_mesh(
-                scene,
-                positions.as_ptr(),
-                positions.len() / 3,
-                indices.as_ptr(),
-                indices.len() / 3,
-                0,
-                &mut id,
-            );
-            ok(st, "add the mesh");
+            let id = support::add_mesh(scene, &positions, &indices);
             assert_eq!(id, round + 1, "ids are not reused");
             ok(rt2_scene_commit(scene), "commit");
             let hit = trace_excluding(ctx, scene, &ray[0], id);

@@ -1,7 +1,7 @@
 //! Shared by the integration tests: for those that compile C against `include/rt2.h` or load
 //! the built shared library, where the library is and a `cc` compiler configured outside
 //! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`; the
-//! fork tests' wait for a child; the C API tests' smallest scene; rays around a target and the
+//! fork tests' wait for a child; the C API tests' smallest scene and meshes; rays around a target and the
 //! sequence behind them; whether a GPU context can be had; renders of shading extremes
 //! (`shading_cases`); the tests' random numbers (`rng`); spheres and ellipsoids far from the origin with their shading worked
 //! out in f64.
@@ -25,6 +25,25 @@ pub fn last_error() -> String {
 /// Asserts that a C API call succeeded, with its message if it did not.
 pub fn ok(status: rt2::error::Rt2Status) {
     assert_eq!(status, rt2::error::Rt2Status::Ok, "{}", last_error());
+}
+
+/// Adds the triangle mesh of `positions` (x, y, z each) and `indices` (three per triangle) to
+/// `scene` with material 0, and returns its object id.
+///
+/// # Safety
+/// `scene` is a live scene.
+pub unsafe fn add_mesh(scene: *mut rt2::api::rt2_scene, positions: &[f32], indices: &[u32]) -> u32 {
+    let mut id = u32::MAX;
+    ok(rt2::api::rt2_scene_add_mesh(
+        scene,
+        positions.as_ptr(),
+        positions.len() / 3,
+        indices.as_ptr(),
+        indices.len() / 3,
+        0,
+        &mut id,
+    ));
+    id
 }
 
 /// `target/<profile>/deps`, where the test executable lives.
