@@ -129,8 +129,8 @@ const SAMPLES: usize = 64;
 /// whose rays change octant more often than this is no row.
 const OCTANT_CHANGES: usize = 4;
 
-/// The order packets and streams should take `rays` in: [`RayOrder::Rows`] when they look like
-/// an image of at least two rows in scanline order, else as given. Reads the first row ray by
+/// The order for packets of `rays` (`query` gives streams theirs as given): [`RayOrder::Rows`]
+/// when they look like an image of at least two rows in scanline order, else as given. Reads the first row ray by
 /// ray, up to half the batch (rays in mixed octants are told after a few), and [`SAMPLES`]
 /// random rays below it with their neighbours: at most about 16,700 rays whatever the batch's
 /// size, a few nanoseconds each.
