@@ -914,9 +914,9 @@ struct rt2_query_options rt2_query_options_default(void);
  * Closest hits of `count` rays into `hits`. `opt` may be NULL (defaults); `stats` may be NULL
  * (not collected). Rays are traced in steps of at most 2^20 (whole bands of four rows when they
  * are a camera image in scanline order, so that packets take the image in tiles across the
- * steps): on failure `hits` is untouched unless the backend failed part-way (internal error, GPU lost or out of memory, or on lavapipe a later
- * step's rays cut short by the driver: `RT2_BACKEND_GPU`), which leaves the earlier steps'
- * hits written.
+ * steps): on failure `hits` is untouched unless the backend failed part-way (internal error,
+ * GPU lost or out of memory, or on lavapipe a later step's rays cut short by the driver:
+ * `RT2_BACKEND_GPU`), which leaves the earlier steps' hits written.
  *
  * `hits` overlapping `rays` is an INVALID_ARGUMENT (`opt->exclude` may be `hits` itself).
  *

@@ -1,6 +1,7 @@
 //! SplitMix64 (Steele, Lea & Flood 2014): a tiny deterministic generator, so that what draws
 //! from it is the same everywhere: the built-in scenes, the sample positions of the CPU
-//! queries' octant-run and image tests, the benchmarks' incoherent rays, and the unit and integration tests.
+//! queries' octant-run and image tests, the benchmarks' incoherent rays, and the unit and
+//! integration tests.
 
 pub struct Rng(pub u64);
 

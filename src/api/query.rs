@@ -327,9 +327,14 @@ unsafe fn run_query<T>(
         let mut st = TraversalStats::default();
         let mut step = Staging::new(Ray::new(Vec3::ZERO, Vec3::ZERO, 0.0, 0.0));
         // Steps of whole bands of an image's rows: each step's packets then take the image in
-        // tiles, as one call over the whole image would (`cpu::ray_order`).
-        let order = ray_order::detect_in(rays.len(), |i| Ray::from(&rays[i]));
-        let size = whole_bands(order, QUERY_CHUNK);
+        // tiles, as one call over the whole image would (`cpu::ray_order`). A batch of one
+        // step needs no look: `cpu::query` finds its rows itself.
+        let size = if rays.len() > QUERY_CHUNK {
+            let order = ray_order::detect_in(rays.len(), |i| Ray::from(&rays[i]));
+            whole_bands(order, QUERY_CHUNK)
+        } else {
+            QUERY_CHUNK
+        };
         for (k, (rays, out)) in rays.chunks(size).zip(out.chunks_mut(size)).enumerate() {
             let step = step.hold(rays.iter().map(Ray::from));
             let step_exclude = exclude.as_ref().map(|e| &e[k * size..][..rays.len()]);
@@ -353,9 +358,9 @@ unsafe fn run_query<T>(
 /// Closest hits of `count` rays into `hits`. `opt` may be NULL (defaults); `stats` may be NULL
 /// (not collected). Rays are traced in steps of at most 2^20 (whole bands of four rows when they
 /// are a camera image in scanline order, so that packets take the image in tiles across the
-/// steps): on failure `hits` is untouched unless the backend failed part-way (internal error, GPU lost or out of memory, or on lavapipe a later
-/// step's rays cut short by the driver: `RT2_BACKEND_GPU`), which leaves the earlier steps'
-/// hits written.
+/// steps): on failure `hits` is untouched unless the backend failed part-way (internal error,
+/// GPU lost or out of memory, or on lavapipe a later step's rays cut short by the driver:
+/// `RT2_BACKEND_GPU`), which leaves the earlier steps' hits written.
 ///
 /// `hits` overlapping `rays` is an INVALID_ARGUMENT (`opt->exclude` may be `hits` itself).
 ///

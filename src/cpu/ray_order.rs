@@ -92,12 +92,17 @@ impl<const N: usize> Iterator for Blocks<N> {
         }
         let mut ids = [self.n as u32; N];
         let mut live = 0;
-        for (l, id) in ids.iter_mut().enumerate() {
-            let (x, y) = (self.x + l % self.columns, self.y + l / self.columns);
-            let i = y * self.width + x;
-            if x < self.width && i < self.n {
-                *id = i as u32;
-                live |= 1 << l;
+        // Lane `row * columns + column`: loops rather than a division per lane, as the tile's
+        // shape is known only at run time.
+        let mut l = 0;
+        for y in self.y..self.y + self.rows {
+            for x in self.x..self.x + self.columns {
+                let i = y * self.width + x;
+                if x < self.width && i < self.n {
+                    ids[l] = i as u32;
+                    live |= 1 << l;
+                }
+                l += 1;
             }
         }
         self.x += self.columns;
@@ -130,10 +135,10 @@ const SAMPLES: usize = 64;
 const OCTANT_CHANGES: usize = 4;
 
 /// The order for packets of `rays` (`query` gives streams theirs as given): [`RayOrder::Rows`]
-/// when they look like an image of at least two rows in scanline order, else as given. Reads the first row ray by
-/// ray, up to half the batch (rays in mixed octants are told after a few), and [`SAMPLES`]
-/// random rays below it with their neighbours: at most about 16,700 rays whatever the batch's
-/// size, a few nanoseconds each.
+/// when they look like an image of at least two rows in scanline order, else as given. Reads
+/// the first row ray by ray, up to half the batch (rays in mixed octants are told after a
+/// few), and [`SAMPLES`] random rays below it with their neighbours: at most about 16,700 rays
+/// whatever the batch's size, a few nanoseconds each.
 ///
 /// The rays of a row are consecutive, each a small step (in unit direction and in origin) from
 /// the one before; the first ray of each row is a large step from the last of the row above,
