@@ -85,7 +85,10 @@ impl<'a> RayTests<'a> {
 
 /// What a batch query computes per ray, written once for packets and streams.
 pub(crate) trait Answer {
-    /// Resets every ray's answer: a miss.
+    /// Resets every ray's answer: a miss. Answers are written in full here, before the
+    /// traversal: resetting only the rays that miss the tree here and each packet's rays while
+    /// the packet before it was traced (so that the first writes, cache misses, overlap the
+    /// traversal) did not change packets' speed (the bunny's 1024² primary rays, 16 lanes).
     fn reset(&mut self);
     /// Tests the planes (outside the tree) against ray `i`, not degenerate. False when that
     /// answers the ray (any-hit): it needs no traversal.

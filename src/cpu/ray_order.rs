@@ -30,7 +30,8 @@ pub enum RayOrder {
 pub const TILE_ROWS: usize = 4;
 
 /// Columns and rows of the tiles of N lanes: as square as a power of two allows (16: 4 × 4,
-/// 8: 4 × 2, 4: 2 × 2).
+/// 8: 4 × 2, 4: 2 × 2). 16-lane packets in 8 × 2 and 2 × 8 tiles ran at 0.92× the speed of
+/// 4 × 4 (the bunny's 1024² primary rays, one thread).
 pub const fn tile<const N: usize>() -> (usize, usize) {
     let rows = 1 << (N.trailing_zeros() / 2);
     (N / rows, rows)

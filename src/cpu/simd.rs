@@ -345,6 +345,12 @@ impl<const N: usize> RayLanes<N> {
 
     /// The test `tests` of every lane against the triangle `rows` ([`PrimitiveSet::triangle_rows`]
     /// for the same intersector), candidates below `tmax` per lane; `t = inf` marks a miss.
+    ///
+    /// Measured and dropped: for lanes sharing an origin (a pinhole camera's rays), the
+    /// origin's part of Möller–Trumbore (`s`, `q = s × e1`, `t`'s numerator) computed once per
+    /// triangle rather than per lane, bit-identical, made 16-lane packets 3–8% slower on the
+    /// bunny's 1024² primary rays: these tests wait on loads and the division, not on
+    /// arithmetic.
     #[inline(always)]
     pub fn triangle(
         &self,
