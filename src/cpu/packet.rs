@@ -4,7 +4,7 @@
 //! the lane width N (4 with SSE, 8 with AVX2, 16 with AVX-512; see [`super::simd`]). A leaf
 //! reached by many of the packet's rays tests them all against one triangle at a time, as Wald's
 //! packets do; one reached by few tests each ray against blocks of its triangles
-//! ([`rays_per_triangle`]).
+//! (`rays_per_triangle`).
 //!
 //! The same function finishes a stream traversal when few rays reach a node (the paper's future
 //! work: stop paying for lists when the rays no longer share nodes).

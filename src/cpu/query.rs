@@ -102,7 +102,7 @@ pub trait RayAnswer: Copy + Send + Sync + 'static {
     const SINGLE: SingleFn<Self>;
     const PACKETS: BatchFn<Self, TraversalStats>;
     const STREAM: BatchFn<Self, (TraversalStats, StreamMemory)>;
-    /// The answer of a ray traced with its direction scaled by `s` ([`Ray::scaled`]), for
+    /// The answer of a ray traced with its direction scaled by `s` (`Ray::scaled`), for
     /// the unscaled ray.
     fn scaled_back(self, s: f32) -> Self;
 }
@@ -138,7 +138,7 @@ impl RayAnswer for bool {
 /// on the calling thread alone.
 ///
 /// Rays are traced as given: `Context` scales a direction far from unit length first
-/// ([`Ray::direction_scale`], [`RayAnswer::scaled_back`]).
+/// (`Ray::direction_scale`, [`RayAnswer::scaled_back`]).
 ///
 /// # Panics
 /// When `exclude` is not as long as `rays`.
@@ -249,7 +249,7 @@ const RUN_SAMPLES: usize = 1024;
 
 /// Whether consecutive rays share an octant in runs of `run` rays or more on average, as a
 /// camera's rays in scanline order do: whether the octant changes at one neighbour pair in
-/// `run` or fewer. Judged from [`RUN_SAMPLES`] pairs in a larger batch, so that it costs the
+/// `run` or fewer. Judged from `RUN_SAMPLES` pairs in a larger batch, so that it costs the
 /// same for a million rays as for a thousand, at positions drawn from a fixed SplitMix64
 /// sequence: evenly spaced samples alias with an image's rows (all on the column where the
 /// octant changes, or none), and so did a Weyl sequence for some image heights (1920×1104

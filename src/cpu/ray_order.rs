@@ -138,7 +138,7 @@ const OCTANT_CHANGES: usize = 4;
 /// The order for packets of `rays` (`query` gives streams theirs as given): [`RayOrder::Rows`]
 /// when they look like an image of at least two rows in scanline order, else as given. Reads
 /// the first row ray by ray, up to half the batch (rays in mixed octants are told after a
-/// few), and [`SAMPLES`] random rays below it with their neighbours: at most about 16,700 rays
+/// few), and `SAMPLES` random rays below it with their neighbours: at most about 16,700 rays
 /// whatever the batch's size, a few nanoseconds each.
 ///
 /// The rays of a row are consecutive, each a small step (in unit direction and in origin) from

@@ -41,11 +41,11 @@ pub struct Tracer<'a> {
 }
 
 /// The weight below which a secondary ray cannot change its pixel by a 1/255 step:
-/// [`MIN_WEIGHT`] divided by a bound on the radiance any ray can bring back, the background or
+/// `MIN_WEIGHT` divided by a bound on the radiance any ray can bring back, the background or
 /// a surface's ambient plus every light's diffuse and specular term at full strength (weights
 /// along a ray tree sum to at most 1). Colours, lights and the background are not capped at 1,
 /// and a fixed 1/512 dropped a mirror of 0.0015 under a background of 200 (0.3 of the pixel).
-/// The bound is capped at [`MAX_RADIANCE_BOUND`]: the rays of a tree grow about as the inverse
+/// The bound is capped at `MAX_RADIANCE_BOUND`: the rays of a tree grow about as the inverse
 /// of the cut-off, and uncapped, a light of intensity 1e4 over 41 half-mirror glass planes
 /// took a second per pixel at depth 64 (a light of 1e30, the cut-off 1e-33, never finished).
 pub fn min_weight(scene: &Committed, opts: &RenderOptions) -> f32 {

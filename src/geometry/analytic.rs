@@ -119,7 +119,7 @@ impl Sphere {
 /// An ellipsoid as the image of the unit sphere under `x = center + M s`; stored as the
 /// inverse map, which is what intersection and normals need, and with what the intersection
 /// derives from that map alone (the scale `sigma` and the cofactors `cof` of
-/// [`Self::line_distance2`]), computed once in [`Self::new`]: per ray they took a quarter of
+/// `Self::line_distance2`), computed once in [`Self::new`]: per ray they took a quarter of
 /// the test's time (27.6 against 20.2 ns a test on random rays, one thread). 100 bytes (60
 /// without them); the GPU reads the same layout.
 #[repr(C)]
@@ -186,7 +186,7 @@ impl Ellipsoid {
     }
 
     /// The ray against the unit sphere in the ellipsoid's unit space (`M⁻¹ (x - center)`),
-    /// except for the centre-to-line distance, which comes from [`Self::line_distance2`].
+    /// except for the centre-to-line distance, which comes from `Self::line_distance2`.
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<f32> {
         let inv = Mat3::from_cols_array(&self.inv);
         let o = ray.org - Vec3::from(self.center);

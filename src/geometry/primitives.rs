@@ -270,9 +270,9 @@ impl PrimitiveSet {
 
     /// The surface of one hit for `Committed::hit_surface`: [`Self::shading_surface`] on the
     /// surface, but a sphere's or ellipsoid's point is recomputed in f64 relative to its
-    /// centre ([`quadric_surface`]): in f32, even relative to the centre, the normals of
+    /// centre (`quadric_surface`): in f32, even relative to the centre, the normals of
     /// shapes 1e-5 across seen from 3 units were 0.05 rad off. A box thinner than rounding
-    /// takes the face the ray meets ([`thin_box_surface`]).
+    /// takes the face the ray meets (`thin_box_surface`).
     pub fn surface_at(&self, hit: &Hit, ray: &Ray) -> (Vec3, Vec3) {
         let i = hit.prim as usize;
         let exact = match (i < self.len()).then(|| self.locate(i)) {
