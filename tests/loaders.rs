@@ -422,6 +422,49 @@ fn obj_from_other_exporters_byte_order_mark_latin1_names_vertex_colours() {
     );
 }
 
+/// Points and lines (Blender writes loose edges as `l`) have no surface: the mesh is the
+/// faces' alone, whatever they reference. Curved surfaces would be dropped, so they are refused.
+#[test]
+fn obj_points_and_lines_are_skipped_curves_refused() {
+    let faces = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n";
+    let plain = parse_obj(faces.as_bytes(), "faces.obj").unwrap();
+    let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2\nv 1 1 0\np 4\nf 1 2 3\n\
+        l 1/1 2/1 3/1 1/1\nmg 1 0.5\nf 2 4 3\np -1 -2\n";
+    let mesh = parse_obj(text.as_bytes(), "edges.obj").unwrap();
+    assert_eq!(mesh.positions, plain.positions);
+    assert_eq!(mesh.triangles, plain.triangles);
+    assert_parse_err(
+        parse_obj(b"v 0 0 0\ncstype bspline\ncurv 0 1 1 1\n", "curve.obj"),
+        "curve.obj",
+        &["line 2:", "unsupported OBJ statement 'cstype'"],
+    );
+}
+
+/// A line ending in `\` continues on the next (long face lists); a comment does not (a
+/// Windows path at its end), and an error on a continued statement names its first line.
+#[test]
+fn obj_continued_lines_are_one_statement() {
+    let plain = parse_obj(
+        b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 4 3\n",
+        "one.obj",
+    )
+    .unwrap();
+    let text =
+        b"v 0 0 \\\n0\nv 1 0 0\r\n# c:\\models\\\nv 0 1 0\nv 1 1 0\nf 1 \\\r\n2\\\n 4 \\\n3\n";
+    let mesh = parse_obj(text, "continued.obj").unwrap();
+    assert_eq!(mesh.positions, plain.positions);
+    assert_eq!(mesh.triangles, plain.triangles);
+    // The face starts on line 3 and fails on its third corner, on line 5.
+    assert_parse_err(
+        parse_obj(b"v 0 0 0\nv 1 0 0\nf 1 \\\n 2 \\\n 7\n", "bad.obj"),
+        "bad.obj",
+        &["line 3:", "index 7 out of range"],
+    );
+    // The file's last line may end in `\`.
+    let last = parse_obj(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 \\\n3 \\", "last.obj").unwrap();
+    assert_eq!(last.triangles, vec![[0, 1, 2]]);
+}
+
 #[test]
 fn obj_negative_indices_are_relative_to_vertices_so_far() {
     let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nv 5 5 5\nf -1 -2/1 -3//2 -4/1/1\n";

@@ -353,8 +353,10 @@ pub unsafe extern "C" fn rt2_scene_add_plane(
 /// read: a missing file, a FIFO, device or directory is an IO error. Parse errors name the
 /// file and the line or byte offset at fault. Triangles keep the file's face order
 /// (polygons are fan-triangulated); a file without faces is a PARSE error, whatever its
-/// format. The file is read and parsed before the scene is locked, so other calls on the
-/// scene do not wait for a slow file.
+/// format. OBJ: positions (`v`) and faces (`f`) are read; normals, texture coordinates,
+/// groups, materials, points and lines (no surface) are skipped; curved surfaces and any other
+/// statement are a PARSE error rather than dropped. The file is read and parsed before the
+/// scene is locked, so other calls on the scene do not wait for a slow file.
 ///
 /// # Safety
 /// `scene` is a live scene; `path` is a NUL-terminated string.

@@ -1,7 +1,10 @@
 //! Wavefront OBJ parsing, limited to what a triangle mesh needs: `v` positions and `f`
-//! polygons. Texture coordinates, normals, groups, smoothing and materials are ignored.
+//! polygons. Texture coordinates, normals, groups, smoothing and materials are ignored, and so
+//! are points and lines, which have no surface for a ray to hit.
 //!
 //! Errors name the 1-based line.
+
+use std::borrow::Cow;
 
 use glam::Vec3;
 
@@ -19,26 +22,22 @@ use crate::fallible::TryGrow;
 /// file's face order, each polygon of n vertices fan-triangulated in place into n-2 triangles
 /// `(v0, v(k), v(k+1))`.
 ///
-/// Ignored statements: `vt`, `vn`, `vp`, `g`, `o`, `s`, `usemtl`, `mtllib`, comments and
-/// blank lines; CRLF line endings and a UTF-8 byte-order mark are accepted, and bytes that
-/// are not UTF-8 are only an error where a number is expected. Any other statement is an
-/// error, so that a file that is not OBJ (or uses features this loader would silently drop,
-/// like curves) is reported rather than half-loaded. A file without faces is an error too.
+/// Ignored statements: `vt`, `vn`, `vp`, `g`, `o`, `s`, `mg`, `usemtl`, `mtllib`, points `p`
+/// and lines `l` (Blender writes loose edges so; they have no surface), comments and blank
+/// lines; CRLF line endings and a UTF-8 byte-order mark are accepted, a line ending in `\`
+/// outside a comment continues on the next (errors name its first line), and bytes that are not UTF-8 are only
+/// an error where a number is expected. Any other statement is an error, so that a file that
+/// is not OBJ (or uses features this loader would silently drop, like curved surfaces) is
+/// reported rather than half-loaded. A file without faces is an error too.
 pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
     let mut mesh = Mesh::default();
     let mut saw_statement = false;
-    for (i, raw) in text_bytes.split(|&b| b == b'\n').enumerate() {
-        let line_no = i + 1;
+    for line in Lines::new(text_bytes, name) {
+        let (line_no, raw) = line?;
         let err = |msg: String| line_error(name, line_no, msg);
-        let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
-        let raw = if i == 0 {
-            raw.strip_prefix(UTF8_BOM).unwrap_or(raw)
-        } else {
-            raw
-        };
         // Lossy: exporters write names and comments in other encodings (Latin-1), which this
         // loader ignores; a byte that is not UTF-8 inside a number fails to parse as one.
-        let line = String::from_utf8_lossy(raw);
+        let line = String::from_utf8_lossy(&raw);
         let line = line.split('#').next().unwrap_or_default();
         let mut toks = line.split_whitespace();
         let Some(keyword) = toks.next() else {
@@ -94,7 +93,7 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
                     return Err(err("face has fewer than 3 vertices".into()));
                 }
             }
-            "vt" | "vn" | "vp" | "g" | "o" | "s" | "usemtl" | "mtllib" => {}
+            "vt" | "vn" | "vp" | "g" | "o" | "s" | "mg" | "usemtl" | "mtllib" | "p" | "l" => {}
             other => return Err(err(format!("unsupported OBJ statement {}", Quoted(other)))),
         }
     }
@@ -111,6 +110,64 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
 
 /// What some editors write at the start of a UTF-8 file.
 const UTF8_BOM: &[u8] = b"\xef\xbb\xbf";
+
+/// The file's lines as they are, numbered from 0.
+type RawLines<'a> = std::iter::Enumerate<std::slice::Split<'a, u8, fn(&u8) -> bool>>;
+
+/// The file's logical lines, each with the 1-based number of its first line: without the CR
+/// of a CRLF ending or the byte-order mark at the start of the file, and a line that ends in
+/// `\` (outside a comment) joined with the next by a space (the OBJ rule for long face lists).
+struct Lines<'a> {
+    lines: RawLines<'a>,
+    name: &'a str,
+}
+
+impl<'a> Lines<'a> {
+    fn new(text: &'a [u8], name: &'a str) -> Self {
+        let newline: fn(&u8) -> bool = |&b| b == b'\n';
+        Lines {
+            lines: text.split(newline).enumerate(),
+            name,
+        }
+    }
+}
+
+impl<'a> Iterator for Lines<'a> {
+    type Item = Result<(usize, Cow<'a, [u8]>)>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        // The continued lines so far, and the number of the first.
+        let mut joined: Option<(usize, Vec<u8>)> = None;
+        for (i, raw) in self.lines.by_ref() {
+            let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
+            let raw = if i == 0 {
+                raw.strip_prefix(UTF8_BOM).unwrap_or(raw)
+            } else {
+                raw
+            };
+            // A comment is never continued: a Windows path at its end would swallow a line.
+            let (part, continued) = match raw.strip_suffix(b"\\") {
+                Some(head) if !head.contains(&b'#') => (head, true),
+                _ => (raw, false),
+            };
+            if !continued && joined.is_none() {
+                return Some(Ok((i + 1, Cow::Borrowed(raw))));
+            }
+            let (_, text) = joined.get_or_insert((i + 1, Vec::new()));
+            // Fallibly: a file of continued lines is one line as long as the file.
+            if text.try_reserve(part.len() + 1).is_err() {
+                return Some(Err(no_memory(self.name)));
+            }
+            text.extend_from_slice(part);
+            text.push(b' ');
+            if !continued {
+                break;
+            }
+        }
+        // The last line of the file may end in `\` too.
+        joined.map(|(first, text)| Ok((first, Cow::Owned(text))))
+    }
+}
 
 /// The error of a mesh that outgrew the memory: OBJ gives no counts up front, so the arrays
 /// grow (fallibly: an error, not an abort of the host program) as lines are read.
