@@ -12,11 +12,13 @@
  * must not overlap; `rt2_query_options.exclude` may be the `hits` array itself.
  *
  * Descriptors (structs with `struct_size`, which must equal their sizeof): start from
- * `rt2_*_default()` and change fields. A zeroed struct is not the defaults: 0 is refused for
- * render max_depth, samples and short_stack_size, query short_stack_size, build leaf_size
- * and traversal_cost, and material ior; it gives STRAIGHT transparency, a black background
- * and an empty_bonus of 0. Zero is the default for context threads, build max_depth and
- * ropes, query exclude, and every enum-valued field but transparency.
+ * `rt2_*_default()` and change fields. A zeroed struct is refused (its struct_size is 0),
+ * and one zeroed but for struct_size is not the defaults: 0 is refused for render max_depth,
+ * samples and short_stack_size, query short_stack_size, build leaf_size and traversal_cost,
+ * and material ior; it gives STRAIGHT transparency, the SINGLE query mode, a black
+ * background and an empty_bonus of 0. Zero is the default for context threads, build
+ * max_depth and ropes, query exclude, and every enum-valued field but transparency and the
+ * query mode (AUTO).
  */
 
 #ifndef RT2_H
@@ -1092,8 +1094,10 @@ enum rt2_status rt2_scene_add_plane(rt2_scene *scene,
  * read: a missing file, a FIFO, device or directory is an IO error. Parse errors name the
  * file and the line or byte offset at fault. Triangles keep the file's face order
  * (polygons are fan-triangulated); a file without faces is a PARSE error, whatever its
- * format. The file is read and parsed before the scene is locked, so other calls on the
- * scene do not wait for a slow file.
+ * format. OBJ: positions (`v`) and faces (`f`) are read; normals, texture coordinates,
+ * groups, materials, points and lines (no surface) are skipped; curved surfaces and any other
+ * statement are a PARSE error rather than dropped. The file is read and parsed before the
+ * scene is locked, so other calls on the scene do not wait for a slow file.
  *
  * # Safety
  * `scene` is a live scene; `path` is a NUL-terminated string.

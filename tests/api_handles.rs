@@ -163,6 +163,12 @@ fn failed_edits_leave_the_scene_as_it_was() {
             rt2_scene_add_sphere(scene, c.as_ptr(), 1.0, 5, &mut id),
             Rt2Status::InvalidArgument
         );
+        // Material 0 alone exists yet.
+        assert!(
+            last_error().contains("material is 5, but the scene's materials are 0 to 0"),
+            "{}",
+            last_error()
+        );
         // The first successful add gets object 0: nothing was added by the failures.
         assert_eq!(
             rt2_scene_add_sphere(scene, c.as_ptr(), 1.0, 0, &mut id),

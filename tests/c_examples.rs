@@ -27,6 +27,15 @@ fn build_example(name: &str) -> PathBuf {
 /// [`build_example`] into the executable `exe_name`: tests that run at the same time must not
 /// rewrite each other's executable.
 fn build_example_as(name: &str, exe_name: &str) -> PathBuf {
+    let source = support::manifest_dir()
+        .join("c_examples")
+        .join(format!("{name}.c"));
+    build_c(&source, exe_name)
+}
+
+/// Compiles the C file `source` with the examples' flags (C99, warnings as errors) into the
+/// executable `exe_name` in the scratch directory.
+fn build_c(source: &Path, exe_name: &str) -> PathBuf {
     let dir = support::scratch("c_examples");
     let lib_dir = support::shared_library()
         .parent()
@@ -38,11 +47,7 @@ fn build_example_as(name: &str, exe_name: &str) -> PathBuf {
     cmd.args(["-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror"])
         .arg("-I")
         .arg(support::manifest_dir().join("include"))
-        .arg(
-            support::manifest_dir()
-                .join("c_examples")
-                .join(format!("{name}.c")),
-        )
+        .arg(source)
         .arg("-o")
         .arg(&exe)
         .arg(format!("-L{}", lib_dir.display()))
@@ -54,7 +59,8 @@ fn build_example_as(name: &str, exe_name: &str) -> PathBuf {
         .unwrap_or_else(|e| panic!("cannot run the C compiler {:?}: {e}", tool.path()));
     assert!(
         out.status.success(),
-        "compiling {name}.c failed:\n{}{}",
+        "compiling {} failed:\n{}{}",
+        source.display(),
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
@@ -179,6 +185,43 @@ fn minimal_renders_the_triangle() {
     assert!(
         r > 0 && r == g && r == b,
         "centre pixel {r},{g},{b} is not the grey triangle"
+    );
+}
+
+/// The README's C example as a user copies it (its image written into scratch space): it
+/// compiles without a warning, runs, and draws its red sphere in the middle of the image over
+/// a grey floor.
+#[test]
+fn readme_c_example_renders_the_red_sphere() {
+    let readme =
+        std::fs::read_to_string(support::manifest_dir().join("README.md")).expect("read README.md");
+    let code = readme
+        .split("```c\n")
+        .nth(1)
+        .and_then(|rest| rest.split("```").next())
+        .expect("README.md has a C example");
+    let dir = support::scratch("c_examples");
+    let png = dir.join("readme_demo.png");
+    assert!(code.contains("\"demo.png\""), "the example writes demo.png");
+    let code = code.replace("\"demo.png\"", &format!("{:?}", png.display().to_string()));
+    let source = dir.join("readme_demo.c");
+    std::fs::write(&source, code).expect("write the example");
+    let _ = std::fs::remove_file(&png);
+    let exe = build_c(&source, "readme_demo");
+    assert_exit(&run(&exe, &[]), 0, "the README's example");
+    let img = image::open(&png)
+        .expect("the example wrote its PNG")
+        .to_rgba8();
+    assert_eq!(img.dimensions(), (640, 360));
+    let [r, g, b] = patch_mean(&img, 320, 180, 3);
+    assert!(
+        r > 2.0 * g && r > 2.0 * b,
+        "centre {r},{g},{b} is not the red sphere"
+    );
+    let [r, g, b] = patch_mean(&img, 320, 350, 3);
+    assert!(
+        (r - g).abs() < 8.0 && (g - b).abs() < 8.0 && r > 20.0,
+        "floor {r},{g},{b}"
     );
 }
 

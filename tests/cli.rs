@@ -118,7 +118,10 @@ fn bad_options_fail_before_any_work() {
             "WIDTHxHEIGHT (e.g. 1376x768), got '10'",
         ),
         (&["render", "default", "--frobnicate"], "--frobnicate"),
-        (&["render", "no-such-scene"], "no-such-scene"),
+        (
+            &["render", "no-such-scene"],
+            "unknown scene 'no-such-scene': the built-in scenes are default, spheres1",
+        ),
         (&["draw"], "draw"),
     ];
     for (args, named) in cases {
@@ -292,6 +295,26 @@ fn bench_refuses_zero_runs() {
 }
 
 /// `render -h` and `--help` print the usage, as `bench -h` does.
+/// No command is an error (exit 1, the usage on stderr); `help` and `--version` answer on
+/// stdout with success.
+#[test]
+fn help_version_and_no_command() {
+    let out = run::<&str>(&[]);
+    assert_refused(&out, "no command given");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("rt2 render [SCENE|MODEL]"));
+    for help in ["help", "-h", "--help"] {
+        let out = run(&[help]);
+        assert!(out.status.success(), "{help}");
+        assert!(String::from_utf8_lossy(&out.stdout).contains("rt2 render [SCENE|MODEL]"));
+    }
+    for version in ["--version", "-V"] {
+        let out = run(&[version]);
+        assert!(out.status.success(), "{version}");
+        let expected = format!("rt2 {}\n", env!("CARGO_PKG_VERSION"));
+        assert_eq!(String::from_utf8_lossy(&out.stdout), expected);
+    }
+}
+
 #[test]
 fn render_help_prints_the_usage() {
     for flag in ["-h", "--help"] {

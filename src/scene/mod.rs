@@ -353,8 +353,8 @@ impl Scene {
         shape.validate()?;
         if material as usize >= self.materials.len() {
             return Err(Error::invalid_argument(format!(
-                "material is {material}, but the scene has {} materials",
-                self.materials.len()
+                "material is {material}, but the scene's materials are 0 to {}",
+                self.materials.len() - 1
             )));
         }
         if self.prim_count + shape.prim_count() >= (1 << 30) {

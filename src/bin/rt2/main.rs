@@ -24,20 +24,24 @@ use std::time::Instant;
 
 const USAGE: &str = "usage:
   rt2 render [SCENE|MODEL] [options]   render to a PNG
-      SCENE: default, spheres1, spheres2, spheres3; MODEL: a .ply or .obj file
+      SCENE: default (when none is given), spheres1, spheres2, spheres3;
+      MODEL: a .ply or .obj file
       -o, --output FILE     PNG to write (default: rt2.png)
       -s, --size WxH        image size (default: 1376x768, the thesis' resolution)
       --backend B           auto, cpu or gpu (default: auto)
       --traversal T         auto, standard, kd-restart, push-down, short-stack,
                             push-down-short-stack, ropes, ropes++ (default: auto)
-      --depth N             maximum ray depth (default: the scene's)
+      --depth N             maximum ray depth (default: the scene's: 6, or 1 for spheres1
+                            and for a model, primary and shadow rays only)
       --samples N           samples per pixel (default: 1)
       --straight            RT² transparency (no refraction)
       --intersector I       moller-trumbore or watertight (default: moller-trumbore)
       --offset M            secondary-ray origins: epsilon, robust, exclude-prim (default: epsilon)
       --threads N           worker threads (default: all cores)
       --builder B           sah (default, perfect splits) or midpoint
-  rt2 bench [frames|build|rays|tables|streams|gpu|chart|memory|all]    measure (rt2 bench --help)";
+  rt2 bench [frames|build|rays|tables|streams|gpu|chart|memory|all]    measure (rt2 bench --help)
+  rt2 help | --help | -h               this text
+  rt2 --version | -V                   the library's version";
 
 fn main() {
     // `args_os`, not `args`: a model or output path need not be UTF-8 (and `args` panics).
@@ -51,12 +55,15 @@ fn main() {
 /// Runs the command that `args` (without the program's name) ask for.
 fn run(args: &[OsString]) -> Result<()> {
     let Some((command, rest)) = args.split_first() else {
-        return say(USAGE);
+        return Err(Error::invalid_argument(format!(
+            "no command given\n{USAGE}"
+        )));
     };
     match args::utf8(command)? {
         "render" => render(rest),
         "bench" => bench::run(rest),
-        "-h" | "--help" => say(USAGE),
+        "help" | "-h" | "--help" => say(USAGE),
+        "-V" | "--version" => say(format_args!("rt2 {}", env!("CARGO_PKG_VERSION"))),
         other => Err(Error::invalid_argument(format!(
             "unknown command '{other}'\n{USAGE}"
         ))),
@@ -71,9 +78,23 @@ pub struct Loaded {
     pub max_depth: u32,
 }
 
+/// Refuses a name that is neither a built-in scene nor a file name with an extension (the
+/// model loaders go by it), naming the built-in scenes: a mistyped scene name is not a model.
+fn check_scene_name(name: &OsStr) -> Result<()> {
+    if Path::new(name).extension().is_none() && !builtin::NAMES.iter().any(|&n| n == name) {
+        return Err(Error::invalid_argument(format!(
+            "unknown scene '{}': the built-in scenes are {}; a model is a .ply or .obj file",
+            name.to_string_lossy(),
+            builtin::NAMES.join(", ")
+        )));
+    }
+    Ok(())
+}
+
 /// A built-in scene by name, or else the model file at that path.
 pub fn load_scene(name: impl AsRef<OsStr>) -> Result<Loaded> {
     let name = name.as_ref();
+    check_scene_name(name)?;
     if let Some(builtin) = name.to_str().filter(|n| builtin::NAMES.contains(n)) {
         let b = builtin::by_name(builtin)?;
         return Ok(Loaded {
@@ -198,6 +219,7 @@ fn render(args: &[OsString]) -> Result<()> {
     // Before any work: a bad output path, option or size found after a long load, commit or
     // render wastes it (the render checks the options again, with the scene's depth).
     rt2::frame::check_png_path(&output)?;
+    check_scene_name(name)?;
     if let Some(d) = depth {
         opts.max_depth = d;
     }
