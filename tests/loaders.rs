@@ -402,18 +402,23 @@ fn obj_all_face_forms_and_ignored_statements() {
     );
 }
 
+/// Asserts that the OBJ `text` reads as the same mesh as the plain OBJ `plain`.
+fn assert_reads_as(text: &[u8], plain: &[u8]) {
+    let plain = parse_obj(plain, "plain.obj").unwrap();
+    let mesh = parse_obj(text, "text.obj").unwrap();
+    assert_eq!(mesh.positions, plain.positions);
+    assert_eq!(mesh.triangles, plain.triangles);
+}
+
 /// What other exporters write: a byte-order mark, names and comments in Latin-1 (bytes that
 /// are not UTF-8), and MeshLab's per-vertex colours. The loader ignores all three, as it does
 /// normals and groups, and reads the same mesh as from the plain file.
 #[test]
 fn obj_from_other_exporters_byte_order_mark_latin1_names_vertex_colours() {
-    let plain = parse_obj(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "plain.obj").unwrap();
     let mut text = b"\xef\xbb\xbfv 0 0 0 0.5 0.25 1\n".to_vec();
     text.extend(b"# caf\xe9\no caf\xe9\ng t\xeate\nmtllib \xe9t\xe9.mtl\nusemtl rouge\xe9\n");
     text.extend(b"v 1 0 0 1 0 0\nv 0 1 0 0 1 0 # vert \xe0 gauche\nf 1 2 3\n");
-    let mesh = parse_obj(&text, "exporters.obj").unwrap();
-    assert_eq!(mesh.positions, plain.positions);
-    assert_eq!(mesh.triangles, plain.triangles);
+    assert_reads_as(&text, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
     // A byte-order mark only at the start of the file.
     assert_parse_err(
         parse_obj(b"v 0 0 0\n\xef\xbb\xbfv 1 0 0\n", "bom2.obj"),
@@ -426,13 +431,10 @@ fn obj_from_other_exporters_byte_order_mark_latin1_names_vertex_colours() {
 /// faces' alone, whatever they reference. Curved surfaces would be dropped, so they are refused.
 #[test]
 fn obj_points_and_lines_are_skipped_curves_refused() {
-    let faces = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n";
-    let plain = parse_obj(faces.as_bytes(), "faces.obj").unwrap();
     let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2\nv 1 1 0\np 4\nf 1 2 3\n\
         l 1/1 2/1 3/1 1/1\nmg 1 0.5\nf 2 4 3\np -1 -2\n";
-    let mesh = parse_obj(text.as_bytes(), "edges.obj").unwrap();
-    assert_eq!(mesh.positions, plain.positions);
-    assert_eq!(mesh.triangles, plain.triangles);
+    let faces = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n";
+    assert_reads_as(text.as_bytes(), faces.as_bytes());
     assert_parse_err(
         parse_obj(b"v 0 0 0\ncstype bspline\ncurv 0 1 1 1\n", "curve.obj"),
         "curve.obj",
@@ -444,16 +446,9 @@ fn obj_points_and_lines_are_skipped_curves_refused() {
 /// Windows path at its end), and an error on a continued statement names its first line.
 #[test]
 fn obj_continued_lines_are_one_statement() {
-    let plain = parse_obj(
-        b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 4 3\n",
-        "one.obj",
-    )
-    .unwrap();
     let text =
         b"v 0 0 \\\n0\nv 1 0 0\r\n# c:\\models\\\nv 0 1 0\nv 1 1 0\nf 1 \\\r\n2\\\n 4 \\\n3\n";
-    let mesh = parse_obj(text, "continued.obj").unwrap();
-    assert_eq!(mesh.positions, plain.positions);
-    assert_eq!(mesh.triangles, plain.triangles);
+    assert_reads_as(text, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 4 3\n");
     // The face starts on line 3 and fails on its third corner, on line 5.
     assert_parse_err(
         parse_obj(b"v 0 0 0\nv 1 0 0\nf 1 \\\n 2 \\\n 7\n", "bad.obj"),
