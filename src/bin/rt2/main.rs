@@ -28,7 +28,8 @@ const USAGE: &str = "usage:
       MODEL: a .ply or .obj file
       -o, --output FILE     PNG to write (default: rt2.png)
       -s, --size WxH        image size (default: 1376x768, the thesis' resolution)
-      --backend B           auto, cpu or gpu (default: auto)
+      --backend B           auto, cpu or gpu (default: auto; RT2_BACKEND, when set, overrides
+                            it, as it does every program's context)
       --traversal T         auto, standard, kd-restart, push-down, short-stack,
                             push-down-short-stack, ropes, ropes++ (default: auto)
       --depth N             maximum ray depth (default: the scene's: 6, or 1 for spheres1
