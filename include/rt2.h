@@ -487,8 +487,9 @@ typedef struct rt2_build_options {
    */
   float traversal_cost;
   /**
-   * SAH factor, in [0, 1), on the cost of a split that leaves one side empty (default 0.8):
-   * the smaller, the more eagerly empty space is cut off; 0 makes such splits free.
+   * SAH factor, in [0, 1), on the cost of a split that leaves one side empty (nothing inside
+   * it; primitives touching the plane are kept on both sides) (default 0.8): the smaller,
+   * the more eagerly empty space is cut off; 0 makes such splits free.
    */
   float empty_bonus;
   /**

@@ -360,8 +360,9 @@ pub struct rt2_build_options {
     /// give a smaller tree, built faster, with fewer and fuller leaves; smaller ones (down to
     /// about 1.5) trade memory for a few per cent more coherent single rays.
     pub traversal_cost: f32,
-    /// SAH factor, in [0, 1), on the cost of a split that leaves one side empty (default 0.8):
-    /// the smaller, the more eagerly empty space is cut off; 0 makes such splits free.
+    /// SAH factor, in [0, 1), on the cost of a split that leaves one side empty (nothing inside
+    /// it; primitives touching the plane are kept on both sides) (default 0.8): the smaller,
+    /// the more eagerly empty space is cut off; 0 makes such splits free.
     pub empty_bonus: f32,
     /// Non-zero: build ropes now (they are also built on demand by rope traversals).
     pub ropes: u32,

@@ -62,7 +62,14 @@ pub struct BuildOptions {
     /// bench build`, "Effect of the SAH traversal cost").
     pub traversal_cost: f32,
     /// Factor λ applied to the SAH cost of a split that leaves one side empty (Wald & Havran
-    /// 2006, §4.3 use 0.8): below 1 it favours cutting off empty space.
+    /// 2006, §4.3 use 0.8): below 1 it favours cutting off empty space. "Empty" means nothing
+    /// reaches into that side: primitives touching the plane are in both children (`sah`).
+    /// Against no bonus, 0.8 gave the bunny's tree 48% more nodes (three times the empty
+    /// leaves) and a 3% lower SAH cost, and ran 16-lane packets and single rays 4–7% faster on
+    /// its 1024² primary rays, streams 4% slower on its incoherent set; on the dragon every
+    /// mode ran 2–17% faster (one thread, alternating processes). (Until the `sah` sweep
+    /// judged emptiness by what reaches inside a side, no split counted as empty and this
+    /// factor did nothing.)
     pub empty_bonus: f32,
     /// Most leaf references (entries of the leaves' primitive lists) the tree may hold per
     /// primitive; a node whose children would exceed its share stays a leaf. A split copies the

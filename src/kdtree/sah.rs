@@ -10,8 +10,8 @@
 //!
 //! Cost model (MacDonald & Booth; Wald & Havran §3): a split costs
 //! `λ (K_T + K_I (P_below N_below + P_above N_above))`, `P = A(child) / A(voxel)`, with
-//! `K_T = opts.traversal_cost`, `K_I = 1` and `λ = opts.empty_bonus` when a side is empty
-//! (else 1); a leaf costs `K_I N`. A node becomes a leaf when no split is cheaper, at the depth
+//! `K_T = opts.traversal_cost`, `K_I = 1` and `λ = opts.empty_bonus` when nothing reaches into
+//! one side (it holds only primitives touching the plane), else 1; a leaf costs `K_I N`. A node becomes a leaf when no split is cheaper, at the depth
 //! limit, when it holds no primitive, when its voxel has no area, or when its children would
 //! exceed its share of the reference budget (`BuildOptions::references_per_prim`).
 
@@ -313,7 +313,8 @@ impl Sah<'_> {
                     scale * (face + side * (pos * unit - lo * unit)),
                     scale * (face + side * (hi * unit - pos * unit)),
                 ];
-                let cost = self.split_cost(probability, [below + planar + starts, above]);
+                let held = [below + planar + starts, above];
+                let cost = self.split_cost(probability, held, [below, above - ends - planar]);
                 let better = cost < best_cost;
                 best_cost = if better { cost } else { best_cost };
                 best_pos = if better { pos } else { best_pos };
@@ -330,9 +331,11 @@ impl Sah<'_> {
 
     /// Cost of a split whose children are hit with probabilities `p` and hold `n` primitives
     /// (those touching the plane in both: conservative leaf membership, where Wald & Havran
-    /// (§4.2) put the planar ones on the cheaper side).
-    fn split_cost(&self, p: [f32; 2], n: [usize; 2]) -> f32 {
-        let lambda = if n[0] == 0 || n[1] == 0 {
+    /// (§4.2) put the planar ones on the cheaper side), `inside` of them reaching into the
+    /// child's interior. A child with nothing inside is the empty space λ favours cutting off:
+    /// it holds only primitives touching the plane, so `n` is never 0 at a plane on geometry.
+    fn split_cost(&self, p: [f32; 2], n: [usize; 2], inside: [usize; 2]) -> f32 {
+        let lambda = if inside[0] == 0 || inside[1] == 0 {
             self.empty_bonus
         } else {
             1.0
