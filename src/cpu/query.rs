@@ -46,9 +46,9 @@ pub const INCOHERENT_STREAM_MAX: usize = 262144;
 /// took 68% of a 32 K-ray stream's time. The more rays a stream holds, the deeper its lists
 /// stay shared: one stream per octant (256 K rays) ran 1.3–1.5× as fast as 32 K-ray streams on
 /// the dragon (367 K leaves), while on the bunny (26 K leaves) and the Snowden bust (15 K) it
-/// was no faster at 128 K and slower at 256 K (trees measured before the SAH's empty bonus took
-/// effect: they now have 514 K, 38 K and 22 K leaves) (2 M incoherent rays, one thread, 3–5 runs with
+/// was no faster at 128 K and slower at 256 K (2 M incoherent rays, one thread, 3–5 runs with
 /// the stream sizes interleaved; `rt2 bench streams` traces 2 M-ray batches in its table 3).
+/// Those trees predate the SAH's empty bonus; the three now have 514 K, 38 K and 22 K leaves.
 /// A stream of one octant's incoherent rays takes 65–70 bytes per ray, ray stack and ray
 /// arrays (16 MiB for the dragon's 256 K; `rt2 bench streams`, memory table).
 /// Mirror reflections of the dragon's 2752×1536 camera rays (557 K rays in mixed octants) ran

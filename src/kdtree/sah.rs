@@ -11,9 +11,10 @@
 //! Cost model (MacDonald & Booth; Wald & Havran §3): a split costs
 //! `λ (K_T + K_I (P_below N_below + P_above N_above))`, `P = A(child) / A(voxel)`, with
 //! `K_T = opts.traversal_cost`, `K_I = 1` and `λ = opts.empty_bonus` when nothing reaches into
-//! one side (it holds only primitives touching the plane), else 1; a leaf costs `K_I N`. A node becomes a leaf when no split is cheaper, at the depth
-//! limit, when it holds no primitive, when its voxel has no area, or when its children would
-//! exceed its share of the reference budget (`BuildOptions::references_per_prim`).
+//! one side (it holds only primitives touching the plane), else 1; a leaf costs `K_I N`. A node
+//! becomes a leaf when no split is cheaper, at the depth limit, when it holds no primitive, when
+//! its voxel has no area, or when its children would exceed its share of the reference budget
+//! (`BuildOptions::references_per_prim`).
 
 use rayon::prelude::*;
 

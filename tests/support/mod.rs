@@ -2,9 +2,9 @@
 //! the built shared library, where the library is and a `cc` compiler configured outside
 //! build.rs; the shared folder's files; the memory tests' reading of `/proc/self/status`; the
 //! fork tests' wait for a child; the C API tests' smallest scene and meshes; rays around a
-//! target and the sequence behind them; whether a GPU context can be had; renders of shading extremes
-//! (`shading_cases`); the tests' random numbers (`rng`); spheres and ellipsoids far from the origin with their shading worked
-//! out in f64.
+//! target and the sequence behind them; whether a GPU context can be had; renders of shading
+//! extremes (`shading_cases`); the tests' random numbers (`rng`); spheres and ellipsoids far
+//! from the origin with their shading worked out in f64.
 
 #![allow(dead_code)]
 

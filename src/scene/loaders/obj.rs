@@ -25,10 +25,10 @@ use crate::fallible::TryGrow;
 /// Ignored statements: `vt`, `vn`, `vp`, `g`, `o`, `s`, `mg`, `usemtl`, `mtllib`, points `p`
 /// and lines `l` (Blender writes loose edges so; they have no surface), comments and blank
 /// lines; CRLF line endings and a UTF-8 byte-order mark are accepted, a line ending in `\`
-/// outside a comment continues on the next (errors name its first line), and bytes that are not UTF-8 are only
-/// an error where a number is expected. Any other statement is an error, so that a file that
-/// is not OBJ (or uses features this loader would silently drop, like curved surfaces) is
-/// reported rather than half-loaded. A file without faces is an error too.
+/// outside a comment continues on the next (errors name its first line), and bytes that are
+/// not UTF-8 are only an error where a number is expected. Any other statement is an error, so
+/// that a file that is not OBJ (or uses features this loader would silently drop, like curved
+/// surfaces) is reported rather than half-loaded. A file without faces is an error too.
 pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
     let mut mesh = Mesh::default();
     let mut saw_statement = false;

@@ -137,7 +137,8 @@ fn paired_ratio(x: &[f64], y: &[f64]) -> f64 {
 /// `runs` timed passes of each job (after a warm-up pass of each), on `ctx`'s threads. Each
 /// run calls `each_run` (the peer's run, where one is timed beside; it says whether it ran),
 /// makes one more warm-up pass after a peer's run, and then times the jobs batch by batch:
-/// the first batch of every job, then the second of every job, and so on, the jobs in turn forwards and backwards (so that none always runs on the caches another left).
+/// the first batch of every job, then the second of every job, and so on, the jobs in turn
+/// forwards and backwards (so that none always runs on the caches another left).
 /// The load of this shared machine changes within seconds; timed a whole job after another,
 /// the 100-frame orbit's modes each took a second or more, and two runs of the bench differed
 /// by up to 25% in a ratio. Interleaved, a busy spell slows every job of a run about alike.
