@@ -140,7 +140,7 @@ fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
     lists: &mut Lists,
     frames: &mut Vec<Frame>,
     scratch: &mut packet::Scratch<N>,
-    roots: &[super::batch::Root],
+    roots: &[Root],
     positive: [bool; 3],
 ) {
     lists.reserve(roots.len() + N);
@@ -190,7 +190,11 @@ fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
                 t1,
                 mask: first::<N>(count),
             };
-            packet::traverse(isa, b, scratch, f.node, p, positive);
+            let rays = packet::PacketRays {
+                axes: packet::Axes::of(isa, b, &id),
+                rays: None,
+            };
+            packet::traverse(isa, b, scratch, f.node, p, rays, positive);
             continue;
         }
         let n = b.tree.nodes[f.node as usize];
@@ -306,8 +310,9 @@ impl Mode for StreamMode {
     fn trace<const N: usize, A: Answer, const WATERTIGHT: bool>(
         isa: Isa<N>,
         b: &mut Batch<A, WATERTIGHT>,
-        groups: &[Vec<Root>; 8],
+        order: RayOrder,
     ) -> Self::Out {
+        let groups = b.group(isa, order);
         let mut lists = Lists::default();
         let mut frames = Vec::with_capacity(128);
         let mut scratch = packet::Scratch::<N>::new();
