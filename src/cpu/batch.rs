@@ -435,7 +435,8 @@ pub(crate) struct Batch<'a, A, const WATERTIGHT: bool> {
     pub tree: &'a KdTree,
     pub prims: &'a PrimitiveSet,
     pub rays: &'a [Ray],
-    /// `split[a][i]` = (origin, reciprocal direction) of ray `i` on axis `a`.
+    /// `split[a][i]` = (origin, reciprocal direction) of ray `i` on axis `a`, for the rays
+    /// [`Batch::keep`] kept (a packet traversed as it is set up has them in vectors).
     pub split: [Vec<[f32; 2]>; 3],
     /// Rays whose answer is final: dropped from every later list (the paper's "rayos
     /// terminados").
