@@ -103,9 +103,10 @@ impl<const N: usize> Scratch<N> {
     }
 }
 
-/// Traverses the subtree of `node` with the packet `p` (all lanes of octant `positive`), front
-/// to back, as the standard traversal does for each lane: descend to the nearest leaf, keep far
-/// children on a stack, stop a lane when its closest hit lies before the leaf's exit.
+/// Traverses the subtree of `node` with the packet `p` (all lanes of octant `positive`; their
+/// rays `rays`), front to back, as the standard traversal does for each lane: descend to the
+/// nearest leaf, keep far children on a stack, stop a lane when its closest hit lies before the
+/// leaf's exit.
 ///
 /// An inner step branches only on whether the near child has lanes, which it has at most steps
 /// (a well-predicted branch): the far child is always written to the top stack slot, and kept
