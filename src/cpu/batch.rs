@@ -416,9 +416,9 @@ impl<const N: usize> LaneBounds<N> {
     }
 }
 
-/// A packet's rays in structure-of-arrays form and their [`LaneBounds`], gathered once for all
-/// its leaves that take the N-rays × 1-triangle test ([`Batch::visit_packet_leaf`]), and
-/// [`Batch::reread`] after tests made elsewhere.
+/// A packet's rays in structure-of-arrays form and their [`LaneBounds`], read once (or taken
+/// from the packet's block) for all its leaves that take the N-rays × 1-triangle test
+/// ([`Batch::visit_packet_leaf`]), and [`Batch::reread`] after tests made elsewhere.
 pub(crate) struct PacketLanes<const N: usize> {
     rays: RayLanes<N>,
     bounds: LaneBounds<N>,
@@ -452,25 +452,25 @@ pub(crate) struct Batch<'a, A, const WATERTIGHT: bool> {
 /// A block of up to N rays set up for traversal ([`Batch::block`]).
 pub(crate) struct Block<const N: usize> {
     /// The rays to traverse (`mask`: inside the root voxel, not degenerate, not finished by a
-    /// plane) and their segments there.
+    /// plane; none when the tree is empty) and their segments there.
     pub lanes: Lanes<N>,
     pub axes: Axes<N>,
     pub rays: RayLanes<N>,
 }
 
 impl<const N: usize> Block<N> {
-    /// The octant of all the lanes to traverse, when they share one.
+    /// The octant of all the lanes to traverse, when there are some and they share one.
     #[inline(always)]
     pub fn octant(&self, isa: Isa<N>) -> Option<usize> {
         let live = self.lanes.mask;
+        if live == 0 {
+            return None;
+        }
         let mut o = 0;
         for a in 0..3 {
-            // A reciprocal keeps its direction's sign, `-0.0` giving `-inf` (see `octant`).
-            let mut sign = [0.0f32; N];
-            for (s, i) in sign.iter_mut().zip(&self.axes.inv[a]) {
-                *s = 1.0f32.copysign(*i);
-            }
-            let negative = live & lanes_less(isa, &sign, &[0.0; N]);
+            // A reciprocal keeps its direction's sign, `-0.0` giving `-inf` (see `octant`), and
+            // is never zero or NaN for a sound ray (a finite direction).
+            let negative = live & lanes_less(isa, &self.axes.inv[a], &[0.0; N]);
             if negative == live {
                 o |= 1 << a;
             } else if negative != 0 {
@@ -634,8 +634,9 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         self.answer.prefetch(i);
     }
 
-    /// The packet's rays `ids` (lanes `live`) gathered for [`Batch::visit_packet_leaf`] (an
-    /// index past the end reads the last ray, as [`RayLanes::gather`]).
+    /// The packet's rays `ids` (lanes `live`) for [`Batch::visit_packet_leaf`]: `known` when
+    /// the caller has them, else gathered (an index past the end reads the last ray, as
+    /// [`RayLanes::gather`]).
     #[inline(always)]
     pub fn packet_lanes<const N: usize>(
         &self,

@@ -130,8 +130,8 @@ pub(crate) fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
     let mut sp = 0;
     let mut dead = 0u32;
     let id = p.id;
-    // The rays for the N-rays × 1-triangle leaf test, gathered at the first leaf that takes it
-    // (a stream hands over many short packets, some of which never take it).
+    // The rays for the N-rays × 1-triangle leaf test, made at the first leaf that takes it from
+    // `known` or a gather (a stream hands over many short packets, some of which never take it).
     let mut lanes = None;
     let mut cur = Entry {
         node,
@@ -265,7 +265,7 @@ impl Mode for PacketMode {
         for (ids, live) in Blocks::<N>::new(b.rays.len(), order) {
             let block = b.block(isa, ids, live);
             match block.octant(isa) {
-                Some(o) if block.lanes.mask != 0 => {
+                Some(o) => {
                     let rays = PacketRays {
                         axes: block.axes,
                         rays: Some(block.rays),

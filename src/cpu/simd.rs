@@ -470,8 +470,8 @@ impl<const N: usize> LeafPrims<N> {
 /// Columns of rows picked by ray index: lane `l` of column `k` is `rows[ids[l]][columns[k]]`
 /// (an index past the end reads the last row: lanes past a list's end hold stale indices).
 /// The stream's hot loop picks every ray's origin and reciprocal direction on a node's axis this
-/// way, and the leaves their rays. AVX2 and AVX-512 use the CPU's gather instruction, one per
-/// column; other widths and CPUs take a lane loop. Against that loop, 16-lane streams ran
+/// way, and the leaves their rays. AVX2 and AVX-512 use the CPU's gather instruction (one per
+/// column, or per pair of columns at 16 lanes: below); other widths and CPUs take a lane loop. Against that loop, 16-lane streams ran
 /// 1.05–1.10× as fast on the bunny's incoherent, primary and diffuse sets and the dragon's
 /// incoherent and primary sets, 8-lane streams 0.97–1.08× and packets 0.97–1.03× (Intel Xeon
 /// with AVX-512, the loop and the gathers alternating in one process, medians of 11–15 runs;
