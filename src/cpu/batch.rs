@@ -18,7 +18,7 @@ use super::traverse::{
     any_among, any_in_subtree, clip_lanes, closest_among, closest_in_subtree, scene_box,
     tested_until, Entry,
 };
-use crate::geometry::{Hit, PrimIndex, PrimitiveSet, Ray, RayTest, TraversalStats, INVALID};
+use crate::geometry::{Aabb, Hit, PrimIndex, PrimitiveSet, Ray, RayTest, TraversalStats, INVALID};
 use crate::kdtree::KdTree;
 use crate::precision::Intersector;
 
@@ -436,8 +436,12 @@ pub(crate) struct Batch<'a, A, const WATERTIGHT: bool> {
     pub prims: &'a PrimitiveSet,
     pub rays: &'a [Ray],
     /// `split[a][i]` = (origin, reciprocal direction) of ray `i` on axis `a`, for the rays
-    /// [`Batch::keep`] kept (a packet traversed as it is set up has them in vectors).
+    /// [`Batch::keep`] kept (a packet traversed as it is set up has them in vectors; empty
+    /// until a ray is kept).
     pub split: [Vec<[f32; 2]>; 3],
+    /// The single-ray traversal's box, padded for the watertight test: the rays are clipped
+    /// to it.
+    bounds: Aabb,
     /// Rays whose answer is final: dropped from every later list (the paper's "rayos
     /// terminados").
     pub done: Vec<bool>,
@@ -459,25 +463,29 @@ pub(crate) struct Block<const N: usize> {
 }
 
 impl<const N: usize> Block<N> {
+    /// The lanes to traverse whose direction is negative on each axis: their octants, as
+    /// [`octant`] reads them from the rays. A reciprocal keeps its direction's sign, `-0.0`
+    /// giving `-inf`, and is never zero or NaN for a sound ray (a finite direction).
+    #[inline(always)]
+    fn negative(&self, isa: Isa<N>) -> [u32; 3] {
+        let mut negative = [0; 3];
+        for (n, inv) in negative.iter_mut().zip(&self.axes.inv) {
+            *n = self.lanes.mask & lanes_less(isa, inv, &[0.0; N]);
+        }
+        negative
+    }
+
     /// The octant of all the lanes to traverse, when there are some and they share one.
     #[inline(always)]
     pub fn octant(&self, isa: Isa<N>) -> Option<usize> {
         let live = self.lanes.mask;
-        if live == 0 {
-            return None;
-        }
-        let mut o = 0;
-        for a in 0..3 {
-            // A reciprocal keeps its direction's sign, `-0.0` giving `-inf` (see `octant`), and
-            // is never zero or NaN for a sound ray (a finite direction).
-            let negative = live & lanes_less(isa, &self.axes.inv[a], &[0.0; N]);
-            if negative == live {
-                o |= 1 << a;
-            } else if negative != 0 {
-                return None;
-            }
-        }
-        Some(o)
+        let negative = self.negative(isa);
+        let shared = (0..3).all(|a| negative[a] == 0 || negative[a] == live);
+        (live != 0 && shared).then(|| {
+            (0..3)
+                .filter(|&a| negative[a] != 0)
+                .fold(0, |o, a| o | 1 << a)
+        })
     }
 }
 
@@ -526,7 +534,8 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
             tree,
             prims,
             rays,
-            split: [(); 3].map(|_| vec![[0.0; 2]; n]),
+            split: Default::default(),
+            bounds: scene_box(tree, Self::INTERSECTOR),
             done: vec![false; n],
             finished: 0,
             answer,
@@ -545,7 +554,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         let mut groups: [Vec<Root>; 8] = Default::default();
         for (ids, live) in Blocks::<N>::new(self.rays.len(), order) {
             let block = self.block(isa, ids, live);
-            self.keep(&block, &mut groups);
+            self.keep(isa, &block, &mut groups);
         }
         groups
     }
@@ -591,9 +600,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         if self.tree.nodes.is_empty() {
             todo = 0;
         }
-        // The single-ray traversal's box: padded for the watertight test.
-        let bounds = scene_box(self.tree, Self::INTERSECTOR);
-        let (t0, t1, inside) = clip_lanes(isa, &bounds, &r.org, &inv, r.tmin, r.tmax);
+        let (t0, t1, inside) = clip_lanes(isa, &self.bounds, &r.org, &inv, r.tmin, r.tmax);
         Block {
             lanes: Lanes {
                 id: ids,
@@ -607,16 +614,27 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
     }
 
     /// Keeps the rays of `block` for a later traversal: their origins and reciprocal
-    /// directions in [`Batch::split`], their roots in the group of their octant.
+    /// directions in [`Batch::split`] (made on the first keep: packets may need none), their
+    /// roots in the group of their octant.
     #[inline(always)]
-    pub fn keep<const N: usize>(&mut self, block: &Block<N>, groups: &mut [Vec<Root>; 8]) {
+    pub fn keep<const N: usize>(
+        &mut self,
+        isa: Isa<N>,
+        block: &Block<N>,
+        groups: &mut [Vec<Root>; 8],
+    ) {
         let Block { lanes, axes, .. } = block;
+        if lanes.mask != 0 && self.split[0].is_empty() {
+            self.split = [(); 3].map(|_| vec![[0.0; 2]; self.rays.len()]);
+        }
+        let negative = block.negative(isa);
         for_lanes(lanes.mask, |l| {
             let i = lanes.id[l] as usize;
             for a in 0..3 {
                 self.split[a][i] = [axes.org[a][l], axes.inv[a][l]];
             }
-            groups[octant(&self.rays[i])].push(Root {
+            let o = (0..3).fold(0, |o, a| o | (negative[a] >> l & 1) << a) as usize;
+            groups[o].push(Root {
                 id: lanes.id[l],
                 t0: lanes.t0[l],
                 t1: lanes.t1[l],

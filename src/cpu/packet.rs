@@ -43,10 +43,17 @@ pub(crate) struct Axes<const N: usize> {
     pub inv: [[f32; N]; 3],
 }
 
-impl<const N: usize> Axes<N> {
-    /// The rays `ids` as [`Batch::keep`](super::batch::Batch::keep) left them in the batch.
+/// A packet's rays: their [`Axes`], and the rays themselves when they are at hand (gathered
+/// at the first leaf that tests them N rays per triangle otherwise).
+pub(crate) struct PacketRays<const N: usize> {
+    pub axes: Axes<N>,
+    pub rays: Option<RayLanes<N>>,
+}
+
+impl<const N: usize> PacketRays<N> {
+    /// The rays `ids` that [`Batch::keep`](super::batch::Batch::keep) kept in the batch.
     #[inline(always)]
-    pub fn of<A, const WATERTIGHT: bool>(
+    pub fn kept<A, const WATERTIGHT: bool>(
         isa: Isa<N>,
         b: &Batch<A, WATERTIGHT>,
         ids: &[u32; N],
@@ -55,15 +62,11 @@ impl<const N: usize> Axes<N> {
         for a in 0..3 {
             [org[a], inv[a]] = simd::gather_columns(isa, &b.split[a], [0, 1], ids);
         }
-        Axes { org, inv }
+        PacketRays {
+            axes: Axes { org, inv },
+            rays: None,
+        }
     }
-}
-
-/// A packet's rays: their [`Axes`], and the rays themselves when they are at hand (gathered
-/// at the first leaf that tests them N rays per triangle otherwise).
-pub(crate) struct PacketRays<const N: usize> {
-    pub axes: Axes<N>,
-    pub rays: Option<RayLanes<N>>,
 }
 
 /// A pending far subtree: the node, the lanes' segments there and the live lanes. The ray
@@ -272,16 +275,13 @@ impl Mode for PacketMode {
                     };
                     traverse(isa, b, &mut s, 0, block.lanes, rays, positive(o));
                 }
-                _ => b.keep(&block, &mut groups),
+                _ => b.keep(isa, &block, &mut groups),
             }
         }
         for (o, group) in groups.iter().enumerate() {
             for chunk in group.chunks(N) {
                 let p = lanes_of(chunk);
-                let rays = PacketRays {
-                    axes: Axes::of(isa, b, &p.id),
-                    rays: None,
-                };
+                let rays = PacketRays::kept(isa, b, &p.id);
                 traverse(isa, b, &mut s, 0, p, rays, positive(o));
             }
         }

@@ -471,16 +471,16 @@ impl<const N: usize> LeafPrims<N> {
 /// (an index past the end reads the last row: lanes past a list's end hold stale indices).
 /// The stream's hot loop picks every ray's origin and reciprocal direction on a node's axis this
 /// way, and the leaves their rays. AVX2 and AVX-512 use the CPU's gather instruction (one per
-/// column, or per pair of columns at 16 lanes: below); other widths and CPUs take a lane loop. Against that loop, 16-lane streams ran
-/// 1.05–1.10× as fast on the bunny's incoherent, primary and diffuse sets and the dragon's
-/// incoherent and primary sets, 8-lane streams 0.97–1.08× and packets 0.97–1.03× (Intel Xeon
-/// with AVX-512, the loop and the gathers alternating in one process, medians of 11–15 runs;
-/// not measured on AMD). At 16 lanes two neighbouring columns (a ray's origin and reciprocal
-/// direction on an axis, or two floats of a ray) are gathered as one 8-byte element per lane:
-/// half the elements, for two permutes. Against a gather per column, 16-lane packets ran 1.02×
-/// as fast on the bunny's 1024² primary rays, 16-lane streams 1.00–1.04× on its 256² primary
-/// and incoherent sets and the dragon's 256² primary set (AMD EPYC, medians of 5 alternating
-/// runs of two builds, each within ±10% noise).
+/// column, or per pair of columns at 16 lanes: below); other widths and CPUs take a lane loop.
+/// Against that loop, 16-lane streams ran 1.05–1.10× as fast on the bunny's incoherent, primary
+/// and diffuse sets and the dragon's incoherent and primary sets, 8-lane streams 0.97–1.08× and
+/// packets 0.97–1.03× (Intel Xeon with AVX-512, the loop and the gathers alternating in one
+/// process, medians of 11–15 runs; not measured on AMD). At 16 lanes two neighbouring columns (a
+/// ray's origin and reciprocal direction on an axis, or two floats of a ray) are gathered as one
+/// 8-byte element per lane: half the elements, for two permutes. Against a gather per column,
+/// 16-lane packets ran 1.02× as fast on the bunny's 1024² primary rays, 16-lane streams 1.00–1.04×
+/// on its 256² primary and incoherent sets and the dragon's 256² primary set (AMD EPYC, medians of
+/// 5 alternating runs of two builds, each within ±10% noise).
 #[inline(always)]
 pub fn gather_columns<const N: usize, const S: usize, const K: usize>(
     _: Isa<N>,

@@ -190,10 +190,7 @@ fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
                 t1,
                 mask: first::<N>(count),
             };
-            let rays = packet::PacketRays {
-                axes: packet::Axes::of(isa, b, &id),
-                rays: None,
-            };
+            let rays = packet::PacketRays::kept(isa, b, &id);
             packet::traverse(isa, b, scratch, f.node, p, rays, positive);
             continue;
         }
