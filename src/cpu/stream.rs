@@ -130,6 +130,9 @@ pub struct StreamMemory {
 /// rays (Embree's switch to single rays): 0.90–0.94× on the dragon. Lists of three or four
 /// rays as 4-lane packets (in 16-lane streams): 0.99× on the bunny, 1.01× on the dragon. On the
 /// dragon's 256² primary rays, lists of up to 2N, 4N and 8N rays as packets: 0.98–0.99×.
+/// The other way, fewer lists as packets: split further as lists down to three rays (no
+/// packets), 0.53× on the bunny's incoherent set; packets for lists of at most 8 or 12 rays
+/// (16 lanes), 0.96–1.00× on the dragon's primary set.
 const SINGLE_MAX: usize = 2;
 
 /// Walks the tree once with all the rays of one octant group.
