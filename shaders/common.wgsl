@@ -158,7 +158,7 @@ fn hit_triangle(tri: Triangle, r: Ray, tmax: f32) -> Tuv {
     if (!(u >= 0.0 && u <= 1.0)) { return no; }
     let q = cross(s, e1);
     let v = dot(r.dir, q) * inv;
-    if (v < 0.0 || u + v > 1.0) { return no; }
+    if (!(v >= 0.0 && u + v <= 1.0)) { return no; }
     let t = dot(e2, q) * inv;
     if (t >= r.tmin && t < tmax) { return Tuv(true, t, u, v); }
     return no;

@@ -39,15 +39,15 @@ fn ray(org: [f32; 3], tmin: f32, dir: [f32; 3], tmax: f32) -> rt2_ray {
     }
 }
 
-/// A context of `backend` and a committed scene of the review's triangle and the plane
-/// `y = -2`, and with `every_kind` a sphere, an ellipsoid and a box.
+/// A context and a scene on it.
 struct Scene {
     ctx: *mut rt2_context,
     scene: *mut rt2_scene,
 }
 
 impl Scene {
-    fn new(backend: Rt2Backend, every_kind: bool) -> Option<Scene> {
+    /// An empty scene on a context of `backend`, or `None` when that backend is unavailable.
+    fn empty(backend: Rt2Backend) -> Option<Scene> {
         let mut desc = rt2_context_desc_default();
         desc.backend = backend as u32;
         let mut ctx = null_mut();
@@ -57,34 +57,55 @@ impl Scene {
             }
             let mut scene = null_mut();
             ok(rt2_scene_create(ctx, &mut scene));
-            let s = Scene { ctx, scene };
-            let mut id = 0;
-            let positions = [
-                -1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.5,
-            ];
-            let indices = [0u32, 1, 2, 1, 3, 2];
+            Some(Scene { ctx, scene })
+        }
+    }
+
+    /// Adds a mesh of `positions` (x, y, z each) and `indices` (three per triangle).
+    fn add_mesh(&self, positions: &[f32], indices: &[u32]) {
+        let mut id = 0;
+        unsafe {
             ok(rt2_scene_add_mesh(
-                scene,
+                self.scene,
                 positions.as_ptr(),
-                4,
+                positions.len() / 3,
                 indices.as_ptr(),
-                2,
+                indices.len() / 3,
                 0,
                 &mut id,
             ));
+        }
+    }
+
+    fn commit(self) -> Scene {
+        unsafe { ok(rt2_scene_commit(self.scene)) };
+        self
+    }
+
+    /// A committed scene of the review's triangle and the plane `y = -2`, and with
+    /// `every_kind` a sphere, an ellipsoid and a box.
+    fn new(backend: Rt2Backend, every_kind: bool) -> Option<Scene> {
+        let s = Scene::empty(backend)?;
+        s.add_mesh(
+            &[
+                -1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.5,
+            ],
+            &[0, 1, 2, 1, 3, 2],
+        );
+        let mut id = 0;
+        unsafe {
             ok(rt2_scene_add_plane(
-                scene,
+                s.scene,
                 [0.0, 1.0, 0.0].as_ptr(),
                 -2.0,
                 0,
                 &mut id,
             ));
             if !every_kind {
-                ok(rt2_scene_commit(scene));
-                return Some(s);
+                return Some(s.commit());
             }
             ok(rt2_scene_add_sphere(
-                scene,
+                s.scene,
                 [3.0, 0.0, 0.0].as_ptr(),
                 1.0,
                 0,
@@ -92,7 +113,7 @@ impl Scene {
             ));
             let (c, r) = ([-3.0f32, 0.0, 0.0], [0.5f32, 1.0, 2.0]);
             ok(rt2_scene_add_ellipsoid(
-                scene,
+                s.scene,
                 c.as_ptr(),
                 r.as_ptr(),
                 0,
@@ -100,15 +121,14 @@ impl Scene {
             ));
             let (lo, hi) = ([-1.0f32, 2.0, -1.0], [1.0f32, 3.0, 1.0]);
             ok(rt2_scene_add_box(
-                scene,
+                s.scene,
                 lo.as_ptr(),
                 hi.as_ptr(),
                 0,
                 &mut id,
             ));
-            ok(rt2_scene_commit(scene));
-            Some(s)
         }
+        Some(s.commit())
     }
 
     /// The hits of `rays` with `opt`, or the status of a refused query.
@@ -318,6 +338,69 @@ fn extreme_rays_on_the_gpu_hit_only_points_of_the_ray() {
                     } else {
                         assert_eq!(found, 0, "{what}: {hits:?}");
                     }
+                }
+                Err(st) => assert_eq!(st, Rt2Status::Unsupported, "{what}: {}", last_error()),
+            }
+        }
+    }
+}
+
+/// Three small triangles and a ray from near `f32::MAX` found by a probe of the C API: the
+/// ray's `dir · q` in Möller–Trumbore overflowed to `inf - inf`, and the `v = NaN` it gave
+/// passed the test's `v < 0 || u + v > 1` rejection (false for NaN) as a hit, which
+/// `rt2_hit_surfaces` then refused. Every CPU option and the GPU must return finite hits
+/// or misses for it.
+fn overflowing_barycentric() -> (Vec<f32>, Vec<rt2_ray>) {
+    // The probe's corners (f32 values, printed exactly).
+    let positions = [
+        [
+            -0.8135596513748169,
+            -0.3098127841949463,
+            -0.2084500789642334,
+        ],
+        [-1.0678718090057373, -0.9083579778671265, 0.1575026512145996],
+        [-0.9784814119338989, -0.9599002599716187, 1.8586065769195557],
+        [1.6103475093841553, -0.9007781744003296, -1.497178554534912],
+        [-1.8435988426208496, 1.7184398174285889, 0.5351080894470215],
+        [1.33174467086792, -1.2947356700897217, 1.4644110202789307],
+        [
+            0.9241147041320801,
+            0.030079364776611328,
+            -0.27529728412628174,
+        ],
+        [0.19805574417114258, -0.9817732572555542, 0.7719383239746094],
+        [0.7865009307861328, -1.3763561248779297, 1.0473439693450928],
+    ];
+    // The probe's ray: components of 0x1.c363ccp+127 (3.0e38) and -0x1.1b1c6p+0.
+    let big = f32::from_bits(0x7f61_b1e6);
+    let rays = vec![ray(
+        [-0.0, -big, big],
+        0.0,
+        [-f32::from_bits(0x3f8d_8e30), big, -big],
+        INF,
+    )];
+    (positions.concat(), rays)
+}
+
+#[test]
+fn an_overflowing_barycentric_is_never_a_hit() {
+    let (positions, rays) = overflowing_barycentric();
+    let indices: Vec<u32> = (0..9).collect();
+    let mut backends = vec![Rt2Backend::Cpu];
+    if support::c_gpu_or_skip() {
+        backends.push(Rt2Backend::Gpu);
+    }
+    for backend in backends {
+        let s = Scene::empty(backend).expect("a context (probed)");
+        s.add_mesh(&positions, &indices);
+        let s = s.commit();
+        for (what, opt) in every_option() {
+            if backend == Rt2Backend::Gpu && opt.mode != Rt2QueryMode::Auto as u32 {
+                continue;
+            }
+            match s.intersect(&rays, &opt) {
+                Ok(hits) => {
+                    s.check_hits(&format!("{backend:?} {what}"), &rays, &hits);
                 }
                 Err(st) => assert_eq!(st, Rt2Status::Unsupported, "{what}: {}", last_error()),
             }

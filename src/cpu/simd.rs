@@ -278,7 +278,8 @@ fn moller_trumbore(
     let ok = (det != 0.0)
         & (det * 0.0 == 0.0)
         & (0.0..=1.0).contains(&u)
-        & !(v < 0.0 || u + v > 1.0)
+        & (v >= 0.0)
+        & (u + v <= 1.0)
         & (t >= tmin)
         & (t < tmax);
     (if ok { t } else { f32::INFINITY }, u, v)

@@ -176,7 +176,9 @@ impl Triangle {
         }
         let q = s.cross(e1);
         let v = ray.dir.dot(q) * inv;
-        if v < 0.0 || u + v > 1.0 {
+        // Written so that a NaN `v` (an overflowing `dir · q`, from components near f32::MAX)
+        // is a miss, as a NaN `u` is above.
+        if !(v >= 0.0 && u + v <= 1.0) {
             return None;
         }
         let t = e2.dot(q) * inv;
