@@ -1230,17 +1230,17 @@ const char *rt2_last_error_message(void);
  * error.
  *
  * Every entry is checked before anything is written; on any error `surfaces` is untouched:
- * INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks (a
- * disabled object's too, and a removed one's, which the message says), a hit with a
- * non-finite `t`, `u` or `v` or a ray that always misses (a non-finite `org` or `dir`, a
- * zero `dir`, a NaN `tmin` or `tmax`, `tmin > tmax`; a query never returns such a hit),
- * NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad handle;
- * INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0`
- * with NULL arrays is fine (the scene is still checked, as `rt2_intersect` does). Runs on
- * the calling thread under the scene's read lock, like a query, and allocates nothing but
- * the lookup of `rt2_query_options.exclude`: the first call that names a primitive builds it
- * under the write lock (4 bytes per primitive, kept until a commit places the objects
- * again: `bytes_prim_lookup`).
+ * INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks (a disabled
+ * object's too, and a removed one's, which the message says), a hit with a non-finite `t`, `u` or
+ * `v` or a ray that always misses (a non-finite `org` or `dir`, a zero `dir`, a NaN `tmin` or
+ * `tmax`, `tmin > tmax`; a query never returns such a hit), a hit whose point is too far from its
+ * sphere, ellipsoid or box to be put on the surface (a `t` no query returns: 3e38 on a unit sphere
+ * 5 units away), NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad
+ * handle; INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0`
+ * with NULL arrays is fine (the scene is still checked, as `rt2_intersect` does). Runs on the
+ * calling thread under the scene's read lock, like a query, and allocates nothing but the lookup
+ * of `rt2_query_options.exclude`: the first call that names a primitive builds it under the write
+ * lock (4 bytes per primitive, kept until a commit places the objects again: `bytes_prim_lookup`).
  *
  * # Safety
  * `scene` is a live scene; `rays`, `hits` and `surfaces` hold `count` elements (may be NULL

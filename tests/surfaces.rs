@@ -645,6 +645,12 @@ fn bad_input_is_refused_and_writes_nothing() {
     for rays in [far, zero, empty] {
         refused(&rays, &hits, bad, "rays[1] has org");
     }
+    // A point 3e38 along a ray through the sphere's centre: the root nearest it is lost to
+    // rounding, so it has no point on the surface and no normal (it got a zero one).
+    let mut through = rays;
+    through[1].org = [3.0, 0.0, 6.0];
+    let lost = rt2_hit { t: 3e38, ..hits[1] };
+    refused(&through, &with(1, lost), bad, "hits[1] at t = 3e38");
     let ok_now = scene.surfaces(&rays, &hits);
     assert_eq!(ok_now.0, Rt2Status::Ok, "{}", last_error());
     assert!(

@@ -7,7 +7,8 @@ use super::query::{named_prim, rt2_hit, rt2_ray, RT2_INVALID_ID};
 use super::scene::rt2_scene;
 use crate::error::{Error, Result, Rt2Status};
 use crate::geometry::{Hit, Ray, INVALID};
-use crate::scene::{Committed, PrimLookup};
+use crate::scene::{Committed, HitSurface, PrimLookup};
+use glam::Vec3;
 
 /// The surface at one hit, in world space (28 bytes).
 #[repr(C)]
@@ -45,17 +46,17 @@ const NO_SURFACE: rt2_surface = rt2_surface {
 /// error.
 ///
 /// Every entry is checked before anything is written; on any error `surfaces` is untouched:
-/// INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks (a
-/// disabled object's too, and a removed one's, which the message says), a hit with a
-/// non-finite `t`, `u` or `v` or a ray that always misses (a non-finite `org` or `dir`, a
-/// zero `dir`, a NaN `tmin` or `tmax`, `tmin > tmax`; a query never returns such a hit),
-/// NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad handle;
-/// INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0`
-/// with NULL arrays is fine (the scene is still checked, as `rt2_intersect` does). Runs on
-/// the calling thread under the scene's read lock, like a query, and allocates nothing but
-/// the lookup of `rt2_query_options.exclude`: the first call that names a primitive builds it
-/// under the write lock (4 bytes per primitive, kept until a commit places the objects
-/// again: `bytes_prim_lookup`).
+/// INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks (a disabled
+/// object's too, and a removed one's, which the message says), a hit with a non-finite `t`, `u` or
+/// `v` or a ray that always misses (a non-finite `org` or `dir`, a zero `dir`, a NaN `tmin` or
+/// `tmax`, `tmin > tmax`; a query never returns such a hit), a hit whose point is too far from its
+/// sphere, ellipsoid or box to be put on the surface (a `t` no query returns: 3e38 on a unit sphere
+/// 5 units away), NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad
+/// handle; INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0`
+/// with NULL arrays is fine (the scene is still checked, as `rt2_intersect` does). Runs on the
+/// calling thread under the scene's read lock, like a query, and allocates nothing but the lookup
+/// of `rt2_query_options.exclude`: the first call that names a primitive builds it under the write
+/// lock (4 bytes per primitive, kept until a commit places the objects again: `bytes_prim_lookup`).
 ///
 /// # Safety
 /// `scene` is a live scene; `rays`, `hits` and `surfaces` hold `count` elements (may be NULL
@@ -84,17 +85,13 @@ pub unsafe extern "C" fn rt2_hit_surfaces(
         let out = slice_mut(surfaces, count, "surfaces")?;
         let named = hits.iter().any(|h| !h.is_miss());
         s.with_lookup(named, |c, lookup| {
-            // Every entry checked before any is written, then converted again while writing:
-            // a lookup and a few comparisons each, where keeping the converted hits would
-            // allocate per call.
+            // Every entry checked (its surface computed) before any is written, then computed
+            // again while writing, where keeping the surfaces would allocate per call.
             for (i, (r, h)) in rays.iter().zip(hits).enumerate() {
-                library_hit(c, lookup, i, &Ray::from(r), h)?;
+                surface(c, lookup, i, &Ray::from(r), h)?;
             }
             for (i, ((r, h), o)) in rays.iter().zip(hits).zip(out.iter_mut()).enumerate() {
-                let ray = Ray::from(r);
-                let surface =
-                    library_hit(c, lookup, i, &ray, h)?.and_then(|hit| c.hit_surface(&ray, &hit));
-                *o = surface.map_or(NO_SURFACE, |s| rt2_surface {
+                *o = surface(c, lookup, i, &Ray::from(r), h)?.map_or(NO_SURFACE, |s| rt2_surface {
                     position: s.position.to_array(),
                     normal: s.normal.to_array(),
                     material: s.material,
@@ -103,6 +100,29 @@ pub unsafe extern "C" fn rt2_hit_surfaces(
             Ok(())
         })
     })
+}
+
+/// Entry `i`'s surface (`None` for a miss), once its hit is checked. A point that cannot be
+/// put on the surface (a `t` so far off a sphere, ellipsoid or box that its point is lost to
+/// rounding, which no query returns) has no normal: refused rather than answered with a zero
+/// normal.
+fn surface(
+    c: &Committed,
+    lookup: &PrimLookup,
+    i: usize,
+    ray: &Ray,
+    h: &rt2_hit,
+) -> Result<Option<HitSurface>> {
+    let Some(hit) = library_hit(c, lookup, i, ray, h)? else {
+        return Ok(None);
+    };
+    match c.hit_surface(ray, &hit) {
+        Some(s) if s.normal != Vec3::ZERO => Ok(Some(s)),
+        _ => Err(Error::invalid_argument(format!(
+            "hits[{i}] at t = {:?} on object {} primitive {}: that point of rays[{i}] is too              far from the primitive to be put on its surface (no query returns such a hit)",
+            h.t, h.object, h.prim
+        ))),
+    }
 }
 
 /// Entry `i`'s hit in the library's numbering (`None` for a miss), once checked.
