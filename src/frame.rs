@@ -92,7 +92,7 @@ impl Frame {
         check_png_path(path)?;
         let io =
             |e: &dyn std::fmt::Display| Error::io(format!("cannot write {}: {e}", path.display()));
-        let file = std::fs::File::create(path).map_err(|e| io(&e))?;
+        let file = create_for_writing(path).map_err(|e| io(&e))?;
         let mut out = std::io::BufWriter::new(file);
         image::codecs::png::PngEncoder::new(&mut out)
             .write_image(
@@ -107,6 +107,39 @@ impl Frame {
         out.into_inner().map_err(|e| io(e.error()))?;
         Ok(())
     }
+}
+
+/// Opens `path` for writing as `File::create` does, except that a FIFO no process reads is
+/// an error rather than an open that blocks until a reader comes, perhaps never. On Unix the
+/// open is non-blocking (for a FIFO without a reader it fails with `ENXIO`; a regular file or
+/// a device opens as usual), and the handle is made blocking again, so that writes to a
+/// FIFO that is read wait for the reader as any writer's do.
+fn create_for_writing(path: &Path) -> std::io::Result<std::fs::File> {
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true).create(true).truncate(true);
+    #[cfg(unix)]
+    {
+        use std::os::fd::AsRawFd;
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NONBLOCK);
+        let file = options.open(path).map_err(|e| match e.raw_os_error() {
+            Some(libc::ENXIO) => std::io::Error::other("a FIFO that no process reads"),
+            _ => e,
+        })?;
+        let fd = file.as_raw_fd();
+        // SAFETY: `fd` is the open file's descriptor, alive as long as `file`; F_GETFL and
+        // F_SETFL read and set its status flags only.
+        let cleared = unsafe {
+            let flags = libc::fcntl(fd, libc::F_GETFL);
+            flags >= 0 && libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK) == 0
+        };
+        if !cleared {
+            return Err(std::io::Error::last_os_error());
+        }
+        Ok(file)
+    }
+    #[cfg(not(unix))]
+    options.open(path)
 }
 
 /// Whether a PNG can be written at `path`, checked before any work is done (the CLI checks its

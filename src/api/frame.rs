@@ -103,7 +103,9 @@ pub unsafe extern "C" fn rt2_frame_pixels(frame: *const rt2_frame) -> *const u8 
 /// Saves the frame as an 8-bit RGBA PNG file, replacing any file at `path`. The bytes are
 /// written as they are, with no gamma or colour-space chunk (`rt2_frame_pixels`). The file name
 /// must have the extension `.png` (any case; a bare `.png` has none), else INVALID_ARGUMENT;
-/// a directory at `path`, a missing folder or a failed write is an IO error.
+/// a directory at `path`, a missing folder or a failed write is an IO error. A FIFO at `path`
+/// is written when a process reads it; one that no process reads is an IO error at once
+/// (rather than a call that waits for a reader).
 ///
 /// # Safety
 /// `frame` is a live frame; `path` is a NUL-terminated string.
