@@ -977,6 +977,44 @@ fn temp_file(file_name: &str, content: &[u8]) -> PathBuf {
     path
 }
 
+/// A file whose geometry `rt2_scene_add_mesh` would refuse (a triangle whose edges overflow
+/// f32) is INVALID_ARGUMENT through `rt2_scene_load_file`, naming the file and the triangle,
+/// and adds nothing to the scene.
+#[test]
+fn a_file_with_a_triangle_beyond_f32_is_refused_naming_file_and_triangle() {
+    use rt2::api::*;
+    let path = temp_file(
+        "huge.obj",
+        b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 3e38 0 0\nv -3e38 1 0\nf 1 2 3\nf 4 5 3\n",
+    );
+    let c_path = std::ffi::CString::new(path.to_str().unwrap()).unwrap();
+    let (mut ctx, mut scene) = (std::ptr::null_mut(), std::ptr::null_mut());
+    // SAFETY: handles made and destroyed here; `c_path` is a C string.
+    unsafe {
+        assert_eq!(
+            rt2_context_create(std::ptr::null(), &mut ctx),
+            Rt2Status::Ok
+        );
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let mut id = 7;
+        let status = rt2_scene_load_file(scene, c_path.as_ptr(), 0, &mut id);
+        let message = support::last_error();
+        assert_eq!(status, Rt2Status::InvalidArgument, "{message}");
+        assert!(message.contains(&path.display().to_string()), "{message}");
+        assert!(message.contains("triangle 1"), "{message}");
+        assert_eq!(id, 7, "no id written");
+        let mut stats = rt2_scene_statistics {
+            struct_size: std::mem::size_of::<rt2_scene_statistics>() as u32,
+            ..Default::default()
+        };
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        assert_eq!(rt2_scene_stats(scene, &mut stats), Rt2Status::Ok);
+        assert_eq!(stats.object_count, 0, "nothing added");
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
 #[test]
 fn load_mesh_picks_format_by_extension_case_insensitively() {
     let ply = temp_file("Upper.PLY", &binary_with_extras(true));

@@ -346,17 +346,19 @@ pub unsafe extern "C" fn rt2_scene_add_plane(
     })
 }
 
-/// Loads a triangle mesh from a `.ply` (ASCII or binary) or `.obj` file as one object.
-/// The extension alone picks the format (`.ply` or `.obj`, any case; the contents are not
-/// sniffed) and is checked first: any other extension, or none, is UNSUPPORTED before the
-/// path is looked at, even for a missing file or a directory. Then only regular files are
-/// read: a missing file, a FIFO, device or directory is an IO error. Parse errors name the
-/// file and the line or byte offset at fault. Triangles keep the file's face order
-/// (polygons are fan-triangulated); a file without faces is a PARSE error, whatever its
-/// format. OBJ: positions (`v`) and faces (`f`) are read; normals, texture coordinates,
-/// groups, materials, points and lines (no surface) are skipped; curved surfaces and any other
-/// statement are a PARSE error rather than dropped. The file is read and parsed before the
-/// scene is locked, so other calls on the scene do not wait for a slow file.
+/// Loads a triangle mesh from a `.ply` (ASCII or binary) or `.obj` file as one object. The
+/// extension alone picks the format (`.ply` or `.obj`, any case; the contents are not sniffed)
+/// and is checked first: any other extension, or none, is UNSUPPORTED before the path is looked
+/// at, even for a missing file or a directory. Then only regular files are read: a missing
+/// file, a FIFO, device or directory is an IO error. Parse errors name the file and the line or
+/// byte offset at fault. Triangles keep the file's face order (polygons are fan-triangulated);
+/// a file without faces is a PARSE error, whatever its format. OBJ: positions (`v`) and faces
+/// (`f`) are read; normals, texture coordinates, groups, materials, points and lines (no
+/// surface) are skipped; curved surfaces and any other statement are a PARSE error rather than
+/// dropped. Geometry that `rt2_scene_add_mesh` would refuse (a triangle that does not fit in
+/// f32) is INVALID_ARGUMENT, naming the file and the triangle (in face order). The file is read
+/// and parsed before the scene is locked, so other calls on the scene do not wait for a slow
+/// file.
 ///
 /// # Safety
 /// `scene` is a live scene; `path` is a NUL-terminated string.
@@ -370,13 +372,19 @@ pub unsafe extern "C" fn rt2_scene_load_file(
     prepare_and_edit(
         scene,
         (out_object, "out_object"),
-        || loaders::load_mesh(&path_arg(path, "path")?),
-        |s, mesh| {
+        || {
+            let path = path_arg(path, "path")?;
+            loaders::load_mesh(&path).map(|mesh| (path, mesh))
+        },
+        |s, (path, mesh)| {
             let shape = Shape::Mesh {
                 positions: mesh.positions,
                 triangles: mesh.triangles,
             };
-            s.add_object(shape, material)
+            s.add_object(shape, material).map_err(|e| Error {
+                message: format!("{}: {}", path.display(), e.message),
+                ..e
+            })
         },
     )
 }
