@@ -385,7 +385,9 @@ fn obj_all_face_forms_and_ignored_statements() {
         f 1 2 3\n\
         f 1/1 2/1 3/1\n\
         f 1//1 2//1 3//1\n\
-        f 1/1/1 2/1/1 3/1/1 4/1/1\n";
+        f 1/1/1 2/1/1 3/1/1 4/1/1\n\
+        f 1/99999999999999999999 2/1 3/1\n";
+    // Texture and normal indices are not read: one past i64 is still a well-formed face.
     let mesh = parse_obj(text.as_bytes(), "forms.obj").unwrap();
     assert_eq!(
         mesh.positions,
@@ -398,7 +400,14 @@ fn obj_all_face_forms_and_ignored_statements() {
     );
     assert_eq!(
         mesh.triangles,
-        vec![[0, 1, 2], [0, 1, 2], [0, 1, 2], [0, 1, 2], [0, 2, 3]]
+        vec![
+            [0, 1, 2],
+            [0, 1, 2],
+            [0, 1, 2],
+            [0, 1, 2],
+            [0, 2, 3],
+            [0, 1, 2]
+        ]
     );
 }
 
@@ -897,6 +906,16 @@ fn malformed_obj_errors_name_file_and_line() {
             "negrange.obj",
             "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n",
             &["line 4:", "index -4 out of range"],
+        ),
+        (
+            "hugeindex.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999\n",
+            &["line 4:", "index 99999999999999999999 out of range"],
+        ),
+        (
+            "hugeneg.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -99999999999999999999\n",
+            &["line 4:", "index -99999999999999999999 out of range"],
         ),
         (
             "zero.obj",

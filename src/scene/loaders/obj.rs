@@ -185,7 +185,10 @@ fn vertex_ref(tok: &str, defined: usize) -> std::result::Result<u32, String> {
     if parts.next().is_some() {
         return Err("too many '/' parts".into());
     }
-    let is_int = |s: &str| s.parse::<i64>().is_ok();
+    use std::num::IntErrorKind::{NegOverflow, PosOverflow};
+    let overflows = |e: &std::num::ParseIntError| matches!(e.kind(), PosOverflow | NegOverflow);
+    // Texture and normal indices are checked for form only (they are not read), however large.
+    let is_int = |s: &str| s.parse::<i64>().map_or_else(|e| overflows(&e), |_| true);
     // `i/t`, `i/t/n` need an integer t; only `i//n` may leave it empty, and then n is required.
     match (t, n) {
         (None, _) => {}
@@ -193,9 +196,10 @@ fn vertex_ref(tok: &str, defined: usize) -> std::result::Result<u32, String> {
         (Some(t), Some(n)) if (t.is_empty() || is_int(t)) && is_int(n) => {}
         _ => return Err("malformed texture/normal index".into()),
     }
-    let i: i64 = v
-        .parse()
-        .map_err(|_| format!("{} is not an integer", Quoted(v)))?;
+    let i: i64 = v.parse().map_err(|e| match overflows(&e) {
+        true => format!("index {v} out of range ({defined} vertices defined so far)"),
+        false => format!("{} is not an integer", Quoted(v)),
+    })?;
     let resolved = match i {
         0 => return Err("index 0 is invalid (OBJ indices start at 1)".into()),
         i if i > 0 => i - 1,
