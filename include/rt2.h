@@ -1042,7 +1042,9 @@ enum rt2_status rt2_scene_add_mesh(rt2_scene *scene,
                                    uint32_t *out_object);
 
 /**
- * Adds a sphere (radius > 0). It stays analytic.
+ * Adds a sphere (radius > 0). It stays analytic. INVALID_ARGUMENT (and nothing added) also
+ * for one that does not fit in f32 in world space: the square of its radius must be a normal
+ * f32 (a radius from about 1.1e-19 to 1.8e19) and its bounds finite (README, "Range").
  *
  * # Safety
  * `scene` is a live scene; `center` holds 3 floats.
@@ -1055,6 +1057,8 @@ enum rt2_status rt2_scene_add_sphere(rt2_scene *scene,
 
 /**
  * Adds an axis-aligned ellipsoid with semi-axes `radii` (each > 0); a transform may rotate it.
+ * INVALID_ARGUMENT (and nothing added) also for one that does not fit in f32 in world space:
+ * its bounds and its inverse map must be finite (README, "Range").
  *
  * # Safety
  * `scene` is a live scene; `center` and `radii` hold 3 floats.
@@ -1079,6 +1083,9 @@ enum rt2_status rt2_scene_add_box(rt2_scene *scene,
 
 /**
  * Adds the infinite plane `dot(normal, x) = offset` (`normal` non-zero, any length).
+ * INVALID_ARGUMENT (and nothing added) also for a plane that does not fit in f32 in world
+ * space: `offset` divided by the normal's largest component must be finite (normal
+ * `(1e-45, 0, 0)` with offset 1 is refused).
  *
  * # Safety
  * `scene` is a live scene; `normal` holds 3 floats.

@@ -353,6 +353,80 @@ fn objects_beyond_the_f32_range_are_errors_and_extreme_valid_ones_are_hit() {
 /// Outputs of the queries may not overlap their rays: the hits are written while the rays are
 /// read, one step at a time (and Rust may not read what it writes through another borrow).
 /// Such a call is an error naming both arrays, and neither is written.
+/// The documented limits of the analytic shapes: a sphere's squared radius must be a normal
+/// f32 (radii from about 1.1e-19 to 1.8e19), an ellipsoid's inverse finite, a plane's offset
+/// over its normal's largest component finite. Past them: INVALID_ARGUMENT, nothing added.
+#[test]
+fn analytic_shapes_are_refused_past_their_documented_limits() {
+    unsafe {
+        let (mut ctx, mut scene) = (null_mut(), null_mut());
+        let mut desc = rt2_context_desc_default();
+        desc.backend = Rt2Backend::Cpu as u32;
+        assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
+        assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
+        let origin = [0.0f32; 3];
+        let fits = |status: Rt2Status| match status {
+            Rt2Status::Ok => true,
+            Rt2Status::InvalidArgument => {
+                assert!(
+                    last_error().contains("does not fit in f32"),
+                    "{}",
+                    last_error()
+                );
+                false
+            }
+            other => panic!("{other:?}: {}", last_error()),
+        };
+        for (radius, expected) in [
+            (1.8e19f32, true),
+            (1.1e-19, true),
+            (1.9e19, false),
+            (1e-19, false),
+            (1e30, false),
+            (1e-45, false),
+        ] {
+            let added = fits(rt2_scene_add_sphere(
+                scene,
+                origin.as_ptr(),
+                radius,
+                0,
+                null_mut(),
+            ));
+            assert_eq!(added, expected, "sphere of radius {radius:e}");
+        }
+        let radii = [1e-45f32, 1e30, 1.0];
+        let added = fits(rt2_scene_add_ellipsoid(
+            scene,
+            origin.as_ptr(),
+            radii.as_ptr(),
+            0,
+            null_mut(),
+        ));
+        assert!(!added, "ellipsoid {radii:?}");
+        let short = [1e-45f32, 0.0, 0.0];
+        for (offset, expected) in [(1.0f32, false), (0.0, true)] {
+            let added = fits(rt2_scene_add_plane(
+                scene,
+                short.as_ptr(),
+                offset,
+                0,
+                null_mut(),
+            ));
+            assert_eq!(added, expected, "plane (1e-45, 0, 0) . x = {offset}");
+        }
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        let mut st = std::mem::zeroed::<rt2_scene_statistics>();
+        st.struct_size = std::mem::size_of::<rt2_scene_statistics>() as u32;
+        assert_eq!(rt2_scene_stats(scene, &mut st), Rt2Status::Ok);
+        assert_eq!(
+            (st.object_count, st.sphere_count, st.plane_count),
+            (3, 2, 1)
+        );
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
 #[test]
 fn query_outputs_overlapping_their_rays_are_errors() {
     unsafe {

@@ -272,7 +272,9 @@ pub unsafe extern "C" fn rt2_scene_add_mesh(
     })
 }
 
-/// Adds a sphere (radius > 0). It stays analytic.
+/// Adds a sphere (radius > 0). It stays analytic. INVALID_ARGUMENT (and nothing added) also
+/// for one that does not fit in f32 in world space: the square of its radius must be a normal
+/// f32 (a radius from about 1.1e-19 to 1.8e19) and its bounds finite (README, "Range").
 ///
 /// # Safety
 /// `scene` is a live scene; `center` holds 3 floats.
@@ -291,6 +293,8 @@ pub unsafe extern "C" fn rt2_scene_add_sphere(
 }
 
 /// Adds an axis-aligned ellipsoid with semi-axes `radii` (each > 0); a transform may rotate it.
+/// INVALID_ARGUMENT (and nothing added) also for one that does not fit in f32 in world space:
+/// its bounds and its inverse map must be finite (README, "Range").
 ///
 /// # Safety
 /// `scene` is a live scene; `center` and `radii` hold 3 floats.
@@ -329,6 +333,9 @@ pub unsafe extern "C" fn rt2_scene_add_box(
 }
 
 /// Adds the infinite plane `dot(normal, x) = offset` (`normal` non-zero, any length).
+/// INVALID_ARGUMENT (and nothing added) also for a plane that does not fit in f32 in world
+/// space: `offset` divided by the normal's largest component must be finite (normal
+/// `(1e-45, 0, 0)` with offset 1 is refused).
 ///
 /// # Safety
 /// `scene` is a live scene; `normal` holds 3 floats.
