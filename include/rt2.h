@@ -881,7 +881,8 @@ const uint8_t *rt2_frame_pixels(const rt2_frame *frame);
  * must have the extension `.png` (any case; a bare `.png` has none), else INVALID_ARGUMENT;
  * a directory at `path`, a missing folder or a failed write is an IO error. A FIFO at `path`
  * is written when a process reads it; one that no process reads is an IO error at once
- * (rather than a call that waits for a reader).
+ * (rather than a call that waits for a reader). As with any write to a pipe, a reader that
+ * closes it early raises SIGPIPE in the calling process unless that signal is ignored.
  *
  * # Safety
  * `frame` is a live frame; `path` is a NUL-terminated string.
@@ -1058,7 +1059,8 @@ enum rt2_status rt2_scene_add_sphere(rt2_scene *scene,
 /**
  * Adds an axis-aligned ellipsoid with semi-axes `radii` (each > 0); a transform may rotate it.
  * INVALID_ARGUMENT (and nothing added) also for one that does not fit in f32 in world space:
- * its bounds and its inverse map must be finite (README, "Range").
+ * each semi-axis squared must neither overflow nor vanish (semi-axes from about 3.7e-23 to
+ * 1.8e19), and its bounds and inverse map must be finite (README, "Range").
  *
  * # Safety
  * `scene` is a live scene; `center` and `radii` hold 3 floats.
@@ -1245,8 +1247,8 @@ const char *rt2_last_error_message(void);
  * object's too, and a removed one's, which the message says), a hit with a non-finite `t`, `u` or
  * `v` or a ray that always misses (a non-finite `org` or `dir`, a zero `dir`, a NaN `tmin` or
  * `tmax`, `tmin > tmax`; a query never returns such a hit), a hit whose point is too far from its
- * sphere, ellipsoid or box to be put on the surface (a `t` no query returns: 3e38 on a unit sphere
- * 5 units away), NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad
+ * sphere or ellipsoid to be put on the surface (a `t` no query returns: 3e38 on a unit sphere 5
+ * units away), NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad
  * handle; INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0`
  * with NULL arrays is fine (the scene is still checked, as `rt2_intersect` does). Runs on the
  * calling thread under the scene's read lock, like a query, and allocates nothing but the lookup

@@ -155,12 +155,13 @@ fn hit_triangle(tri: Triangle, r: Ray, tmax: f32) -> Tuv {
     let inv = 1.0 / det;
     let s = r.org - v3(tri.v0);
     let u = dot(s, p) * inv;
-    if (!(u >= 0.0 && u <= 1.0)) { return no; }
+    if (is_nan(u) || u < 0.0 || u > 1.0) { return no; }
     let q = cross(s, e1);
     let v = dot(r.dir, q) * inv;
-    if (!(v >= 0.0 && u + v <= 1.0)) { return no; }
+    // A NaN v (an overflowing dot product) is a miss, as on the CPU.
+    if (is_nan(v) || v < 0.0 || u + v > 1.0) { return no; }
     let t = dot(e2, q) * inv;
-    if (t >= r.tmin && t < tmax) { return Tuv(true, t, u, v); }
+    if (!is_nan(t) && t >= r.tmin && t < tmax) { return Tuv(true, t, u, v); }
     return no;
 }
 

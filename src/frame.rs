@@ -120,11 +120,18 @@ fn create_for_writing(path: &Path) -> std::io::Result<std::fs::File> {
     #[cfg(unix)]
     {
         use std::os::fd::AsRawFd;
-        use std::os::unix::fs::OpenOptionsExt;
+        use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
         options.custom_flags(libc::O_NONBLOCK);
-        let file = options.open(path).map_err(|e| match e.raw_os_error() {
-            Some(libc::ENXIO) => std::io::Error::other("a FIFO that no process reads"),
-            _ => e,
+        let file = options.open(path).map_err(|e| {
+            // ENXIO also comes from a socket or a device without its hardware: said only of
+            // a FIFO.
+            let fifo = e.raw_os_error() == Some(libc::ENXIO)
+                && std::fs::metadata(path).is_ok_and(|m| m.file_type().is_fifo());
+            if fifo {
+                std::io::Error::new(e.kind(), "a FIFO that no process reads")
+            } else {
+                e
+            }
         })?;
         let fd = file.as_raw_fd();
         // SAFETY: `fd` is the open file's descriptor, alive as long as `file`; F_GETFL and

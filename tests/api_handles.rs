@@ -350,12 +350,10 @@ fn objects_beyond_the_f32_range_are_errors_and_extreme_valid_ones_are_hit() {
     }
 }
 
-/// Outputs of the queries may not overlap their rays: the hits are written while the rays are
-/// read, one step at a time (and Rust may not read what it writes through another borrow).
-/// Such a call is an error naming both arrays, and neither is written.
 /// The documented limits of the analytic shapes: a sphere's squared radius must be a normal
-/// f32 (radii from about 1.1e-19 to 1.8e19), an ellipsoid's inverse finite, a plane's offset
-/// over its normal's largest component finite. Past them: INVALID_ARGUMENT, nothing added.
+/// f32 (radii from about 1.1e-19 to 1.8e19), an ellipsoid's squared semi-axes must neither
+/// overflow nor vanish (about 3.7e-23 to 1.8e19), a plane's offset over its normal's largest
+/// component must be finite. Past them: INVALID_ARGUMENT, nothing added.
 #[test]
 fn analytic_shapes_are_refused_past_their_documented_limits() {
     unsafe {
@@ -394,15 +392,22 @@ fn analytic_shapes_are_refused_past_their_documented_limits() {
             ));
             assert_eq!(added, expected, "sphere of radius {radius:e}");
         }
-        let radii = [1e-45f32, 1e30, 1.0];
-        let added = fits(rt2_scene_add_ellipsoid(
-            scene,
-            origin.as_ptr(),
-            radii.as_ptr(),
-            0,
-            null_mut(),
-        ));
-        assert!(!added, "ellipsoid {radii:?}");
+        for (axis, expected) in [
+            (1.8e19f32, true),
+            (1e-22, true),
+            (1.9e19, false),
+            (1e-23, false),
+        ] {
+            let radii = [axis, 1.0, 1.0];
+            let added = fits(rt2_scene_add_ellipsoid(
+                scene,
+                origin.as_ptr(),
+                radii.as_ptr(),
+                0,
+                null_mut(),
+            ));
+            assert_eq!(added, expected, "ellipsoid {radii:?}");
+        }
         let short = [1e-45f32, 0.0, 0.0];
         for (offset, expected) in [(1.0f32, false), (0.0, true)] {
             let added = fits(rt2_scene_add_plane(
@@ -419,14 +424,22 @@ fn analytic_shapes_are_refused_past_their_documented_limits() {
         st.struct_size = std::mem::size_of::<rt2_scene_statistics>() as u32;
         assert_eq!(rt2_scene_stats(scene, &mut st), Rt2Status::Ok);
         assert_eq!(
-            (st.object_count, st.sphere_count, st.plane_count),
-            (3, 2, 1)
+            (
+                st.object_count,
+                st.sphere_count,
+                st.ellipsoid_count,
+                st.plane_count
+            ),
+            (5, 2, 2, 1)
         );
         rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);
     }
 }
 
+/// Outputs of the queries may not overlap their rays: the hits are written while the rays are
+/// read, one step at a time (and Rust may not read what it writes through another borrow).
+/// Such a call is an error naming both arrays, and neither is written.
 #[test]
 fn query_outputs_overlapping_their_rays_are_errors() {
     unsafe {

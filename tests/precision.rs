@@ -732,21 +732,24 @@ fn both_tests_match_the_f64_reference() {
 }
 
 /// Both tests decide in f32 on which side of each edge a ray passes, from the corners taken
-/// relative to the ray origin (rounded there): a ray passing within a few ULPs of its origin's
-/// distance from an edge can go either way, a hit just beside the triangle or a miss just
-/// inside it. Rays aimed at and around triangles about 1 across from `d` away, counted against
-/// the f64 reference: the share of wrong answers grows with `d` and stays within the README's
-/// figures ("Range"); from 1e7 away (about 2^24 times the triangles' size) it is noise.
+/// relative to the ray origin (rounded there): a ray passing an edge closer than a few ULPs of
+/// its origin's distance can go either way, a hit just beside the triangle or a miss just
+/// inside it. Rays aimed at and around triangles about 1 across from `d` away (20,000 per
+/// distance, drawn the same way every run), counted against the f64 reference: the share of
+/// wrong answers grows with `d`, and stays within about 1.6 times the README's figures
+/// ("Range"); from 1e7 away (about 2^24 times the triangles' size) it is about the share of
+/// rays that hit: no better than answering "miss" every time.
 #[test]
 fn edge_decisions_degrade_with_the_origin_distance_as_documented() {
     const RAYS: usize = 20_000;
     let mut rng = Rng(9);
-    // The distance, and the most wrong answers per ray allowed (None: at least 5% wrong).
+    // The distance, and the most wrong answers per ray allowed (None: at least 10% wrong).
+    let mut before = [0.0f64; 2];
     for (d, most) in [
-        (1e3f32, Some(5e-4)),
-        (1e4, Some(2e-3)),
-        (1e5, Some(1e-2)),
-        (1e6, Some(6e-2)),
+        (1e3f32, Some(1e-4)),
+        (1e4, Some(4e-4)),
+        (1e5, Some(6e-3)),
+        (1e6, Some(5.5e-2)),
         (1e7, None),
     ] {
         let mut wrong = [0usize; 2];
@@ -767,8 +770,15 @@ fn edge_decisions_degrade_with_the_origin_distance_as_documented() {
         eprintln!("from {d:e}: wrong answers {share:?} (Möller–Trumbore, watertight)");
         match most {
             Some(most) => assert!(share.iter().all(|&s| s <= most), "from {d:e}: {share:?}"),
-            None => assert!(share.iter().all(|&s| s >= 0.05), "from {d:e}: {share:?}"),
+            None => assert!(share.iter().all(|&s| s >= 0.1), "from {d:e}: {share:?}"),
         }
+        if d > 1e3 {
+            assert!(
+                share.iter().zip(before).all(|(&s, b)| s > b),
+                "from {d:e}: {share:?}, no more than {before:?} nearer"
+            );
+        }
+        before = share;
     }
 }
 

@@ -63,11 +63,9 @@ fn a_frame_saved_to_a_fifo_is_written_only_when_something_reads_it() {
                 .map(|_| bytes)
         })
     };
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
     let mut status = save();
-    for _ in 0..500 {
-        if status != Rt2Status::Io {
-            break;
-        }
+    while status == Rt2Status::Io && std::time::Instant::now() < deadline {
         std::thread::sleep(std::time::Duration::from_millis(10));
         status = save();
     }

@@ -105,7 +105,8 @@ pub unsafe extern "C" fn rt2_frame_pixels(frame: *const rt2_frame) -> *const u8 
 /// must have the extension `.png` (any case; a bare `.png` has none), else INVALID_ARGUMENT;
 /// a directory at `path`, a missing folder or a failed write is an IO error. A FIFO at `path`
 /// is written when a process reads it; one that no process reads is an IO error at once
-/// (rather than a call that waits for a reader).
+/// (rather than a call that waits for a reader). As with any write to a pipe, a reader that
+/// closes it early raises SIGPIPE in the calling process unless that signal is ignored.
 ///
 /// # Safety
 /// `frame` is a live frame; `path` is a NUL-terminated string.

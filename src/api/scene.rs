@@ -294,7 +294,8 @@ pub unsafe extern "C" fn rt2_scene_add_sphere(
 
 /// Adds an axis-aligned ellipsoid with semi-axes `radii` (each > 0); a transform may rotate it.
 /// INVALID_ARGUMENT (and nothing added) also for one that does not fit in f32 in world space:
-/// its bounds and its inverse map must be finite (README, "Range").
+/// each semi-axis squared must neither overflow nor vanish (semi-axes from about 3.7e-23 to
+/// 1.8e19), and its bounds and inverse map must be finite (README, "Range").
 ///
 /// # Safety
 /// `scene` is a live scene; `center` and `radii` hold 3 floats.

@@ -50,8 +50,8 @@ const NO_SURFACE: rt2_surface = rt2_surface {
 /// object's too, and a removed one's, which the message says), a hit with a non-finite `t`, `u` or
 /// `v` or a ray that always misses (a non-finite `org` or `dir`, a zero `dir`, a NaN `tmin` or
 /// `tmax`, `tmin > tmax`; a query never returns such a hit), a hit whose point is too far from its
-/// sphere, ellipsoid or box to be put on the surface (a `t` no query returns: 3e38 on a unit sphere
-/// 5 units away), NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad
+/// sphere or ellipsoid to be put on the surface (a `t` no query returns: 3e38 on a unit sphere 5
+/// units away), NULL arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad
 /// handle; INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0`
 /// with NULL arrays is fine (the scene is still checked, as `rt2_intersect` does). Runs on the
 /// calling thread under the scene's read lock, like a query, and allocates nothing but the lookup
@@ -103,7 +103,7 @@ pub unsafe extern "C" fn rt2_hit_surfaces(
 }
 
 /// Entry `i`'s surface (`None` for a miss), once its hit is checked. A point that cannot be
-/// put on the surface (a `t` so far off a sphere, ellipsoid or box that its point is lost to
+/// put on the surface (a `t` so far off a sphere or ellipsoid that its point is lost to
 /// rounding, which no query returns) has no normal: refused rather than answered with a zero
 /// normal.
 fn surface(
@@ -119,7 +119,8 @@ fn surface(
     match c.hit_surface(ray, &hit) {
         Some(s) if s.normal != Vec3::ZERO => Ok(Some(s)),
         _ => Err(Error::invalid_argument(format!(
-            "hits[{i}] at t = {:?} on object {} primitive {}: that point of rays[{i}] is too              far from the primitive to be put on its surface (no query returns such a hit)",
+            "hits[{i}] at t = {:?} on object {} primitive {}: that point of rays[{i}] is too \
+             far from the primitive to be put on its surface (no query returns such a hit)",
             h.t, h.object, h.prim
         ))),
     }

@@ -405,6 +405,27 @@ impl Sheared {
 mod tests {
     use super::*;
 
+    /// A ray from near `f32::MAX` (a C-API probe's, its direction scaled by 2^-127 into
+    /// [1, 2) as a query scales it) whose `dir · q` overflows to `inf - inf`: the NaN `v`
+    /// passed the rejection `v < 0 || u + v > 1` (false for NaN) as a hit. A miss now, or at
+    /// least no hit with a non-finite `t`, `u` or `v`.
+    #[test]
+    fn an_overflowing_v_is_never_a_hit() {
+        let tri = Triangle::from_vertices(
+            Vec3::new(0.9241147, 0.030079365, -0.27529728),
+            Vec3::new(0.19805574, -0.98177326, 0.7719383),
+            Vec3::new(0.78650093, -1.3763561, 1.047344),
+        );
+        let big = f32::from_bits(0x7f61_b1e6);
+        let dir = Vec3::new(-f32::from_bits(0x3f8d_8e30), big, -big) * f32::from_bits(0x0040_0000);
+        let ray = Ray::new(Vec3::new(-0.0, -big, big), dir, 0.0, f32::INFINITY);
+        let hit = tri.intersect(&ray, &TriangleTest::MollerTrumbore, f32::INFINITY);
+        assert!(
+            hit.is_none_or(|(t, u, v)| [t, u, v].iter().all(|x| x.is_finite())),
+            "{hit:?}"
+        );
+    }
+
     /// One triangle at scales from 1e-30 to 1e18: the unit normal of the triangle at unit
     /// scale, (2, 3, 6) / 7 for this one, whatever the scale; at unit scale the plain
     /// normalisation's bits.

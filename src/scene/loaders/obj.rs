@@ -188,17 +188,21 @@ fn vertex_ref(tok: &str, defined: usize) -> std::result::Result<u32, String> {
     use std::num::IntErrorKind::{NegOverflow, PosOverflow};
     let overflows = |e: &std::num::ParseIntError| matches!(e.kind(), PosOverflow | NegOverflow);
     // Texture and normal indices are checked for form only (they are not read), however large.
-    let is_int = |s: &str| s.parse::<i64>().map_or_else(|e| overflows(&e), |_| true);
+    let integer = |s: &str| s.parse::<i64>().map_or_else(|e| overflows(&e), |_| true);
     // `i/t`, `i/t/n` need an integer t; only `i//n` may leave it empty, and then n is required.
     match (t, n) {
         (None, _) => {}
-        (Some(t), None) if is_int(t) => {}
-        (Some(t), Some(n)) if (t.is_empty() || is_int(t)) && is_int(n) => {}
+        (Some(t), None) if integer(t) => {}
+        (Some(t), Some(n)) if (t.is_empty() || integer(t)) && integer(n) => {}
         _ => return Err("malformed texture/normal index".into()),
     }
-    let i: i64 = v.parse().map_err(|e| match overflows(&e) {
-        true => format!("index {v} out of range ({defined} vertices defined so far)"),
-        false => format!("{} is not an integer", Quoted(v)),
+    let out_of_range = || format!("index {v} out of range ({defined} vertices defined so far)");
+    let i: i64 = v.parse().map_err(|e| {
+        if overflows(&e) {
+            out_of_range()
+        } else {
+            format!("{} is not an integer", Quoted(v))
+        }
     })?;
     let resolved = match i {
         0 => return Err("index 0 is invalid (OBJ indices start at 1)".into()),
@@ -206,9 +210,7 @@ fn vertex_ref(tok: &str, defined: usize) -> std::result::Result<u32, String> {
         i => defined as i64 + i,
     };
     if resolved < 0 || resolved >= defined as i64 {
-        return Err(format!(
-            "index {i} out of range ({defined} vertices defined so far)"
-        ));
+        return Err(out_of_range());
     }
     u32::try_from(resolved).map_err(|_| "index does not fit 32 bits".into())
 }
