@@ -86,7 +86,10 @@ pub unsafe extern "C" fn rt2_hit_surfaces(
         let named = hits.iter().any(|h| !h.is_miss());
         s.with_lookup(named, |c, lookup| {
             // Every entry checked (its surface computed) before any is written, then computed
-            // again while writing, where keeping the surfaces would allocate per call.
+            // again while writing, where keeping the surfaces would allocate per call. That
+            // cost 1.17x the time of checking the hits alone on the bunny's hits and 1.7x on
+            // spheres' (1024² rays, one thread); checking only the kinds whose normal can be
+            // missing cost more on the bunny (1.3x: the check reads every triangle).
             for (i, (r, h)) in rays.iter().zip(hits).enumerate() {
                 surface(c, lookup, i, &Ray::from(r), h)?;
             }
