@@ -363,6 +363,7 @@ fn analytic_shapes_are_refused_past_their_documented_limits() {
         assert_eq!(rt2_context_create(&desc, &mut ctx), Rt2Status::Ok);
         assert_eq!(rt2_scene_create(ctx, &mut scene), Rt2Status::Ok);
         let origin = [0.0f32; 3];
+        let (o, none) = (origin.as_ptr(), null_mut());
         let fits = |status: Rt2Status| match status {
             Rt2Status::Ok => true,
             Rt2Status::InvalidArgument => {
@@ -383,13 +384,7 @@ fn analytic_shapes_are_refused_past_their_documented_limits() {
             (1e30, false),
             (1e-45, false),
         ] {
-            let added = fits(rt2_scene_add_sphere(
-                scene,
-                origin.as_ptr(),
-                radius,
-                0,
-                null_mut(),
-            ));
+            let added = fits(rt2_scene_add_sphere(scene, o, radius, 0, none));
             assert_eq!(added, expected, "sphere of radius {radius:e}");
         }
         for (axis, expected) in [
@@ -399,24 +394,12 @@ fn analytic_shapes_are_refused_past_their_documented_limits() {
             (1e-23, false),
         ] {
             let radii = [axis, 1.0, 1.0];
-            let added = fits(rt2_scene_add_ellipsoid(
-                scene,
-                origin.as_ptr(),
-                radii.as_ptr(),
-                0,
-                null_mut(),
-            ));
+            let added = fits(rt2_scene_add_ellipsoid(scene, o, radii.as_ptr(), 0, none));
             assert_eq!(added, expected, "ellipsoid {radii:?}");
         }
         let short = [1e-45f32, 0.0, 0.0];
         for (offset, expected) in [(1.0f32, false), (0.0, true)] {
-            let added = fits(rt2_scene_add_plane(
-                scene,
-                short.as_ptr(),
-                offset,
-                0,
-                null_mut(),
-            ));
+            let added = fits(rt2_scene_add_plane(scene, short.as_ptr(), offset, 0, none));
             assert_eq!(added, expected, "plane (1e-45, 0, 0) . x = {offset}");
         }
         assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
