@@ -8,7 +8,6 @@ use super::scene::rt2_scene;
 use crate::error::{Error, Result, Rt2Status};
 use crate::geometry::{Hit, Ray, INVALID};
 use crate::scene::{Committed, HitSurface, PrimLookup};
-use glam::Vec3;
 
 /// The surface at one hit, in world space (28 bytes).
 #[repr(C)]
@@ -105,10 +104,8 @@ pub unsafe extern "C" fn rt2_hit_surfaces(
     })
 }
 
-/// Entry `i`'s surface (`None` for a miss), once its hit is checked. A point that cannot be
-/// put on the surface (a `t` so far off a sphere or ellipsoid that its point is lost to
-/// rounding, which no query returns) has no normal: refused rather than answered with a zero
-/// normal.
+/// Entry `i`'s surface (`None` for a miss), once its hit is checked. A hit without a unit
+/// normal (`Committed::hit_surface`) is refused rather than answered with a zero normal.
 fn surface(
     c: &Committed,
     lookup: &PrimLookup,
@@ -116,17 +113,16 @@ fn surface(
     ray: &Ray,
     h: &rt2_hit,
 ) -> Result<Option<HitSurface>> {
-    let Some(hit) = library_hit(c, lookup, i, ray, h)? else {
-        return Ok(None);
+    let surface = |hit| {
+        c.hit_surface(ray, &hit).ok_or_else(|| {
+            Error::invalid_argument(format!(
+                "hits[{i}] at t = {:?} on object {} primitive {}: that point of rays[{i}] cannot \
+                 be put on the primitive's surface (no query returns such a hit)",
+                h.t, h.object, h.prim
+            ))
+        })
     };
-    match c.hit_surface(ray, &hit) {
-        Some(s) if s.normal != Vec3::ZERO => Ok(Some(s)),
-        _ => Err(Error::invalid_argument(format!(
-            "hits[{i}] at t = {:?} on object {} primitive {}: that point of rays[{i}] is too \
-             far from the primitive to be put on its surface (no query returns such a hit)",
-            h.t, h.object, h.prim
-        ))),
-    }
+    library_hit(c, lookup, i, ray, h)?.map(surface).transpose()
 }
 
 /// Entry `i`'s hit in the library's numbering (`None` for a miss), once checked.
