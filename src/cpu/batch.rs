@@ -481,11 +481,7 @@ impl<const N: usize> Block<N> {
         let live = self.lanes.mask;
         let negative = self.negative(isa);
         let shared = (0..3).all(|a| negative[a] == 0 || negative[a] == live);
-        (live != 0 && shared).then(|| {
-            (0..3)
-                .filter(|&a| negative[a] != 0)
-                .fold(0, |o, a| o | 1 << a)
-        })
+        (live != 0 && shared).then(|| octant_where(|a| negative[a] != 0))
     }
 }
 
@@ -633,8 +629,7 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
             for a in 0..3 {
                 self.split[a][i] = [axes.org[a][l], axes.inv[a][l]];
             }
-            let o = (0..3).fold(0, |o, a| o | (negative[a] >> l & 1) << a) as usize;
-            groups[o].push(Root {
+            groups[octant_where(|a| negative[a] >> l & 1 != 0)].push(Root {
                 id: lanes.id[l],
                 t0: lanes.t0[l],
                 t1: lanes.t1[l],
@@ -835,9 +830,13 @@ pub(crate) fn lanes_where<const N: usize>(f: impl Fn(usize) -> bool) -> u32 {
 /// Octant index of a ray: bit `a` set when the direction is negative on axis `a`.
 #[inline]
 pub(crate) fn octant(ray: &Ray) -> usize {
-    (0..3)
-        .filter(|&a| ray.dir[a].is_sign_negative())
-        .fold(0, |o, a| o | 1 << a)
+    octant_where(|a| ray.dir[a].is_sign_negative())
+}
+
+/// The octant index whose bit `a` is set where `negative(a)` holds.
+#[inline(always)]
+fn octant_where(negative: impl Fn(usize) -> bool) -> usize {
+    (0..3).filter(|&a| negative(a)).fold(0, |o, a| o | 1 << a)
 }
 
 /// A way of tracing a whole batch N lanes at a time (packets, streams): how it sets the rays

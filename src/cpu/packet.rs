@@ -275,7 +275,7 @@ impl Mode for PacketMode {
                     };
                     traverse(isa, b, &mut s, 0, block.lanes, rays, positive(o));
                 }
-                _ => b.keep(isa, &block, &mut groups),
+                None => b.keep(isa, &block, &mut groups),
             }
         }
         for (o, group) in groups.iter().enumerate() {
