@@ -112,16 +112,20 @@ pub struct Agreement {
     pub mismatches: usize,
     /// Different primitives within `eps·diag`: a shared edge or vertex, either answer right.
     pub ties: usize,
+    /// The same primitive, `|Δt| > eps·diag`: one of the two computed the hit wrongly.
+    pub t_disagreements: usize,
 }
 
 impl Agreement {
-    /// Rays on which the two disagree for real (hit/miss or a different surface).
+    /// Rays on which the two disagree for real (hit/miss, a different surface, or another
+    /// distance to the same primitive).
     pub fn disagreements(&self) -> usize {
-        self.a_only + self.b_only + self.mismatches
+        self.a_only + self.b_only + self.mismatches + self.t_disagreements
     }
 }
 
-/// Compares two hit lists with `rt2cmp`'s rule (`tol = eps · diag`, default eps 1e-4).
+/// Compares two hit lists with `rt2cmp`'s rule (`tol = eps · diag`, default eps 1e-4). A `t`
+/// that is NaN on either side counts as further than `tol`.
 pub fn compare(a: &[HitRecord], b: &[HitRecord], diag: f32, eps: f32) -> Agreement {
     let tol = eps * diag;
     let mut g = Agreement {
@@ -132,15 +136,61 @@ pub fn compare(a: &[HitRecord], b: &[HitRecord], diag: f32, eps: f32) -> Agreeme
         match (x.prim != u32::MAX, y.prim != u32::MAX) {
             (true, false) => g.a_only += 1,
             (false, true) => g.b_only += 1,
-            (true, true) if x.prim != y.prim => {
-                if (x.t - y.t).abs() > tol {
-                    g.mismatches += 1;
-                } else {
-                    g.ties += 1;
-                }
-            }
-            _ => {}
+            // `<=` rather than `>` so that a NaN distance is not within tol.
+            (true, true) => match (x.prim == y.prim, (x.t - y.t).abs() <= tol) {
+                (false, false) => g.mismatches += 1,
+                (false, true) => g.ties += 1,
+                (true, false) => g.t_disagreements += 1,
+                (true, true) => {}
+            },
+            (false, false) => {}
         }
     }
     g
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hit(prim: u32, t: f32) -> HitRecord {
+        HitRecord {
+            t,
+            prim,
+            u: 0.25,
+            v: 0.25,
+        }
+    }
+
+    /// One record pair of each of `rt2cmp`'s cases (tol = 1e-4 · 10 = 1e-3), each counted
+    /// where that tool counts it, and only the real disagreements in `disagreements`.
+    #[test]
+    fn each_case_is_counted_as_rt2cmp_counts_it() {
+        let miss = hit(u32::MAX, f32::INFINITY);
+        let pairs = [
+            (hit(1, 2.0), hit(1, 2.0)),      // agree
+            (hit(1, 2.0), hit(1, 2.0005)),   // same prim within tol: agree
+            (hit(1, 2.0), hit(1, 2.5)),      // same prim, t off: disagreement
+            (hit(1, 2.0), hit(1, f32::NAN)), // same prim, NaN t: disagreement
+            (hit(1, 2.0), hit(2, 2.0005)),   // shared edge: tie
+            (hit(1, 2.0), hit(2, 3.0)),      // another surface: mismatch
+            (hit(1, 2.0), miss),             // a only
+            (miss, hit(2, 3.0)),             // b only
+            (miss, miss),                    // agree
+        ];
+        let (a, b): (Vec<_>, Vec<_>) = pairs.into_iter().unzip();
+        let g = compare(&a, &b, 10.0, 1e-4);
+        let want = Agreement {
+            rays: 9,
+            a_only: 1,
+            b_only: 1,
+            mismatches: 1,
+            ties: 1,
+            t_disagreements: 2,
+        };
+        assert_eq!(g, want);
+        assert_eq!(g.disagreements(), 5);
+        // The shorter list bounds the count.
+        assert_eq!(compare(&a[..3], &b, 10.0, 1e-4).rays, 3);
+    }
 }
