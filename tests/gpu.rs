@@ -1,6 +1,7 @@
 //! The GPU backend against the CPU backend: same hits on the shared bunny ray sets and on the
 //! hard cases, the same images (within a stated tolerance) on every built-in scene for every
-//! traversal and both render paths, rows split across two logical devices, the AUTO
+//! traversal (spheres1, whose 1.2 M-sphere build dominates, for two) and both render paths,
+//! rows split across two logical devices, the AUTO
 //! decisions, the upload cache, and queries and renders that lavapipe's loop budget cuts
 //! short (refused, or run on the CPU under AUTO). CI runs these on lavapipe with `RT2_REQUIRE_GPU=1`;
 //! without an adapter they print SKIPPED and pass, unless `RT2_REQUIRE_GPU=1`.

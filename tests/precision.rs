@@ -410,7 +410,8 @@ fn needles_in_closed_meshes_are_kept_whatever_their_corner_order() {
 }
 
 /// A ray through a vertex shared by a fan of triangles, and along an edge seen edge-on: the
-/// watertight test reports a hit for the first, both report the lowest index on ties.
+/// watertight test reports a hit for the first (at the vertex's distance), neither test one
+/// for the second.
 #[test]
 fn rays_through_vertices_and_along_edges() {
     let c = Vec3::new(0.3, 0.7, 0.0);

@@ -277,7 +277,7 @@ fn a_query_longer_than_one_step_answers_every_ray_in_place() {
                 tmax: f32::INFINITY,
             })
             .collect();
-        for mode in [Rt2QueryMode::Single, Rt2QueryMode::Stream] {
+        for mode in MODES {
             let mut opt = rt2_query_options_default();
             opt.mode = mode as u32;
             let mut hits = vec![UNWRITTEN; n];
