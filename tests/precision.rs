@@ -673,7 +673,9 @@ fn ordinary_ellipsoids_match_the_f64_reference() {
     assert!(worst.iter().all(|&w| w <= 2e-6), "{worst:?}");
 }
 
-/// The f64 reference: t of the closest of `tris` along the ray, with exact vertices.
+/// The f64 reference: t of the closest of `tris` along the ray, computed exactly from the
+/// stored triangles' corners (`Triangle::vertices`, the f32 triangle both tests see: a corner
+/// rebuilt as `v0 + e1` may differ from the input's, as the test above shows).
 fn reference_t(tris: &[Triangle], ray: &Ray) -> Option<f64> {
     let (o, d) = (ray.org.as_dvec3(), ray.dir.as_dvec3());
     tris.iter()

@@ -2,6 +2,10 @@
 //! bit for bit against `Traversal::Standard` (same primitive, same `t`, `u`, `v`), against a brute
 //! force over the same f32 intersection core (the answer a traversal must reproduce up to the
 //! rounding of leaf boundaries), and against a brute force written independently here in f64.
+//! The f64 brute force reads the primitives as stored (a triangle's `v0`, `e1`, `e2` in f32, an
+//! ellipsoid's inverse map): it judges the traversals on the scene they see, not the rounding of
+//! that preprocessing, which `tests/transforms.rs` and `tests/render_reference.rs` judge from
+//! the input vertices and matrices.
 //! `occluded` must agree with `intersect(..).is_hit()` on every ray. Every check runs with both
 //! ray–triangle tests (`Intersector`). Random scenes come first, then the hard cases, each its
 //! own test.
@@ -100,6 +104,22 @@ fn quad_grid(prims: &mut PrimitiveSet, n: usize, p: impl Fn(usize, usize) -> Vec
             prims.triangles.push(Triangle::from_vertices(a, c, d));
         }
     }
+}
+
+/// The lane widths this CPU runs (4 always; 8 with AVX2, 16 with AVX-512), saying which it
+/// lacks: those paths are then not tested here, and CI's machine may lack AVX-512.
+fn widths_here() -> Vec<Width> {
+    let (here, lacking): (Vec<Width>, Vec<Width>) =
+        Width::ALL.into_iter().partition(|w| w.supported());
+    if !lacking.is_empty() {
+        let lanes = |ws: &[Width]| ws.iter().map(|w| w.lanes()).collect::<Vec<_>>();
+        println!(
+            "NOT TESTED on this CPU: {:?}-lane packets and streams (tested: {:?})",
+            lanes(&lacking),
+            lanes(&here)
+        );
+    }
+    here
 }
 
 /// Best and second-best `(t, prim)` of the f64 brute force (distinct primitives).
@@ -412,9 +432,8 @@ fn check_batch_modes(what: &str, prims: &PrimitiveSet, tree: &KdTree, rays: &[Ra
                     rows => rows,
                 },
             ];
-            let configs = Width::ALL
+            let configs = widths_here()
                 .into_iter()
-                .filter(|w| w.supported())
                 .flat_map(|w| orders.map(|o| (w, o)));
             for (width, order) in configs {
                 for mode in ["packet", "stream"] {
@@ -935,7 +954,7 @@ fn degenerate_rays_miss_without_touching_the_tree() {
                 );
             }
         }
-        let widths = Width::ALL.into_iter().filter(|w| w.supported());
+        let widths = widths_here().into_iter();
         for (width, intersector) in widths.flat_map(|w| Intersector::ALL.map(|i| (w, i))) {
             let t = RayTests {
                 intersector,
@@ -1384,7 +1403,7 @@ fn shadow_rays_in_batches_answer_as_single_rays() {
                 intersector,
                 exclude,
             };
-            for width in Width::ALL.into_iter().filter(|w| w.supported()) {
+            for width in widths_here() {
                 // Every batch size up to a few widths, so that lanes past the batch's end and
                 // leaves where only some rays are found are met.
                 for size in [1, 2, 3, 5, 7, 8, 9, 15, 16, 17, 33, rays.len()] {
