@@ -30,6 +30,10 @@ for src in "$examples"/*.c; do
     if [ "$exe" = load_model ]; then
         if [ ! -f "$bunny" ]; then
             echo "skip $exe: $bunny is absent (set RT2_SHARED to the shared data folder)"
+            # As the cargo tests: with RT2_REQUIRE_SHARED=1 (CI) a missing file is a failure.
+            if [ "${RT2_REQUIRE_SHARED:-0}" = 1 ]; then
+                fail=1
+            fi
             continue
         fi
         args=("$bunny")
