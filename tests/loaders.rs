@@ -477,6 +477,42 @@ fn obj_negative_indices_are_relative_to_vertices_so_far() {
     assert_eq!(mesh.triangles, vec![[0, 1, 2], [3, 2, 1], [3, 1, 0]]);
 }
 
+/// A PLY header's comments may be in another encoding (Latin-1), and the file may start with a
+/// UTF-8 byte-order mark, as OBJ files may.
+#[test]
+fn ply_latin1_comments_and_a_byte_order_mark() {
+    let mut bytes = b"\xef\xbb\xbf".to_vec();
+    bytes.extend_from_slice(
+        PLY_HEAD
+            .replace("format", "comment caf\u{e9}\nformat")
+            .as_bytes(),
+    );
+    let at = bytes
+        .windows(4)
+        .position(|w| w == "caf\u{e9}".as_bytes()[..4].as_ref());
+    // The comment's e-acute as Latin-1 (one byte 0xE9) instead of UTF-8 (0xC3 0xA9).
+    let at = at.expect("the comment") + 3;
+    bytes.splice(at..at + 2, [0xe9]);
+    bytes.extend_from_slice(b"0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+    let mesh = parse_ply(&bytes, "latin1.ply").unwrap();
+    assert_eq!(mesh.positions.len(), 3);
+    assert_eq!(mesh.triangles, vec![[0, 1, 2]]);
+    // Non-UTF-8 elsewhere in the header is still an error.
+    let mut bad = PLY_HEAD
+        .replace("vertex_indices", "vertex_ind\u{e9}")
+        .into_bytes();
+    let at = bad
+        .windows(2)
+        .position(|w| w == [0xc3, 0xa9])
+        .expect("the e-acute");
+    bad.splice(at..at + 2, [0xe9]);
+    assert_parse_err(
+        parse_ply(&bad, "latin1name.ply"),
+        "latin1name.ply",
+        &["line 8:", "invalid UTF-8"],
+    );
+}
+
 #[test]
 fn obj_crlf_line_endings() {
     let text = "v 0.5 0 0\r\nv 0 0.5 0\r\nv 0 0 0.5\r\n\r\nf 1 2 3\r\n";
@@ -660,6 +696,28 @@ fn malformed_ascii_ply_errors_name_file_and_line() {
             format!("{PLY_HEAD}{good_verts}\u{1}\u{2}\u{3}\n"),
             // Control characters are shown escaped.
             vec!["line 13:", r"'\u{1}\u{2}\u{3}'"],
+        ),
+        (
+            "cr.ply",
+            format!("{PLY_HEAD}{good_verts}3 0 1 2\n").replace('\n', "\r"),
+            vec!["CR alone"],
+        ),
+        (
+            // Seven vertices declared, three given, and three faces: the vertices' count alone
+            // fits the 42 bytes, so both counts are named (the faces' alone was blamed).
+            "counts.ply",
+            format!(
+                "{}{good_verts}{}",
+                PLY_HEAD
+                    .replace("vertex 3", "vertex 7")
+                    .replace("face 1", "face 3"),
+                "3 0 1 2\n".repeat(3)
+            ),
+            vec![
+                "line 7:",
+                "'vertex' 7, 'face' 3",
+                "need more than the 42 bytes",
+            ],
         ),
     ];
     for (name, text, needles) in cases {
@@ -868,7 +926,16 @@ fn random_garbage_is_a_parse_error_never_a_panic() {
 fn malformed_obj_errors_name_file_and_line() {
     let cases: &[(&str, &str, &[&str])] = &[
         ("empty.obj", "", &["empty file"]),
-        ("blank.obj", "\n  \n# only a comment\n", &["empty file"]),
+        (
+            "blank.obj",
+            "\n  \n# only a comment\n",
+            &["no statements", "only comments and blank lines"],
+        ),
+        (
+            "cr.obj",
+            "v 0 0 0\rv 1 0 0\rv 0 1 0\rf 1 2 3\r",
+            &["CR alone"],
+        ),
         ("nofaces.obj", "v 0 0 0\n", &["no faces"]),
         (
             "nonnumber.obj",

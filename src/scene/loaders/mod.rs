@@ -7,6 +7,9 @@
 //!
 //! Every loader treats its input as untrusted: no panics on any input, no allocation sized by
 //! a header count before that count is checked against the bytes actually present.
+//!
+//! Both read LF or CRLF line endings and an optional UTF-8 byte-order mark; comments may be in
+//! any encoding (exporters write Latin-1). Lines that end in a CR alone are refused as such.
 
 use std::path::Path;
 
@@ -145,6 +148,20 @@ impl std::fmt::Display for Quoted<'_> {
         let more = if chars.next().is_some() { "..." } else { "" };
         write!(f, "'{}{more}'", head.escape_debug())
     }
+}
+
+/// The error for a text whose lines end in a CR alone (classic Mac OS): both loaders split lines
+/// at LF, so such a file reads as one long line, and the error that line gave named the wrong
+/// cause. `None` when the first line holds no CR before its end.
+fn cr_only_lines(text: &[u8], name: &str) -> Option<Error> {
+    let first = text.split(|&b| b == b'\n').next().unwrap_or_default();
+    let first = first.strip_suffix(b"\r").unwrap_or(first);
+    first.contains(&b'\r').then(|| {
+        Error::parse(format!(
+            "{name}: the lines end in a CR alone (classic Mac OS line endings): convert the \
+             file to LF or CRLF line endings"
+        ))
+    })
 }
 
 /// A parse error located at a 1-based line of a text file (or of a PLY header).

@@ -8,7 +8,7 @@ use std::borrow::Cow;
 
 use glam::Vec3;
 
-use super::{finite_coord, line_error, Mesh, Quoted};
+use super::{cr_only_lines, finite_coord, line_error, Mesh, Quoted};
 use crate::error::{Error, Result};
 use crate::fallible::TryGrow;
 
@@ -30,6 +30,9 @@ use crate::fallible::TryGrow;
 /// that a file that is not OBJ (or uses features this loader would silently drop, like curved
 /// surfaces) is reported rather than half-loaded. A file without faces is an error too.
 pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
+    if let Some(e) = cr_only_lines(text_bytes, name) {
+        return Err(e);
+    }
     let mut mesh = Mesh::default();
     let mut saw_statement = false;
     for line in Lines::new(text_bytes, name) {
@@ -97,8 +100,13 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
             other => return Err(err(format!("unsupported OBJ statement {}", Quoted(other)))),
         }
     }
-    if !saw_statement {
+    if text_bytes.is_empty() {
         return Err(Error::parse(format!("{name}: empty file")));
+    }
+    if !saw_statement {
+        return Err(Error::parse(format!(
+            "{name}: no statements (the file holds only comments and blank lines)"
+        )));
     }
     if mesh.triangles.is_empty() {
         return Err(Error::parse(format!(

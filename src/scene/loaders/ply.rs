@@ -10,7 +10,7 @@ use std::collections::HashSet;
 
 use glam::Vec3;
 
-use super::{finite_coord, line_error, offset_error, Mesh, Quoted};
+use super::{cr_only_lines, finite_coord, line_error, offset_error, Mesh, Quoted};
 use crate::error::{Error, Result};
 use crate::fallible::TryGrow;
 
@@ -219,6 +219,9 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
     if bytes.is_empty() {
         return Err(Error::parse(format!("{name}: empty file")));
     }
+    if let Some(e) = cr_only_lines(bytes, name) {
+        return Err(e);
+    }
     let mut pos = 0usize;
     let mut line_no = 0usize;
     let mut format = None;
@@ -246,6 +249,17 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
         pos += len;
         let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
         let err = |msg: String| line_error(name, line_no, msg);
+        // Comments are skipped before the UTF-8 check: exporters write them in other
+        // encodings (Latin-1), as the OBJ loader allows.
+        let keyword = raw.split(u8::is_ascii_whitespace).next();
+        if line_no > 1 && matches!(keyword, Some(b"comment" | b"obj_info")) {
+            continue;
+        }
+        // A byte-order mark, as some editors write at the start of a UTF-8 file.
+        let raw = match line_no {
+            1 => raw.strip_prefix(b"\xef\xbb\xbf").unwrap_or(raw),
+            _ => raw,
+        };
         let line = std::str::from_utf8(raw)
             .map_err(|_| err("PLY header line is not text (invalid UTF-8)".into()))?;
         if line_no == 1 {
@@ -468,6 +482,23 @@ fn check_counts(header: &Header, body_len: usize, name: &str) -> Result<()> {
             .and_then(|n| n.checked_add(need))
         {
             Some(n) if n <= limit => need = n,
+            // Alone, this element fits: which count is wrong is not known, so all are named.
+            _ if (el.count as u64).saturating_mul(per_entry) <= limit => {
+                let counts: Vec<String> = (header.elements.iter())
+                    .take_while(|e| !std::ptr::eq(*e, el))
+                    .chain([el])
+                    .map(|e| format!("'{}' {}", e.name, e.count))
+                    .collect();
+                return Err(line_error(
+                    name,
+                    el.line,
+                    format!(
+                        "file truncated or an element count wrong: the elements' declared \
+                         entries ({}) need more than the {body_len} bytes after the header",
+                        counts.join(", ")
+                    ),
+                ));
+            }
             _ => {
                 return Err(line_error(
                     name,
