@@ -2,31 +2,26 @@
 //! triangle, and must do so without a copy of the mesh (a 10M-triangle mesh once needed
 //! ~935 MB extra just to be checked).
 //!
-//! Its own test binary because it installs a counting global allocator; the count is per
-//! thread, so tests running beside it do not disturb it.
+//! Its own test binary, with this one test, because it installs a counting global allocator:
+//! the count is of every thread (a copy made on worker threads counts too), so nothing else
+//! may run beside it.
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
+use std::sync::atomic::{AtomicIsize, Ordering::SeqCst};
 
 use glam::{Affine3A, Vec3};
 use rt2::scene::{Scene, Shape};
 
 struct Counting;
 
-thread_local! {
-    /// Bytes this thread holds (allocated minus freed; a block freed by another thread is
-    /// not subtracted here, which only makes the count higher).
-    static LIVE: Cell<isize> = const { Cell::new(0) };
-    /// The most `LIVE` has been since the last [`peak_during`] began.
-    static PEAK: Cell<isize> = const { Cell::new(0) };
-}
+/// Bytes the process holds through the global allocator (allocated minus freed).
+static LIVE: AtomicIsize = AtomicIsize::new(0);
+/// The most `LIVE` has been since the last [`peak_during`] began.
+static PEAK: AtomicIsize = AtomicIsize::new(0);
 
 fn count(delta: isize) {
-    // `try_with`: the allocator may run while the thread's locals are being torn down.
-    let _ = LIVE.try_with(|live| {
-        live.set(live.get() + delta);
-        let _ = PEAK.try_with(|peak| peak.set(peak.get().max(live.get())));
-    });
+    let live = LIVE.fetch_add(delta, SeqCst) + delta;
+    PEAK.fetch_max(live, SeqCst);
 }
 
 // SAFETY: forwards every call to the system allocator unchanged; only counts sizes.
@@ -52,12 +47,12 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-/// The most memory `f` holds at once on this thread, beyond what the thread held before.
+/// The most memory `f` holds at once (on any thread), beyond what was held before.
 fn peak_during(f: impl FnOnce()) -> isize {
-    let before = LIVE.with(Cell::get);
-    PEAK.with(|p| p.set(before));
+    let before = LIVE.load(SeqCst);
+    PEAK.store(before, SeqCst);
     f();
-    PEAK.with(Cell::get) - before
+    PEAK.load(SeqCst) - before
 }
 
 /// A strip of `n` triangles over `n + 2` vertices.
