@@ -481,6 +481,97 @@ fn a_loaded_file_has_the_normals_of_its_faces() {
     }
 }
 
+/// Shapes placed at the edge of f32 (translation z = f32::MAX) and rays from the origin with
+/// directions 1e36 long: the last bit of the query's `t` moves `org + t·dir` by 1e31, so the
+/// line's offset from the shape is lost to rounding. A helper's stateful fuzz found
+/// `rt2_hit_surfaces` refusing such a hit that `rt2_intersect` had just returned (the first
+/// case is its repro). Each must be answered: a unit normal facing the ray, a point within
+/// the shape's bounds.
+#[test]
+fn hits_at_the_edge_of_f32_have_surfaces() {
+    let fuzz = Affine3A::from_cols_array(&[
+        0.7966295,
+        -0.1133584,
+        0.5304893,
+        0.4595938,
+        -0.041391082,
+        -0.6990112,
+        0.21147762,
+        1.673205,
+        0.039967988,
+        -2.5591354,
+        18.555008,
+        3.4028235e38,
+    ]);
+    let far = Vec3::new(0.0, 0.0, f32::MAX);
+    let cases = [
+        (
+            Shape::Sphere(DVec3::new(-11.951399, 12.0179405, 5.9753933), 1.9253507),
+            fuzz,
+            rt2_ray {
+                org: [-3.0267277, 14.098213, -14.826452],
+                tmin: 0.5,
+                dir: [-0.018959675, 0.1595673, 3.4028233e36],
+                tmax: 1e30,
+            },
+        ),
+        (
+            Shape::Sphere(DVec3::ZERO, 1.5),
+            general(Vec3::new(1.0, 0.5, 2.0), far),
+            rt2_ray {
+                org: [0.0; 3],
+                tmin: 0.0,
+                dir: [0.0, 0.0, 3.4028233e36],
+                tmax: f32::INFINITY,
+            },
+        ),
+        (
+            Shape::Ellipsoid(DVec3::ZERO, DVec3::new(2.0, 1.0, 1.5)),
+            general(Vec3::ONE, far),
+            rt2_ray {
+                org: [0.0; 3],
+                tmin: 0.0,
+                dir: [1e-38, 0.0, 3.4e36],
+                tmax: f32::INFINITY,
+            },
+        ),
+    ];
+    for (k, (shape, t, ray)) in cases.into_iter().enumerate() {
+        let mut scene = Scene::new();
+        let (centre, radius) = match shape {
+            Shape::Sphere(c, r) => (c, r),
+            Shape::Ellipsoid(c, r) => (c, r.max_element()),
+            _ => unreachable!("spheres and ellipsoids only"),
+        };
+        let id = scene.add(shape, t);
+        scene.commit();
+        let hits = scene.intersect(&[ray]);
+        assert_eq!(hits[0].object, id, "case {k}: the ray misses");
+        let (st, out) = scene.surfaces(&[ray], &hits);
+        assert_eq!(st, Rt2Status::Ok, "case {k}: {}", last_error());
+        let (p, n) = (Vec3::from(out[0].position), Vec3::from(out[0].normal));
+        assert!((n.length() - 1.0).abs() < 1e-6, "case {k}: normal {n}");
+        assert!(
+            n.dot(Vec3::from(ray.dir)) < 0.0,
+            "case {k}: normal {n} faces away"
+        );
+        // Within the placed shape's bounds: its centre, plus the transform's largest stretch
+        // of the radius, plus the rounding of coordinates near f32::MAX.
+        let c = t.transform_point3(centre.as_vec3());
+        let reach = radius as f32
+            * t.matrix3
+                .to_cols_array()
+                .iter()
+                .map(|x| x.abs())
+                .sum::<f32>();
+        let slack = Vec3::splat(reach) + c.abs() * f32::EPSILON;
+        assert!(
+            p.is_finite() && (p - c).abs().cmple(slack).all(),
+            "case {k}: position {p} outside {c} ± {slack}"
+        );
+    }
+}
+
 /// From far away, `org + t * dir` in f32 is off the surface by about an ULP of the distance
 /// times the direction: the positions are recomputed on the primitive, far closer. (Checked to
 /// be discriminating: the ray's own point is asserted to be further off.)

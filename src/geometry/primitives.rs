@@ -321,14 +321,14 @@ fn quadric_surface(inv: DMat3, center: [f32; 3], hit: &Hit, ray: &Ray) -> Option
     if !(a > 0.0 && a.is_finite() && u.is_finite()) {
         return None;
     }
+    let start = (inv * (oc + ray.tmin as f64 * d)).length_squared();
+    let entering = !ray.tmin.is_finite() || start > 1.0 || start.is_nan();
     let b = u.dot(du);
     let disc = a * (1.0 - (u - (b / a) * du).length_squared());
     let s = if disc >= 0.0 {
         let h = disc.sqrt();
         let (s0, s1) = ((-b - h) / a, (-b + h) / a);
         let rounding = 4.0 * (hit.t.abs() * f32::EPSILON) as f64;
-        let start = (inv * (oc + ray.tmin as f64 * d)).length_squared();
-        let entering = !ray.tmin.is_finite() || start > 1.0 || start.is_nan();
         match s1 - s0 <= rounding {
             true if entering => s0,
             true => s1,
@@ -341,8 +341,51 @@ fn quadric_surface(inv: DMat3, center: [f32; 3], hit: &Hit, ray: &Ray) -> Option
     let p = (q + s * d).as_vec3();
     let g = inv.transpose() * (u + s * du);
     let len = g.length();
-    (len > 0.0 && len.is_finite() && p.is_finite())
-        .then(|| (p + Vec3::from(center), (g / len).as_vec3()))
+    if len > 0.0 && len.is_finite() && p.is_finite() {
+        return Some((p + Vec3::from(center), (g / len).as_vec3()));
+    }
+    line_lost_surface(inv, center, hit, ray, (u, du), entering)
+}
+
+/// [`quadric_surface`] where its re-solve cancels to nothing: `q` lies further from the
+/// surface than f64 resolves against its own size, yet within the rounding of the query's
+/// f32 operands (a ray from 1e38 away with a direction 1e36 long: the last bit of `t` moves
+/// the point by 1e31), so the line's offset from the centre is lost and the query's hit
+/// cannot be placed on the surface from it. The point is then the one the ray's direction
+/// alone gives, the entry (or, for a ray starting inside, the exit) of a line through the
+/// centre: `∓ M⁻¹d / |M⁻¹d|` in unit space, its normal facing the ray. `None` for a `q`
+/// further off than that rounding (a `t` no query returns) or a result that is not finite.
+fn line_lost_surface(
+    inv: DMat3,
+    center: [f32; 3],
+    hit: &Hit,
+    ray: &Ray,
+    (u, du): (DVec3, DVec3),
+    entering: bool,
+) -> Option<(Vec3, Vec3)> {
+    let c = Vec3::from(center).as_dvec3();
+    // How far f32 rounding of `t`, the origin and the centre can move `q` in world space,
+    // and (through the map's Frobenius norm, a bound of its largest stretch) in unit space.
+    let world = 4.0
+        * f32::EPSILON as f64
+        * (hit.t.abs() as f64 * ray.dir.as_dvec3().length()
+            + ray.org.as_dvec3().abs().max_element()
+            + c.abs().max_element());
+    let stretch = inv
+        .to_cols_array()
+        .iter()
+        .map(|x| x * x)
+        .sum::<f64>()
+        .sqrt();
+    // All finite (the caller checked `u`; `t`, the ray and the map are finite).
+    if u.length() > 1.0 + world * stretch {
+        return None;
+    }
+    let unit = du.normalize() * if entering { -1.0 } else { 1.0 };
+    let p = (c + inv.inverse() * unit).as_vec3();
+    let g = inv.transpose() * unit;
+    let len = g.length();
+    (len > 0.0 && len.is_finite() && p.is_finite()).then(|| (p, (g / len).as_vec3()))
 }
 
 /// The face of a box thinner than the rounding of `org + t dir` across its flat axis (a box
