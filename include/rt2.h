@@ -1129,6 +1129,11 @@ enum rt2_status rt2_scene_load_file(rt2_scene *scene,
  * others at most 2^-20 of it are taken for rounding and set to zero, as in a quarter turn
  * made with `cosf`).
  *
+ * On error the object keeps its transform: INVALID_ARGUMENT for an object id the scene does
+ * not hold (never issued or removed), a non-finite entry, a singular `R` or one whose
+ * determinant overflows, a placement that leaves f32 (README, "Range"), NULL `m3x4` or a bad
+ * handle; UNSUPPORTED for a box given a transform that turns it off its axes.
+ *
  * # Safety
  * `scene` is a live scene; `m3x4` holds 12 floats.
  */
