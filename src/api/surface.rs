@@ -48,10 +48,10 @@ const NO_SURFACE: rt2_surface = rt2_surface {
 /// INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks (a disabled
 /// object's too, and a removed one's, which the message says), a hit with a non-finite `t`, `u` or
 /// `v` or a ray that always misses (a non-finite `org` or `dir`, a zero `dir`, a NaN `tmin` or
-/// `tmax`, `tmin > tmax`; a query never returns such a hit), a hit whose point is further from its
-/// sphere or ellipsoid than the f32 rounding of its ray and `t` allows (a `t` no query returns:
-/// 3e38 on a unit sphere 5 units away; where that rounding is larger than the shape, as for a
-/// ray 1e38 long, the point is the entry of a line through the centre along the ray), NULL
+/// `tmax`, `tmin > tmax`; a query never returns such a hit), a hit whose point is too far from its
+/// sphere or ellipsoid to be put on the surface (a `t` no query returns: 3e38 on a unit sphere 5
+/// units away; a point that far off which the rounding of a huge ray explains, as for a direction
+/// 1e36 long, is answered with the entry of a line through the centre along the ray), NULL
 /// arrays when `count > 0`, `surfaces` overlapping `rays` or `hits`, or a bad
 /// handle; INVALID_OPERATION for a scene never committed or edited since its commit. `count = 0`
 /// with NULL arrays is fine (the scene is still checked, as `rt2_intersect` does). Runs on the

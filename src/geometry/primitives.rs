@@ -311,7 +311,9 @@ impl PrimitiveSet {
 /// chord is within the rounding of `t` (a shape thinner than an ULP of the distance: either
 /// sheet is at the same f32 `t`), by the entry if the ray starts (at `tmin`) outside, else
 /// the exit: the root the query must have found. A grazing ray (an f32 `t` just past the rim)
-/// takes the point of the line nearest the surface. `None` where a step is not finite.
+/// takes the point of the line nearest the surface. Where `q` lies so far off (in unit space)
+/// that f64 cannot place the line against the shape, [`line_lost_surface`] answers. `None`
+/// where a step is not finite.
 fn quadric_surface(inv: DMat3, center: [f32; 3], hit: &Hit, ray: &Ray) -> Option<(Vec3, Vec3)> {
     let oc = ray.org.as_dvec3() - Vec3::from(center).as_dvec3();
     let d = ray.dir.as_dvec3();
@@ -323,6 +325,12 @@ fn quadric_surface(inv: DMat3, center: [f32; 3], hit: &Hit, ray: &Ray) -> Option
     }
     let start = (inv * (oc + ray.tmin as f64 * d)).length_squared();
     let entering = !ray.tmin.is_finite() || start > 1.0 || start.is_nan();
+    // The line's offset from the centre, `u - (b/a) du` below, is good to about |u| ULPs:
+    // past an eighth of the unit shape it is noise (a quarter of such hits got a normal
+    // facing away from the ray), and the root it gives no answer.
+    if u.length() * f64::EPSILON > 0.125 {
+        return line_lost_surface(inv, center, hit, ray, (u, du), entering);
+    }
     let b = u.dot(du);
     let disc = a * (1.0 - (u - (b / a) * du).length_squared());
     let s = if disc >= 0.0 {
@@ -341,20 +349,18 @@ fn quadric_surface(inv: DMat3, center: [f32; 3], hit: &Hit, ray: &Ray) -> Option
     let p = (q + s * d).as_vec3();
     let g = inv.transpose() * (u + s * du);
     let len = g.length();
-    if len > 0.0 && len.is_finite() && p.is_finite() {
-        return Some((p + Vec3::from(center), (g / len).as_vec3()));
-    }
-    line_lost_surface(inv, center, hit, ray, (u, du), entering)
+    (len > 0.0 && len.is_finite() && p.is_finite())
+        .then(|| (p + Vec3::from(center), (g / len).as_vec3()))
 }
 
-/// [`quadric_surface`] where its re-solve cancels to nothing: `q` lies further from the
-/// surface than f64 resolves against its own size, yet within the rounding of the query's
-/// f32 operands (a ray from 1e38 away with a direction 1e36 long: the last bit of `t` moves
-/// the point by 1e31), so the line's offset from the centre is lost and the query's hit
-/// cannot be placed on the surface from it. The point is then the one the ray's direction
-/// alone gives, the entry (or, for a ray starting inside, the exit) of a line through the
-/// centre: `∓ M⁻¹d / |M⁻¹d|` in unit space, its normal facing the ray. `None` for a `q`
-/// further off than that rounding (a `t` no query returns) or a result that is not finite.
+/// [`quadric_surface`] where `q` lies so far from the shape that f64 cannot place the line
+/// against it (a ray from 1e38 away with a direction 1e36 long: the last bit of `t` moves the
+/// point by 1e31), yet within the rounding of the query's f32 operands: the line's offset
+/// from the centre is lost, and the query's hit cannot be placed on the surface from it. The
+/// point is then the one the ray's direction alone gives, the entry (or, for a ray starting
+/// inside, the exit) of a line through the centre: `∓ M⁻¹d / |M⁻¹d|` in unit space, with its
+/// outward normal. `None` for a `q` further off than that rounding (a `t` no query returns,
+/// such as 3e38 on a unit sphere a few units away) or a result that is not finite.
 fn line_lost_surface(
     inv: DMat3,
     center: [f32; 3],

@@ -29,9 +29,9 @@ impl Committed {
     /// The surface at `hit`, a hit of `ray` by a query of this commit, in the library's
     /// numbering (`Context::intersect`'s hits: the global primitive and the stored triangle's
     /// barycentrics). `None` for a miss, a primitive this commit lacks, or a point that has no
-    /// unit normal: one that cannot be put on the surface (a `t` further off a sphere or
-    /// ellipsoid than the rounding of the ray and `t` allows), or on a triangle of no area;
-    /// no query returns such a hit.
+    /// unit normal: one that cannot be put on the surface (a `t` so far off a sphere or
+    /// ellipsoid that the point is lost to rounding, further than the rounding of the ray's
+    /// f32 values explains), or on a triangle of no area; no query returns such a hit.
     pub fn hit_surface(&self, ray: &Ray, hit: &Hit) -> Option<HitSurface> {
         let origin = self.origins.get(hit.prim as usize)?;
         let (position, normal) = self.prims.surface_at(hit, ray);
