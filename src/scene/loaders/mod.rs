@@ -15,7 +15,7 @@ use std::path::Path;
 
 use glam::Vec3;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Rt2Status};
 use crate::fallible;
 
 mod obj;
@@ -150,17 +150,23 @@ impl std::fmt::Display for Quoted<'_> {
     }
 }
 
-/// The error for a text whose lines end in a CR alone (classic Mac OS): both loaders split lines
-/// at LF, so such a file reads as one long line, and the error that line gave named the wrong
-/// cause. `None` when the first line holds no CR before its end.
-fn cr_only_lines(text: &[u8], name: &str) -> Option<Error> {
+/// What some editors write at the start of a UTF-8 file.
+const UTF8_BOM: &[u8] = b"\xef\xbb\xbf";
+
+/// `result` of parsing `text`, with a parse error replaced by one naming the cause when the
+/// text's first line holds a CR before its end: lines that end in a CR alone (classic Mac
+/// OS), which both loaders, splitting lines at LF, read as one long line whose error named
+/// the wrong cause. Only on failure: a file that parses (CR CR LF endings, a CR in a comment)
+/// is kept.
+fn cr_line_ends(result: Result<Mesh>, text: &[u8], name: &str) -> Result<Mesh> {
     let first = text.split(|&b| b == b'\n').next().unwrap_or_default();
     let first = first.strip_suffix(b"\r").unwrap_or(first);
-    first.contains(&b'\r').then(|| {
-        Error::parse(format!(
+    result.map_err(|e| match e.status {
+        Rt2Status::Parse if first.contains(&b'\r') => Error::parse(format!(
             "{name}: the lines end in a CR alone (classic Mac OS line endings): convert the \
              file to LF or CRLF line endings"
-        ))
+        )),
+        _ => e,
     })
 }
 

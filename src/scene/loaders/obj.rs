@@ -8,7 +8,7 @@ use std::borrow::Cow;
 
 use glam::Vec3;
 
-use super::{cr_only_lines, finite_coord, line_error, Mesh, Quoted};
+use super::{cr_line_ends, finite_coord, line_error, Mesh, Quoted, UTF8_BOM};
 use crate::error::{Error, Result};
 use crate::fallible::TryGrow;
 
@@ -30,9 +30,11 @@ use crate::fallible::TryGrow;
 /// that a file that is not OBJ (or uses features this loader would silently drop, like curved
 /// surfaces) is reported rather than half-loaded. A file without faces is an error too.
 pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
-    if let Some(e) = cr_only_lines(text_bytes, name) {
-        return Err(e);
-    }
+    cr_line_ends(parse(text_bytes, name), text_bytes, name)
+}
+
+/// [`parse_obj`] but for naming CR-only line ends.
+fn parse(text_bytes: &[u8], name: &str) -> Result<Mesh> {
     let mut mesh = Mesh::default();
     let mut saw_statement = false;
     for line in Lines::new(text_bytes, name) {
@@ -115,9 +117,6 @@ pub fn parse_obj(text_bytes: &[u8], name: &str) -> Result<Mesh> {
     }
     Ok(mesh)
 }
-
-/// What some editors write at the start of a UTF-8 file.
-const UTF8_BOM: &[u8] = b"\xef\xbb\xbf";
 
 /// The file's lines as they are, numbered from 0.
 type RawLines<'a> = std::iter::Enumerate<std::slice::Split<'a, u8, fn(&u8) -> bool>>;

@@ -10,7 +10,7 @@ use std::collections::HashSet;
 
 use glam::Vec3;
 
-use super::{cr_only_lines, finite_coord, line_error, offset_error, Mesh, Quoted};
+use super::{cr_line_ends, finite_coord, line_error, offset_error, Mesh, Quoted, UTF8_BOM};
 use crate::error::{Error, Result};
 use crate::fallible::TryGrow;
 
@@ -155,6 +155,11 @@ enum Role {
 /// coordinates, element counts the file cannot hold, trailing data after the last element
 /// (a sign of wrong counts), and a file without faces (as the OBJ loader does).
 pub fn parse_ply(bytes: &[u8], name: &str) -> Result<Mesh> {
+    cr_line_ends(parse(bytes, name), bytes, name)
+}
+
+/// [`parse_ply`] but for naming CR-only line ends.
+fn parse(bytes: &[u8], name: &str) -> Result<Mesh> {
     let header = parse_header(bytes, name)?;
     let roles = plan(&header, name)?;
     let body = bytes.get(header.body_start..).unwrap_or_default();
@@ -219,9 +224,6 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
     if bytes.is_empty() {
         return Err(Error::parse(format!("{name}: empty file")));
     }
-    if let Some(e) = cr_only_lines(bytes, name) {
-        return Err(e);
-    }
     let mut pos = 0usize;
     let mut line_no = 0usize;
     let mut format = None;
@@ -251,13 +253,13 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
         let err = |msg: String| line_error(name, line_no, msg);
         // Comments are skipped before the UTF-8 check: exporters write them in other
         // encodings (Latin-1), as the OBJ loader allows.
-        let keyword = raw.split(u8::is_ascii_whitespace).next();
+        let keyword = raw.trim_ascii_start().split(u8::is_ascii_whitespace).next();
         if line_no > 1 && matches!(keyword, Some(b"comment" | b"obj_info")) {
             continue;
         }
         // A byte-order mark, as some editors write at the start of a UTF-8 file.
         let raw = match line_no {
-            1 => raw.strip_prefix(b"\xef\xbb\xbf").unwrap_or(raw),
+            1 => raw.strip_prefix(UTF8_BOM).unwrap_or(raw),
             _ => raw,
         };
         let line = std::str::from_utf8(raw)
@@ -465,7 +467,7 @@ fn check_counts(header: &Header, body_len: usize, name: &str) -> Result<()> {
     // The last ASCII line may lack its newline.
     let limit = body_len as u64 + u64::from(ascii);
     let mut need = 0u64;
-    for el in &header.elements {
+    for (i, el) in header.elements.iter().enumerate() {
         let per_entry: u64 = if ascii {
             2 * el.props.len() as u64
         } else {
@@ -484,9 +486,8 @@ fn check_counts(header: &Header, body_len: usize, name: &str) -> Result<()> {
             Some(n) if n <= limit => need = n,
             // Alone, this element fits: which count is wrong is not known, so all are named.
             _ if (el.count as u64).saturating_mul(per_entry) <= limit => {
-                let counts: Vec<String> = (header.elements.iter())
-                    .take_while(|e| !std::ptr::eq(*e, el))
-                    .chain([el])
+                let counts: Vec<String> = header.elements[..=i]
+                    .iter()
                     .map(|e| format!("'{}' {}", e.name, e.count))
                     .collect();
                 return Err(line_error(
@@ -504,7 +505,7 @@ fn check_counts(header: &Header, body_len: usize, name: &str) -> Result<()> {
                     name,
                     el.line,
                     format!(
-                        "file truncated or element count wrong: element '{}' declares {} \
+                        "file truncated or an element count wrong: element '{}' declares {} \
                          entries, more than the {body_len} bytes after the header can hold",
                         el.name, el.count
                     ),
