@@ -54,17 +54,42 @@ fn first_difference<'a>(fresh: &'a str, other: &'a str) -> (usize, &'a str, &'a 
     }
 }
 
-/// `include/rt2.h` as committed at HEAD; `None` outside a git checkout (or without git).
-fn header_at_head() -> Option<String> {
+/// Runs `git -C <crate> args`: its stdout, or why it failed (git missing, not a checkout,
+/// a repository git refuses to read), and whether it exited 0.
+fn git(args: &[&str]) -> Result<(bool, String), String> {
     let out = std::process::Command::new("git")
         .arg("-C")
         .arg(support::manifest_dir())
-        .args(["show", "HEAD:include/rt2.h"])
+        .args(args)
         .output()
-        .ok()?;
-    out.status
-        .success()
-        .then(|| String::from_utf8(out.stdout).expect("the committed header is UTF-8"))
+        .map_err(|e| format!("git could not run: {e}"))?;
+    match out.status.code() {
+        Some(0 | 1) => Ok((
+            out.status.success(),
+            String::from_utf8_lossy(&out.stdout).into(),
+        )),
+        _ => Err(String::from_utf8_lossy(&out.stderr).trim().to_string()),
+    }
+}
+
+/// `include/rt2.h` as committed at HEAD, when the sources it is generated from are as
+/// committed too: with an API change not yet committed, HEAD's header is rightly older.
+fn header_at_head() -> Result<String, String> {
+    let inputs = [
+        "src/api",
+        "src/error.rs",
+        "cbindgen.toml",
+        "build.rs",
+        "Cargo.toml",
+    ];
+    let (unchanged, _) = git(&[&["diff", "--quiet", "HEAD", "--"][..], &inputs].concat())?;
+    if !unchanged {
+        return Err(format!("{} differ from HEAD", inputs.join(", ")));
+    }
+    match git(&["show", "HEAD:./include/rt2.h"])? {
+        (true, text) => Ok(text),
+        (false, _) => Err("git show HEAD:./include/rt2.h failed".into()),
+    }
 }
 
 /// The header in the tree and the one committed at HEAD are both a fresh generation. build.rs
@@ -82,7 +107,7 @@ fn committed_header_matches_fresh_generation() {
         );
     }
     match header_at_head() {
-        Some(committed) if committed != fresh => {
+        Ok(committed) if committed != fresh => {
             let (n, f, c) = first_difference(&fresh, &committed);
             panic!(
                 "include/rt2.h at HEAD differs from a fresh cbindgen generation at line {n}:\n  generated: {f}\n  committed: {c}\n\
@@ -90,11 +115,8 @@ fn committed_header_matches_fresh_generation() {
                  (and never a hand-edited one)."
             );
         }
-        Some(_) => {}
-        None => println!(
-            "NOT COMPARED with HEAD: {} is not a git checkout",
-            support::manifest_dir().display()
-        ),
+        Ok(_) => {}
+        Err(why) => println!("NOT COMPARED with HEAD: {why}"),
     }
 }
 
