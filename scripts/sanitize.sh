@@ -29,10 +29,12 @@ for src in "$examples"/*.c; do
     args=()
     if [ "$exe" = load_model ]; then
         if [ ! -f "$bunny" ]; then
-            echo "skip $exe: $bunny is absent (set RT2_SHARED to the shared data folder)"
             # As the cargo tests: with RT2_REQUIRE_SHARED=1 (CI) a missing file is a failure.
             if [ "${RT2_REQUIRE_SHARED:-0}" = 1 ]; then
+                echo "FAIL $exe: $bunny is absent and RT2_REQUIRE_SHARED=1 (set RT2_SHARED to the shared data folder)"
                 fail=1
+            else
+                echo "skip $exe: $bunny is absent (set RT2_SHARED to the shared data folder)"
             fi
             continue
         fi

@@ -163,7 +163,8 @@ mod tests {
     }
 
     /// One record pair of each of `rt2cmp`'s cases (tol = 1e-4 · 10 = 1e-3), each counted
-    /// where that tool counts it, and only the real disagreements in `disagreements`.
+    /// where that tool counts it, and only the real disagreements in `disagreements`; a NaN
+    /// `t`, which `rt2cmp` lets pass (`dt > tol` is false), is deliberately a disagreement.
     #[test]
     fn each_case_is_counted_as_rt2cmp_counts_it() {
         let miss = hit(u32::MAX, f32::INFINITY);

@@ -129,8 +129,8 @@ pub struct StreamMemory {
 /// inner step moves every live ray one node, their fetches in flight together; a leaf visit
 /// one lane at a time with the single-ray leaf test): same hits, 10.5 steps per list against
 /// the packet's 19, but 0.55× on the bunny and 0.65× on the dragon: the packet's rays share
-/// their leaves' gathered triangles, which lone rays each gather again. Lists of up to 2N and 4N rays as two or four packets: 0.92× and 0.86× on the bunny,
-/// no change on the dragon. Packets that finish their last one to four live lanes as single
+/// their leaves' gathered triangles, which lone rays each gather again. Lists of up to 2N and
+/// 4N rays as two or four packets: 0.92× and 0.86× on the bunny, no change on the dragon. Packets that finish their last one to four live lanes as single
 /// rays (Embree's switch to single rays): 0.90–0.94× on the dragon. Lists of three or four
 /// rays as 4-lane packets (in 16-lane streams): 0.99× on the bunny, 1.01× on the dragon. On the
 /// dragon's 256² primary rays, lists of up to 2N, 4N and 8N rays as packets: 0.98–0.99×.
