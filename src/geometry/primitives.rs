@@ -377,12 +377,9 @@ fn line_lost_surface(
         * (hit.t.abs() as f64 * ray.dir.as_dvec3().length()
             + ray.org.as_dvec3().abs().max_element()
             + c.abs().max_element());
-    let stretch = inv
-        .to_cols_array()
-        .iter()
-        .map(|x| x * x)
-        .sum::<f64>()
-        .sqrt();
+    let stretch =
+        (inv.x_axis.length_squared() + inv.y_axis.length_squared() + inv.z_axis.length_squared())
+            .sqrt();
     // All finite (the caller checked `u`; `t`, the ray and the map are finite).
     if u.length() > 1.0 + world * stretch {
         return None;

@@ -159,14 +159,16 @@ const UTF8_BOM: &[u8] = b"\xef\xbb\xbf";
 /// the wrong cause. Only on failure: a file that parses (CR CR LF endings, a CR in a comment)
 /// is kept.
 fn cr_line_ends(result: Result<Mesh>, text: &[u8], name: &str) -> Result<Mesh> {
-    let first = text.split(|&b| b == b'\n').next().unwrap_or_default();
-    let first = first.strip_suffix(b"\r").unwrap_or(first);
-    result.map_err(|e| match e.status {
-        Rt2Status::Parse if first.contains(&b'\r') => Error::parse(format!(
-            "{name}: the lines end in a CR alone (classic Mac OS line endings): convert the \
-             file to LF or CRLF line endings"
-        )),
-        _ => e,
+    result.map_err(|e| {
+        let first = text.split(|&b| b == b'\n').next().unwrap_or_default();
+        let first = first.strip_suffix(b"\r").unwrap_or(first);
+        match e.status {
+            Rt2Status::Parse if first.contains(&b'\r') => Error::parse(format!(
+                "{name}: the lines end in a CR alone (classic Mac OS line endings): convert \
+                 the file to LF or CRLF line endings"
+            )),
+            _ => e,
+        }
     })
 }
 
