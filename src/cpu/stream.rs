@@ -121,22 +121,24 @@ pub struct StreamMemory {
 /// within the machine's noise of each other on primary, incoherent and diffuse rays.
 ///
 /// Measured and dropped for the lists of at most N rays (16 lanes, one thread, the bunny's
-/// `incoherent_262144` and the dragon's `incoherent_131072`, where these finishing walks take
-/// 58% and 85% of the time): single rays taken in turns, 16 at once, each ray's next node and
-/// its leaf's triangles prefetched while the others step (same hits and statistics), ran at
-/// 0.68× on the bunny and 0.95–1.10× on the dragon: a lone ray's steps cost more than its cache
-/// misses. Independent lanes (each lane its own ray, node, segment and stack, as on a GPU: an
-/// inner step moves every live ray one node, their fetches in flight together; a leaf visit
-/// one lane at a time with the single-ray leaf test): same hits, 10.5 steps per list against
-/// the packet's 19, but 0.55× on the bunny and 0.65× on the dragon: the packet's rays share
-/// their leaves' gathered triangles, which lone rays each gather again. Lists of up to 2N and
-/// 4N rays as two or four packets: 0.92× and 0.86× on the bunny, no change on the dragon. Packets that finish their last one to four live lanes as single
-/// rays (Embree's switch to single rays): 0.90–0.94× on the dragon. Lists of three or four
-/// rays as 4-lane packets (in 16-lane streams): 0.99× on the bunny, 1.01× on the dragon. On the
-/// dragon's 256² primary rays, lists of up to 2N, 4N and 8N rays as packets: 0.98–0.99×.
-/// The other way, fewer lists as packets: split further as lists down to three rays (no
-/// packets), 0.53× on the bunny's incoherent set; packets for lists of at most 8 or 12 rays
-/// (16 lanes), 0.96–1.00× on the dragon's primary set.
+/// `incoherent_262144` and the dragon's `incoherent_131072`, where these finishing walks take 58%
+/// and 85% of the time): single rays taken in turns, 16 at once, each ray's next node and its
+/// leaf's triangles prefetched while the others step (same hits and statistics), ran at 0.68× on
+/// the bunny and 0.95–1.10× on the dragon: a lone ray's steps cost more than its cache misses. Two
+/// lists' packets walked in turns, a step of each (their node fetches in flight together; same
+/// hits): 0.95–0.97× on the bunny, 0.99–1.05× on the dragon. Independent lanes (each lane its own
+/// ray, node, segment and stack, as on a GPU: an inner step moves every live ray one node, their
+/// fetches in flight together; a leaf visit one lane at a time with the single-ray leaf test): same
+/// hits, 10.5 steps per list against the packet's 19, but 0.55× on the bunny and 0.65× on the
+/// dragon: the packet's rays share their leaves' gathered triangles, which lone rays each gather
+/// again. Lists of up to 2N and 4N rays as two or four packets: 0.92× and 0.86× on the bunny, no
+/// change on the dragon. Packets that finish their last one to four live lanes as single rays
+/// (Embree's switch to single rays): 0.90–0.94× on the dragon. Lists of three or four rays as
+/// 4-lane packets (in 16-lane streams): 0.99× on the bunny, 1.01× on the dragon. On the dragon's
+/// 256² primary rays, lists of up to 2N, 4N and 8N rays as packets: 0.98–0.99×. The other way,
+/// fewer lists as packets: split further as lists down to three rays (no packets), 0.53× on the
+/// bunny's incoherent set; packets for lists of at most 8 or 12 rays (16 lanes), 0.96–1.00× on the
+/// dragon's primary set.
 const SINGLE_MAX: usize = 2;
 
 /// Walks the tree once with all the rays of one octant group.
