@@ -710,7 +710,7 @@ typedef struct rt2_scene_statistics {
    * The lookup from `(object, prim)` to the library's primitive index that
    * `rt2_query_options.exclude` and `rt2_hit_surfaces` need: 4 bytes per primitive of every
    * object (disabled ones too, not removed ones), a `size_t` per object id given (removed
-   * ones too) and 4 bytes per removed id; 0 until a query names primitives
+   * ones too) and one more, and 4 bytes per removed id; 0 until a query names primitives
    * to exclude or surfaces are asked for a hit.
    */
   uint64_t bytes_prim_lookup;
@@ -1059,7 +1059,7 @@ enum rt2_status rt2_scene_add_sphere(rt2_scene *scene,
 /**
  * Adds an axis-aligned ellipsoid with semi-axes `radii` (each > 0); a transform may rotate it.
  * INVALID_ARGUMENT (and nothing added) also for one that does not fit in f32 in world space:
- * each semi-axis squared must neither overflow nor vanish (semi-axes from about 3.7e-23 to
+ * each semi-axis squared must neither overflow nor vanish (semi-axes from about 2.7e-23 to
  * 1.8e19), and its bounds and inverse map must be finite (README, "Range").
  *
  * # Safety
@@ -1106,9 +1106,10 @@ enum rt2_status rt2_scene_add_plane(rt2_scene *scene,
  * file, a FIFO, device or directory is an IO error. Parse errors name the file and the line or
  * byte offset at fault. Triangles keep the file's face order (polygons are fan-triangulated);
  * a file without faces is a PARSE error, whatever its format. OBJ: positions (`v`) and faces
- * (`f`) are read; normals, texture coordinates, groups, materials, points and lines (no
- * surface) are skipped; curved surfaces and any other statement are a PARSE error rather than
- * dropped. Geometry that `rt2_scene_add_mesh` would refuse (a triangle that does not fit in
+ * (`f`) are read; normals, texture coordinates, free-form parameter vertices (`vp`), object
+ * and group names, smoothing and merging groups (`o`, `g`, `s`, `mg`), materials, points and
+ * lines (no surface) are skipped; free-form curves and surfaces (`cstype`, `curv`, `surf`...)
+ * and any other statement are a PARSE error rather than dropped. Geometry that `rt2_scene_add_mesh` would refuse (a triangle that does not fit in
  * f32) is INVALID_ARGUMENT, naming the file and the triangle (in face order). The file is read
  * and parsed before the scene is locked, so other calls on the scene do not wait for a slow
  * file.

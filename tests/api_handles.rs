@@ -352,7 +352,7 @@ fn objects_beyond_the_f32_range_are_errors_and_extreme_valid_ones_are_hit() {
 
 /// The documented limits of the analytic shapes: a sphere's squared radius must be a normal
 /// f32 (radii from about 1.1e-19 to 1.8e19), an ellipsoid's squared semi-axes must neither
-/// overflow nor vanish (about 3.7e-23 to 1.8e19), a plane's offset over its normal's largest
+/// overflow nor vanish (about 2.7e-23 to 1.8e19), a plane's offset over its normal's largest
 /// component must be finite. Past them: INVALID_ARGUMENT, nothing added.
 #[test]
 fn analytic_shapes_are_refused_past_their_documented_limits() {
@@ -389,9 +389,9 @@ fn analytic_shapes_are_refused_past_their_documented_limits() {
         }
         for (axis, expected) in [
             (1.8e19f32, true),
-            (1e-22, true),
+            (2.7e-23, true),
             (1.9e19, false),
-            (1e-23, false),
+            (2.6e-23, false),
         ] {
             let radii = [axis, 1.0, 1.0];
             let added = fits(rt2_scene_add_ellipsoid(scene, o, radii.as_ptr(), 0, none));

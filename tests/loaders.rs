@@ -379,6 +379,7 @@ fn obj_all_face_forms_and_ignored_statements() {
         v 0 1 0   # trailing comment\n\
         vt 0 0\n\
         vn 0 0 1\n\
+        vp 0.5 0.5\n\
         usemtl red\n\
         s off\n\
         \n\

@@ -105,7 +105,7 @@ fn mat(s: &S) -> u32 {
 
 /// Ellipsoids far from unit size: the normal inv^T inv (p - c) is ~1/size long; squared it
 /// overflows below ~5e-20 and underflows above ~3e22 (the same as the triangle fix). Those
-/// within the header's limits (semi-axes from about 3.7e-23 to 1.8e19) are accepted and get
+/// within the header's limits (semi-axes from about 2.7e-23 to 1.8e19) are accepted and get
 /// the right normal; those outside are refused.
 #[test]
 fn ellipsoid_normals_far_from_unit_size() {
