@@ -64,12 +64,14 @@ fn build_peak(name: &str, set: &PrimitiveSet, opts: &BuildOptions) -> Peak {
     p
 }
 
-fn triangles(tris: impl Iterator<Item = [Vec3; 3]>) -> PrimitiveSet {
-    let mut set = PrimitiveSet::default();
-    set.triangles = tris
-        .map(|[a, b, c]| Triangle::from_vertices(a, b, c))
-        .collect();
-    set
+/// The triangles of `corners`, as a primitive set.
+fn triangles(corners: impl Iterator<Item = [Vec3; 3]>) -> PrimitiveSet {
+    PrimitiveSet {
+        triangles: corners
+            .map(|[a, b, c]| Triangle::from_vertices(a, b, c))
+            .collect(),
+        ..PrimitiveSet::default()
+    }
 }
 
 #[test]
