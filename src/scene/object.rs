@@ -139,8 +139,9 @@ enum Placed {
     Plane(Plane),
 }
 
-/// Appends the world-space primitives of `obj` to `set`; `origins` receives one entry per
-/// bounded primitive, `plane_origins` per plane (they are indexed after the bounded ones).
+/// Appends the world-space primitives of `obj` to `set`, and where each came from to the
+/// origin list of its kind, `origins[k]` for triangles, spheres, ellipsoids, boxes and planes
+/// in turn (the commit concatenates them in that order: the order of the global index).
 ///
 /// Fails when a primitive cannot be represented in world space (see [`check`]), having
 /// appended the primitives before it: the commit then drops the whole set. The scene checks
