@@ -152,7 +152,7 @@ pub(crate) trait Answer {
         start: Entry,
         stats: &mut TraversalStats,
     ) -> bool;
-    /// Starts loading what [`Answer::leaf`] will touch for ray `i`.
+    /// Starts loading what [`Answer::leaf_rays`] will touch for ray `i`.
     fn prefetch(&self, i: usize);
 }
 
@@ -543,8 +543,8 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
     /// Sets every ray up ([`Batch::block`]) and returns them grouped by octant (the signs of
     /// the direction, `-0.0` negative as in `TRay::positive`): within a group every node has
     /// the same near child for every ray, so the group can be traversed front to back at once
-    /// (paper: ≤ 8 traversals). The groups keep the order of the blocks (`RayOrder`): packets
-    /// and streams take their rays in it.
+    /// (paper: ≤ 8 traversals). The groups keep the order of the blocks (`RayOrder`): streams
+    /// take their rays in it (packets set their blocks up and group only the mixed ones).
     #[inline(always)]
     pub fn group<const N: usize>(&mut self, isa: Isa<N>, order: RayOrder) -> [Vec<Root>; 8] {
         let mut groups: [Vec<Root>; 8] = Default::default();
@@ -637,7 +637,8 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
         });
     }
 
-    /// Starts loading ray `i` and its answer, a few rays before [`Batch::visit_leaf`] needs them.
+    /// Starts loading ray `i` and its answer, a few rays before a stream's leaf visit
+    /// ([`Batch::visit_leaf_rays`]) needs them.
     #[inline(always)]
     pub fn prefetch_leaf(&self, i: u32) {
         let i = i as usize;

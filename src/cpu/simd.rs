@@ -1,7 +1,7 @@
 //! SIMD lane width, the triangle tests of the vectorised-traversal paper (Noguera & Ureña,
 //! seeds/000, "intersección rayo–triángulo": the precomputed 1 ray × 4 triangles variant, and N
-//! rays × 1 triangle for stream leaves), for Möller–Trumbore and the watertight test, and the
-//! stream compaction.
+//! rays × 1 triangle for the leaves that many rays of a stream or packet reach), for
+//! Möller–Trumbore and the watertight test, and the stream compaction.
 //!
 //! The code is portable: fixed-size `[f32; N]` lanes written as straight-line loops that LLVM
 //! turns into vector instructions; only the compaction, the lane masks ([`lanes_less`]) and the
@@ -285,8 +285,9 @@ fn moller_trumbore(
     (if ok { t } else { f32::INFINITY }, u, v)
 }
 
-/// N rays in structure-of-arrays form, for the leaves of a stream: every ray of a list that
-/// reaches a leaf is tested N at a time against each triangle in turn (broadcast, not gathered).
+/// N rays in structure-of-arrays form, for the leaves of a stream and those a packet's rays
+/// reach at least one per two primitives: the rays are tested N at a time against each
+/// triangle in turn (broadcast, not gathered).
 /// SAH leaves hold ~2 triangles per visit, so a [`TriBlock`] of N lanes is mostly padding.
 pub struct RayLanes<const N: usize> {
     pub org: [[f32; N]; 3],
@@ -391,10 +392,12 @@ impl<const N: usize> RayLanes<N> {
 }
 
 /// Fewest rays at a leaf for which its triangles are gathered into N-lane blocks once for all of
-/// them. Gathering costs about as much as testing each triangle once, and SAH leaves hold ~3
-/// triangles, so one or two rays take the single-ray leaf test instead, which gathers 4
-/// triangles per ray (on the bunny's sets this rule took stream ×8 from 1.13× to 1.34× the
-/// single-ray speed on primary rays; incoherent rays were within noise).
+/// them (a packet's leaf that few of its rays reach; streams test their leaves N rays per
+/// triangle). Gathering costs about as much as testing each triangle once, and SAH leaves hold
+/// ~3 triangles, so one or two rays take the single-ray leaf test instead, which gathers 4
+/// triangles per ray (measured when streams still used it: on the bunny's sets this rule took
+/// 8-lane streams from 1.13× to 1.34× the single-ray speed on primary rays; incoherent rays
+/// were within noise).
 pub const GATHER_MIN_RAYS: usize = 3;
 
 /// Reused buffers for a leaf's primitives prepared once per leaf visit for all the rays that

@@ -270,8 +270,8 @@ pub struct Surface<'a> {
 }
 
 /// Deterministic per-pixel sample positions: a stratified grid jittered by a hash, so that a
-/// render does not depend on thread scheduling. Sample `s` of `n` takes cell `cell` of the
-/// grid of `ceil(sqrt(n))` cells a side.
+/// render does not depend on thread scheduling. Sample `s` takes cell `cell` (row by row) of
+/// a grid of `side` cells a side.
 fn stratified(x: u32, y: u32, s: u32, cell: u32, side: u32, salt: u32) -> Vec2 {
     let h = |k: u32| (mix(x, y, s, k ^ salt) >> 8) as f32 / (1u32 << 24) as f32;
     Vec2::new(
@@ -432,12 +432,13 @@ struct WaveRay {
 const WAVE_PATHS: usize = 1 << 20;
 
 /// Breadth-first (wavefront) rendering, the schedule the vectorised-traversal paper needs: the
-/// closest hits of all rays of a depth as one stream query, then all their shadow rays as one
-/// occlusion query, then the next depth's rays. Each sample's radiance is the depth-first one's
-/// terms (same rays, same hits, same shading) summed in another order; float addition is not
+/// closest hits of a depth's rays as stream queries, then their shadow rays as one occlusion query,
+/// then the next depth's rays (a depth larger than a slice of [`WAVE_RAYS`] is traced slice by
+/// slice, each slice's next depth before the next slice). Each sample's radiance is the depth-first
+/// one's terms (same rays, same hits, same shading) summed in another order; float addition is not
 /// associative, so a pixel may round to the next 1/255 step. Each ray carries the primitive it
-/// ignores (`OffsetMode::ExcludePrim`) into the stream queries. The traced pixels go in runs of
-/// at most [`WAVE_PATHS`] samples.
+/// ignores (`OffsetMode::ExcludePrim`) into the stream queries. The traced pixels go in runs of at
+/// most [`WAVE_PATHS`] samples.
 fn render_breadth_first(
     scene: &Committed,
     camera: &Camera,

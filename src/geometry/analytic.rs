@@ -89,8 +89,9 @@ impl Sphere {
         Aabb::new(c - self.radius, c + self.radius)
     }
 
-    /// Tight bounds of the sphere inside a voxel: the box of the sphere's disc cut by each
-    /// voxel face is folded in, so a voxel corner far from the surface is not counted.
+    /// The sphere's box cut by the voxel, or empty when no point of the voxel lies in the
+    /// sphere (the voxel's point nearest the centre is farther than the radius). Not the box of
+    /// the sphere's part inside the voxel: a corner of this box may lie far from the surface.
     pub fn clipped_bounds(&self, voxel: &Aabb) -> Aabb {
         let b = self.bounds().intersection(*voxel);
         if b.is_empty() {

@@ -26,8 +26,10 @@ use crate::geometry::{Aabb, Clipped};
 /// Cost of one primitive test, the unit of the cost model.
 const INTERSECTION_COST: f32 = 1.0;
 
-/// Event kinds in their sort order at equal positions: the sweep must see the ends of the
-/// primitives left of a plane before the planar ones and the starts (Wald & Havran §4.2).
+/// Event kinds in their sort order at equal positions (Wald & Havran §4.2: ends, planar,
+/// starts). The sweep counts every event at one position before it scores that plane, so the
+/// order within a position does not change its counts; it keeps the events of one position
+/// together, grouped by kind.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kind {
     End = 0,

@@ -34,7 +34,7 @@ pub struct Scene {
     lights: Vec<PointLight>,
     /// By id; `None` where the object was removed ([`Scene::remove`]): ids are never reused,
     /// so a removed object leaves its slot here and an entry in the committed per-object
-    /// arrays. Boxed, so that a slot is a pointer (8 bytes) rather than an `Object` (120): a
+    /// arrays. Boxed, so that a slot is a pointer (8 bytes) rather than an `Object` (128): a
     /// program that streamed a million objects through a scene kept 128 MB of empty slots,
     /// which every commit walked.
     objects: Vec<Option<Box<Object>>>,

@@ -402,8 +402,9 @@ pub(crate) struct Entry {
     pub t1: f32,
 }
 
-/// Entries kept without allocating: enough for any tree the builders make (depth ≤ 32 is typical);
-/// deeper trees spill into a heap vector rather than lose work.
+/// Entries kept without allocating: enough for the trees of most scenes (the SAH's default
+/// depth limit, 8 + 1.3 log2 N, reaches 32 at about 1.2 M primitives; the dragon's is 34);
+/// deeper walks spill into a heap vector rather than lose work.
 const INLINE: usize = 32;
 
 /// The standard traversal's stack: unbounded, inline for the first [`INLINE`] entries.
