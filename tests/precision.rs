@@ -820,13 +820,13 @@ fn offset_modes_and_shadow_acne_far_from_the_origin() {
                 let target = o + Vec3::new(rng.unit() * 1.8 - 0.9, 0.0, rng.unit() * 1.8 - 0.9);
                 let eye = o + Vec3::new(-0.5, 1.5, 2.5);
                 let ray = Ray::new(eye, target - eye, 0.0, f32::INFINITY);
-                let hit = tracer.intersect(&ray, INVALID);
+                let hit = tracer.intersect(&ray, INVALID, None);
                 assert!(hit.is_hit(), "{mode:?} offset {offset}: primary miss");
                 let surface = tracer.surface(&ray, &hit);
                 let (org, skip) = tracer.leave(&surface, surface.n);
                 let to_light = light - org;
                 let shadow = Ray::new(org, to_light.normalize(), 0.0, to_light.length());
-                acne += tracer.occluded(&shadow, skip) as usize;
+                acne += tracer.occluded(&shadow, skip, None) as usize;
             }
             match mode {
                 OffsetMode::Epsilon => epsilon_acne.push(acne as f64 / n as f64),
@@ -935,7 +935,7 @@ fn robust_offsets_on_every_kind_of_primitive_seen_from_far_away() {
                 let (x, z) = (rng.unit() - 0.5, rng.unit() - 0.5);
                 let y = if flat { 0.0 } else { -0.3 };
                 let ray = Ray::new(eye, Vec3::new(x, y, z) - eye, 0.0, f32::INFINITY);
-                let hit = tracer.intersect(&ray, INVALID);
+                let hit = tracer.intersect(&ray, INVALID, None);
                 assert!(hit.is_hit(), "{name} from {distance}: primary miss");
                 let surface = tracer.surface(&ray, &hit);
                 if flat && surface.n != Vec3::Y {
@@ -947,7 +947,7 @@ fn robust_offsets_on_every_kind_of_primitive_seen_from_far_away() {
                 if to_light.dot(surface.n) > 0.0 {
                     lit += 1;
                     let shadow = Ray::new(org, to_light.normalize(), 0.0, to_light.length());
-                    acne += tracer.occluded(&shadow, skip) as usize;
+                    acne += tracer.occluded(&shadow, skip, None) as usize;
                 }
             }
             assert!(lit > n / 2, "{name} from {distance}: only {lit} of {n} lit");
@@ -992,7 +992,7 @@ fn robust_hit_points_on_thin_ellipsoids_stay_where_the_ray_hit() {
         for _ in 0..500 {
             let aim = Vec3::new(rng.unit() - 0.5, 0.0, rng.unit() - 0.5);
             let ray = Ray::new(eye, aim - eye, 0.0, f32::INFINITY);
-            let hit = tracer.intersect(&ray, INVALID);
+            let hit = tracer.intersect(&ray, INVALID, None);
             assert!(hit.is_hit(), "h {h:e}: miss");
             let moved = tracer.surface(&ray, &hit).p.distance(ray.at(hit.t));
             worst = worst.max(moved);

@@ -620,7 +620,7 @@ fn normals_far_from_the_origin_are_those_of_f64() {
             for (x, y) in (0..h).flat_map(|y| (0..w).map(move |x| (x, y))) {
                 let pixel = glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                 let ray = rays.ray(pixel, size, glam::Vec2::ZERO);
-                let hit = tracer.intersect(&ray, INVALID);
+                let hit = tracer.intersect(&ray, INVALID, None);
                 let reference = far.hit(ray.org.as_dvec3(), ray.dir.as_dvec3());
                 // Both miss, or both hit (a ray within rounding of the rim may not).
                 let Some((_, n)) = reference.filter(|_| hit.is_hit()) else {

@@ -36,7 +36,8 @@ impl KdTree {
     /// The leaf node (a node index, not a rope leaf number) whose voxel holds `p`, descending below
     /// the plane when `p[axis] <= split`. For points outside the root box it is the leaf the
     /// point would fall in if the outer voxels were extended to infinity; ropes++ starts
-    /// secondary rays here instead of at the root.
+    /// secondary rays here instead of at the root (the CPU's depth-first render,
+    /// `Tracer::start_leaf`).
     pub fn locate_leaf(&self, p: Vec3) -> u32 {
         let mut node = 0u32;
         loop {

@@ -200,8 +200,11 @@ fn sum(a: Acne, b: Acne) -> Acne {
 fn depth_first(ctx: &Context, tracer: &Tracer, rays: &[Ray], light: Vec3) -> Acne {
     ctx.install(|| {
         rays.par_iter()
-            .filter_map(|ray| Shadow::of(tracer, ray, &tracer.intersect(ray, INVALID), light))
-            .map(|s| s.judge(tracer.scene, &tracer.intersect(&s.ray, s.skip)))
+            .filter_map(|ray| Shadow::of(tracer, ray, &tracer.intersect(ray, INVALID, None), light))
+            .map(|s| {
+                let start = tracer.start_leaf(s.ray.org);
+                s.judge(tracer.scene, &tracer.intersect(&s.ray, s.skip, start))
+            })
             .reduce(Acne::default, sum)
     })
 }
