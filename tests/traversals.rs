@@ -1041,8 +1041,8 @@ fn a_tree_at_the_depth_limit_is_traversed_in_every_mode() {
 fn rope_traversals_without_ropes_fall_back_to_standard() {
     let mut rng = Rng(12);
     let prims = soup(&mut rng, 500, 0.1);
-    let mut tree = build(&prims, &BuildOptions::default());
-    tree.drop_ropes();
+    let tree = build(&prims, &BuildOptions::default());
+    assert!(tree.ropes.is_none(), "the default build makes no ropes");
     let rays = random_rays(&mut rng, 300);
     check_rays(
         "no ropes",

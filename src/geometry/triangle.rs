@@ -145,7 +145,10 @@ impl Triangle {
         e1.cross(e2).length() <= (-21f64).exp2() * sides[0] * sides[1]
     }
 
-    /// The test `how` asks for. Returns `(t, u, v)` with `tmin <= t < tmax`.
+    /// The test `how` asks for, on this triangle's corners as stored (`v0`, `v0 + e1`,
+    /// `v0 + e2`). Returns `(t, u, v)` with `tmin <= t < tmax`. A scene's watertight test reads
+    /// the exact corners its mesh gave instead, which the edge form does not always give back
+    /// bit for bit (`PrimitiveSet::intersect`); Möller–Trumbore reads the edges either way.
     #[inline]
     pub fn intersect(&self, ray: &Ray, how: &TriangleTest, tmax: f32) -> Option<(f32, f32, f32)> {
         match how {

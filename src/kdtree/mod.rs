@@ -268,11 +268,6 @@ impl KdTree {
         Ok(())
     }
 
-    /// Frees the ropes when no rope traversal needs them any more.
-    pub fn drop_ropes(&mut self) {
-        self.ropes = None;
-    }
-
     pub fn node_bytes(&self) -> usize {
         std::mem::size_of_val(self.nodes.as_slice())
     }
