@@ -402,57 +402,50 @@ pub(crate) struct Entry {
     pub t1: f32,
 }
 
-/// Entries kept without allocating: enough for the trees of most scenes (the SAH's default
-/// depth limit, 8 + 1.3 log2 N, reaches 32 at about 1.2 M primitives; the dragon's is 34);
-/// deeper walks spill into a heap vector rather than lose work.
-const INLINE: usize = 32;
+/// Slots of the standard traversal's stack. Its entries are far children pending on the path
+/// from the start to the current node, at most one per level below the start, and the
+/// builders make every node at depth `MAX_DEPTH_LIMIT` a leaf: that many slots and the start's
+/// always suffice (`tests/traversals.rs` walks a tree at the limit). A fixed array: the
+/// earlier inline part of 32 entries with a heap vector past it ran 1.02–1.03× slower on the
+/// bunny's primary rays (one thread) and could never spill.
+const STACK_SLOTS: usize = crate::kdtree::MAX_DEPTH_LIMIT as usize + 1;
 
-/// The standard traversal's stack: unbounded, inline for the first [`INLINE`] entries.
+/// The standard traversal's stack ([`STACK_SLOTS`]).
 pub(super) struct Stack {
-    inline: [Entry; INLINE],
+    entries: [Entry; STACK_SLOTS],
     len: usize,
-    spill: Vec<Entry>,
 }
 
 impl Stack {
     pub fn new() -> Self {
         Stack {
-            inline: [Entry::default(); INLINE],
+            entries: [Entry::default(); STACK_SLOTS],
             len: 0,
-            spill: Vec::new(),
         }
     }
 
     #[inline]
     pub fn push(&mut self, e: Entry) {
-        if self.len < INLINE {
-            self.inline[self.len] = e;
-        } else {
-            self.spill.push(e);
-        }
+        self.entries[self.len] = e;
         self.len += 1;
     }
 
     #[inline]
     pub fn pop(&mut self) -> Option<Entry> {
         self.len = self.len.checked_sub(1)?;
-        if self.len < INLINE {
-            Some(self.inline[self.len])
-        } else {
-            self.spill.pop()
-        }
+        Some(self.entries[self.len])
     }
 }
 
 /// Largest short stack (the thesis uses 3): the query and render options refuse larger sizes,
 /// and the traversal clamps them. The GPU kernels hold the same bound (`SHORT_STACK_MAX`).
-pub const MAX_SHORT_STACK: usize = INLINE;
+pub const MAX_SHORT_STACK: usize = 32;
 
 /// The short stack of Horn et al.: circular, so a push onto a full stack overwrites the oldest
 /// (farthest) entry. Losing it is safe: when the stack runs dry the traversal restarts and finds
 /// that part of the ray again.
 pub(super) struct ShortStack {
-    buf: [Entry; INLINE],
+    buf: [Entry; MAX_SHORT_STACK],
     cap: usize,
     top: usize,
     len: usize,
@@ -461,8 +454,8 @@ pub(super) struct ShortStack {
 impl ShortStack {
     pub fn new(size: usize) -> Self {
         ShortStack {
-            buf: [Entry::default(); INLINE],
-            cap: size.min(INLINE),
+            buf: [Entry::default(); MAX_SHORT_STACK],
+            cap: size.min(MAX_SHORT_STACK),
             top: 0,
             len: 0,
         }
@@ -500,12 +493,12 @@ mod tests {
     }
 
     #[test]
-    fn stack_spills_past_its_inline_part_without_losing_entries() {
+    fn stack_holds_a_far_child_per_level_and_the_start() {
         let mut s = Stack::new();
-        for i in 0..3 * INLINE as u32 {
+        for i in 0..STACK_SLOTS as u32 {
             s.push(entry(i));
         }
-        for i in (0..3 * INLINE as u32).rev() {
+        for i in (0..STACK_SLOTS as u32).rev() {
             assert_eq!(s.pop().map(|e| e.node), Some(i));
         }
         assert!(s.pop().is_none());
