@@ -20,15 +20,32 @@ pub(crate) struct TRay {
     pub ray: Ray,
     org: [f32; 3],
     pub inv_dir: [f32; 3],
+    /// Bit `axis` set where the direction is negative ([`Self::positive`] false).
+    negative: u32,
 }
 
 impl TRay {
     pub fn new(ray: &Ray) -> Self {
+        let inv_dir = ray.dir.recip().to_array();
+        let negative = (0..3).fold(0, |m, a| m | u32::from(inv_dir[a].is_sign_negative()) << a);
         TRay {
             ray: *ray,
             org: ray.org.to_array(),
-            inv_dir: ray.dir.recip().to_array(),
+            inv_dir,
+            negative,
         }
+    }
+
+    /// 1 where the direction on `axis` is negative, else 0: the near child of a node splitting
+    /// `axis` is its first child plus this. Read from a mask in a register rather than from the
+    /// sign of `inv_dir[axis]`: LLVM picked the near child with a conditional move on that
+    /// load, so every step's next node waited on one more load. With the mask the standard
+    /// traversal ran the bunny's primary rays 1.14× as fast (one thread; it had run at 0.84×
+    /// the short-stack traversal, which LLVM had compiled with a branch there), the dragon's
+    /// 1.11×, and CPU renders of the bunny 1.12×.
+    #[inline]
+    pub fn negative_bit(&self, axis: usize) -> u32 {
+        self.negative >> axis & 1
     }
 
     /// Ray parameter where the ray meets the plane `x[axis] = plane`. NaN when the ray lies in
@@ -43,7 +60,7 @@ impl TRay {
     /// reciprocal keeps the direction's sign (`1 / -0 = -inf`).
     #[inline]
     pub fn positive(&self, axis: usize) -> bool {
-        self.inv_dir[axis].is_sign_positive()
+        self.negative_bit(axis) == 0
     }
 }
 
@@ -123,12 +140,8 @@ pub(super) enum Crossing {
 fn step(node: KdNode, ray: &TRay, t0: f32, t1: f32) -> Crossing {
     let axis = node.axis();
     let t_split = ray.dist(axis, node.split);
-    let (below, above) = (node.index(), node.index() + 1);
-    let (near, far) = if ray.positive(axis) {
-        (below, above)
-    } else {
-        (above, below)
-    };
+    let flip = ray.negative_bit(axis);
+    let (near, far) = (node.index() + flip, node.index() + (flip ^ 1));
     if t_split.is_nan() || t_split <= t0 {
         Crossing::One { child: far }
     } else if t_split >= t1 {
