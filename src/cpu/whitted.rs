@@ -683,31 +683,27 @@ mod tests {
                 let (org, skip) = tracer.leave(&s, s.n);
                 let start = tracer.start_leaf(org).unwrap();
                 assert!(c.tree.nodes[start as usize].is_leaf(), "{name}: a leaf");
-                let b = ropes.leaf_bounds[ropes.leaf_number(start)];
-                if !(b.min.cmplt(org).all() && org.cmplt(b.max).all()) {
+                let leaf_box = ropes.leaf_bounds[ropes.leaf_number(start)];
+                if !(leaf_box.min.cmplt(org).all() && org.cmplt(leaf_box.max).all()) {
                     continue; // On a face: the walk takes the root instead.
                 }
                 hinted += 1;
                 let mirror = Ray::new(org, reflect(primary.dir, s.n), 0.0, f32::INFINITY);
-                for (ray, hint, nodes) in [
-                    (&mirror, Some(start), &mut nodes_hint),
-                    (&mirror, None, &mut nodes_root),
-                ] {
+                let want = tracer.intersect(&mirror, skip, None);
+                for (hint, nodes) in [(Some(start), &mut nodes_hint), (None, &mut nodes_root)] {
                     let mut stats = TraversalStats::default();
                     let topts = tracer.traverse_options(skip, hint);
-                    let got = traverse::intersect(
-                        &c.tree,
-                        &c.prims,
-                        ray,
-                        Traversal::RopesPlusPlus,
-                        &topts,
-                        &mut stats,
-                    );
-                    assert_eq!(got, tracer.intersect(ray, skip, None), "{name} ({x}, {y})");
+                    let how = Traversal::RopesPlusPlus;
+                    let got =
+                        traverse::intersect(&c.tree, &c.prims, &mirror, how, &topts, &mut stats);
+                    assert_eq!(got, want, "{name} ({x}, {y})");
                     *nodes += stats.nodes_visited;
                 }
             }
-            println!("{name}: {hinted} origins inside a leaf; {nodes_hint} nodes from their leaves, {nodes_root} from the root");
+            println!(
+                "{name}: {hinted} origins inside a leaf; {nodes_hint} nodes from their leaves, \
+                 {nodes_root} from the root"
+            );
             assert!(
                 hinted > 100,
                 "{name}: {hinted} origins strictly inside a leaf"
