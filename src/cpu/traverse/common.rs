@@ -36,16 +36,14 @@ impl TRay {
         }
     }
 
-    /// 1 where the direction on `axis` is negative, else 0: the near child of a node splitting
-    /// `axis` is its first child plus this. Read from a mask in a register rather than from the
-    /// sign of `inv_dir[axis]`: LLVM picked the near child with a conditional move on that
-    /// load, so every step's next node waited on one more load. With the mask the standard
-    /// traversal ran the bunny's primary rays 1.14× as fast (one thread; it had run at 0.84×
-    /// the short-stack traversal, which LLVM had compiled with a branch there), the dragon's
-    /// 1.11×, and CPU renders of the bunny 1.12×. The restart family, whose loop had the
-    /// branch (a predicted branch adds nothing to the chain; the mask adds a shift and an add),
-    /// lost: short-stack 0.96×, kd-restart and push-down 0.9× on those primary rays. The
-    /// standard traversal is the one AUTO picks on the CPU.
+    /// 1 where the direction on `axis` is negative, else 0. A step picks the near child by it,
+    /// from a mask in a register rather than from the sign of `inv_dir[axis]`: on that load
+    /// LLVM chose the child with a conditional move in the standard traversal, so every step's
+    /// next node waited on one more load (the restart family's loop got a branch). With the
+    /// mask the standard traversal ran the bunny's primary rays 1.14× as fast (one thread; it
+    /// had run at 0.84× the short-stack traversal), the dragon's 1.1×, and CPU renders of the
+    /// bunny 1.12×, the others as fast as before. Written as an `if`: the near child as
+    /// `index + bit` cost the restart family 4–10%.
     #[inline]
     pub fn negative_bit(&self, axis: usize) -> u32 {
         self.negative >> axis & 1
@@ -143,8 +141,12 @@ pub(super) enum Crossing {
 fn step(node: KdNode, ray: &TRay, t0: f32, t1: f32) -> Crossing {
     let axis = node.axis();
     let t_split = ray.dist(axis, node.split);
-    let flip = ray.negative_bit(axis);
-    let (near, far) = (node.index() + flip, node.index() + (flip ^ 1));
+    let (below, above) = (node.index(), node.index() + 1);
+    let (near, far) = if ray.negative_bit(axis) == 0 {
+        (below, above)
+    } else {
+        (above, below)
+    };
     if t_split.is_nan() || t_split <= t0 {
         Crossing::One { child: far }
     } else if t_split >= t1 {
