@@ -92,17 +92,18 @@ impl<'a> Tracer<'a> {
         }
     }
 
-    /// Ropes++ only (the thesis' algorithm 8): the leaf node holding `p`, where the secondary
-    /// rays leaving from `p` start their rope walk instead of at the root
+    /// Ropes++ only (the thesis' algorithm 8): the leaf node holding the point `p()` (asked for
+    /// only then: the other traversals pay nothing), where the secondary rays leaving from it
+    /// start their rope walk instead of at the root
     /// (`TraverseOptions::start_node`, which the walk checks against the leaf's box). The
     /// thesis keeps the leaf in which the hit was found; here it is located from the root, a
     /// descent that costs about what the walk's own first descent does, once for all the
     /// shadow rays of a point. Same images; CPU ropes++ renders (`rt2 render S --traversal
     /// ropes++ --backend cpu --threads 1`, 1376×768) ran 1.06× as fast on the bunny, 1.04–1.08×
     /// on spheres3 and 1.10× on spheres2.
-    pub fn start_leaf(&self, p: Vec3) -> Option<u32> {
+    pub fn start_leaf(&self, p: impl FnOnce() -> Vec3) -> Option<u32> {
         (self.traversal == Traversal::RopesPlusPlus && self.scene.tree.ropes.is_some())
-            .then(|| self.scene.tree.locate_leaf(p))
+            .then(|| self.scene.tree.locate_leaf(p()))
     }
 
     /// Closest hit of `ray`, ignoring primitive `exclude` (`INVALID` for none), its walk started
@@ -131,7 +132,7 @@ impl<'a> Tracer<'a> {
         while let Some((ray, exclude, weight, depth)) = pending.pop() {
             // Secondary rays (below the primary's depth) start in the leaf of their origin.
             let start = if depth > 1 {
-                self.start_leaf(ray.org)
+                self.start_leaf(|| ray.org)
             } else {
                 None
             };
@@ -143,7 +144,7 @@ impl<'a> Tracer<'a> {
             let s = self.surface(&ray, &hit);
             if s.local_weight > 0.0 {
                 // Every shadow ray leaves from the same point (`shadow_rays`).
-                let start = self.start_leaf(self.leave(&s, s.n).0);
+                let start = self.start_leaf(|| self.leave(&s, s.n).0);
                 let local =
                     self.local(&s, &ray, |shadow, skip| !self.occluded(shadow, skip, start));
                 color += weight * s.local_weight * local;
@@ -660,12 +661,12 @@ mod tests {
             let plain = b.scene.committed().unwrap();
             let centre = plain.bounds.center();
             let rope_less = Tracer::new(plain, &opts, Traversal::RopesPlusPlus);
-            assert_eq!(rope_less.start_leaf(centre), None, "{name}: no ropes");
+            assert_eq!(rope_less.start_leaf(|| centre), None, "{name}: no ropes");
             b.scene.ensure_ropes().unwrap();
             let c = b.scene.committed().unwrap();
             let ropes = c.tree.ropes.as_ref().unwrap();
             let standard = Tracer::new(c, &opts, Traversal::Standard);
-            assert_eq!(standard.start_leaf(centre), None, "{name}: standard");
+            assert_eq!(standard.start_leaf(|| centre), None, "{name}: standard");
             let tracer = Tracer::new(c, &opts, Traversal::RopesPlusPlus);
 
             let (w, h) = (48u32, 32u32);
@@ -681,7 +682,7 @@ mod tests {
                 }
                 let s = tracer.surface(&primary, &hit);
                 let (org, skip) = tracer.leave(&s, s.n);
-                let start = tracer.start_leaf(org).unwrap();
+                let start = tracer.start_leaf(|| org).unwrap();
                 assert!(c.tree.nodes[start as usize].is_leaf(), "{name}: a leaf");
                 let leaf_box = ropes.leaf_bounds[ropes.leaf_number(start)];
                 if !(leaf_box.min.cmplt(org).all() && org.cmplt(leaf_box.max).all()) {

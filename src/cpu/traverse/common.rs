@@ -6,6 +6,7 @@
 //! makes the seven traversals return bit-identical hits, because they then agree on every leaf's
 //! exit distance and on every side decision.
 
+use crate::cpu::batch::octant;
 use crate::cpu::simd::{lanes_less, lanes_less_eq, Isa, TriBlock};
 use crate::geometry::{Aabb, Hit, PrimitiveSet, Ray, RayTest, TraversalStats, TriangleTest};
 use crate::kdtree::{KdNode, KdTree};
@@ -20,19 +21,18 @@ pub(crate) struct TRay {
     pub ray: Ray,
     org: [f32; 3],
     pub inv_dir: [f32; 3],
-    /// Bit `axis` set where the direction is negative ([`Self::positive`] false).
+    /// Bit `axis` set where the direction is negative ([`Self::positive`] false): the ray's
+    /// octant, as packets and streams group rays.
     negative: u32,
 }
 
 impl TRay {
     pub fn new(ray: &Ray) -> Self {
-        let inv_dir = ray.dir.recip().to_array();
-        let negative = (0..3).fold(0, |m, a| m | u32::from(inv_dir[a].is_sign_negative()) << a);
         TRay {
             ray: *ray,
             org: ray.org.to_array(),
-            inv_dir,
-            negative,
+            inv_dir: ray.dir.recip().to_array(),
+            negative: octant(ray) as u32,
         }
     }
 
@@ -57,8 +57,8 @@ impl TRay {
     }
 
     /// Direction sign on `axis`, with `-0.0` negative: the sign of a zero component still picks
-    /// a side, so a ray lying in a split plane is sent to exactly one child, consistently. The
-    /// reciprocal keeps the direction's sign (`1 / -0 = -inf`).
+    /// a side, so a ray lying in a split plane is sent to exactly one child, consistently (and
+    /// the reciprocal keeps the direction's sign: `1 / -0 = -inf`).
     #[inline]
     pub fn positive(&self, axis: usize) -> bool {
         self.negative_bit(axis) == 0

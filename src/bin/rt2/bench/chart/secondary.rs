@@ -202,7 +202,7 @@ fn depth_first(ctx: &Context, tracer: &Tracer, rays: &[Ray], light: Vec3) -> Acn
         rays.par_iter()
             .filter_map(|ray| Shadow::of(tracer, ray, &tracer.intersect(ray, INVALID, None), light))
             .map(|s| {
-                let start = tracer.start_leaf(s.ray.org);
+                let start = tracer.start_leaf(|| s.ray.org);
                 s.judge(tracer.scene, &tracer.intersect(&s.ray, s.skip, start))
             })
             .reduce(Acne::default, sum)
