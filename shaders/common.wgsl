@@ -102,7 +102,9 @@ fn loops_ran_to_the_end() -> bool {
 }
 
 // `skip`: the global index of the primitive the ray ignores (`RayTest::exclude`; INVALID: none).
-struct Ray { org: vec3<f32>, dir: vec3<f32>, tmin: f32, tmax: f32, skip: u32 }
+// `start`: a leaf node holding the ray's origin (`start_leaf`), where ropes++ starts its walk
+// (`TraverseOptions::start_node`); INVALID, or ignored by the other traversals: the root.
+struct Ray { org: vec3<f32>, dir: vec3<f32>, tmin: f32, tmax: f32, skip: u32, start: u32 }
 struct TRay { ray: Ray, inv_dir: vec3<f32> }
 struct Hit { t: f32, u: f32, v: f32, prim: u32 }
 struct Stats { nodes: u32, leaves: u32, prims: u32 }
@@ -370,6 +372,22 @@ fn kd_step(n: KdNode, r: TRay, t0: f32, t1: f32) -> Crossing {
     if (t_split <= t0 || is_nan(t_split)) { return Crossing(false, far, far, t_split); }
     if (t_split >= t1) { return Crossing(false, near, far, t_split); }
     return Crossing(true, near, far, t_split);
+}
+
+// `Tracer::start_leaf`: for a traversal that starts secondary rays in the leaf of their origin
+// (STARTS_IN_ORIGIN_LEAF, the first line of the module: ropes++), the leaf node holding p
+// (`KdTree::locate_leaf`: below the plane when p[axis] <= split), located once for all the
+// rays leaving p; INVALID for the others, which pay nothing. A descent that does not reach a
+// leaf within the deepest tree the builders make gives INVALID too: the ray starts at the root.
+fn start_leaf(p: vec3<f32>) -> u32 {
+    if (!STARTS_IN_ORIGIN_LEAF) { return INVALID; }
+    var node = 0u;
+    for (var depth = 0u; depth <= STACK_SIZE; depth++) {
+        let n = nodes[node];
+        if (is_leaf(n)) { return node; }
+        node = node_index(n) + select(0u, 1u, p[n.bits & 3u] > bitcast<f32>(n.split));
+    }
+    return INVALID;
 }
 
 // The leaf visit of both queries (`Closest` / `AnyHit`): true when the traversal can stop.

@@ -10,7 +10,7 @@ fn load_ray(i: u32) -> Ray {
     let q = rays[i];
     var skip = INVALID;
     if (params.excluding != 0u) { skip = excludes[i]; }
-    return Ray(v3(q.org), v3(q.dir), q.tmin, q.tmax, skip);
+    return Ray(v3(q.org), v3(q.dir), q.tmin, q.tmax, skip, INVALID);
 }
 
 @compute @workgroup_size(64)

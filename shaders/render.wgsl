@@ -36,7 +36,7 @@ fn megakernel(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
         while (sp > 0u) {
             sp -= 1u;
             let q = pending[sp];
-            let sh = shade(Ray(q.org, q.dir, 0.0, inf(), q.skip), q.w, q.depth);
+            let sh = shade(Ray(q.org, q.dir, 0.0, inf(), q.skip, INVALID), q.w, q.depth);
             color += sh.color;
             if (sh.transmitted.ok && sp < PENDING_MAX) {
                 let t = sh.transmitted;
@@ -79,7 +79,7 @@ fn wave_trace(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
     let i = flat_id(wid, lid, nwg);
     if (i >= params.count) { return; }
     let q = queue[i];
-    let sh = shade(Ray(v3(q.org), v3(q.dir), 0.0, inf(), q.skip), v3(q.weight), q.depth);
+    let sh = shade(Ray(v3(q.org), v3(q.dir), 0.0, inf(), q.skip, INVALID), v3(q.weight), q.depth);
     // w: 1 when the driver cut this ray short, summed per pixel by wave_accumulate.
     contrib[i] = vec4<f32>(sh.color, select(1.0, 0.0, loops_ran_to_the_end()));
     let t = sh.transmitted;

@@ -296,7 +296,10 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
     let none = Child(false, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), INVALID);
     var out = Shaded(vec3<f32>(0.0), none, none);
     var st = Stats(0u, 0u, 0u);
-    let hit = closest_hit(r, &st);
+    // Secondary rays (below the primary's depth) start in the leaf of their origin (ropes++).
+    var traced = r;
+    if (depth > 1u) { traced.start = start_leaf(r.org); }
+    let hit = closest_hit(traced, &st);
     if (hit.prim == INVALID) {
         out.color = weight * params.background.xyz;
         return out;
@@ -315,13 +318,15 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
     if (local_weight > 0.0) {
         var local = m.ambient * base;
         let above = leave(p, hit.prim, n_geo, n);
+        // Every shadow ray leaves from the same point: its leaf is located once.
+        let start = start_leaf(above.org);
         for (var k = 0u; k < params.n_lights; k++) {
             let light = lights[k];
             let to_light = v3(light.position) - above.org;
             // `Tracer::shadow_rays`: a light beyond ~1.8e19 squares to infinity.
             let d = distance_of(to_light);
             let dir = select(unit_or_zero(to_light), to_light / d, square_is_normal(to_light));
-            let shadow = Ray(above.org, dir, 0.0, d, above.skip);
+            let shadow = Ray(above.org, dir, 0.0, d, above.skip, start);
             if (d > 0.0 && !occluded(shadow, &st)) {
                 local += phong(m, base, p, n, -r.dir, light);
             }
@@ -431,14 +436,14 @@ fn camera_ray(pixel: vec2<f32>, lens: vec2<f32>) -> Ray {
     let dir = normalize_or_zero(fwd + (ndc.x * params.right.w) * right + (ndc.y * params.up.w) * up);
     let eye = params.eye.xyz;
     let aperture = params.eye.w;
-    if (aperture == 0.0) { return Ray(eye, dir, 0.0, inf(), INVALID); }
+    if (aperture == 0.0) { return Ray(eye, dir, 0.0, inf(), INVALID, INVALID); }
     let focus_point = eye + dir * (params.forward.w / dot(dir, fwd));
     let rad = 0.5 * aperture * sqrt(lens.x);
     let phi = 6.28318530717958647692 * lens.y;
     let org = eye + rad * (cos(phi) * right + sin(phi) * up);
     let lens_dir = normalize_or_zero(focus_point - org);
-    if (all(lens_dir == vec3<f32>(0.0))) { return Ray(eye, dir, 0.0, inf(), INVALID); }
-    return Ray(org, lens_dir, 0.0, inf(), INVALID);
+    if (all(lens_dir == vec3<f32>(0.0))) { return Ray(eye, dir, 0.0, inf(), INVALID, INVALID); }
+    return Ray(org, lens_dir, 0.0, inf(), INVALID, INVALID);
 }
 
 // Primary ray of sample s of the chunk's pixel i.

@@ -92,9 +92,10 @@ impl<'a> Tracer<'a> {
         }
     }
 
-    /// Ropes++ only (the thesis' algorithm 8): the leaf node holding the point `p()` (asked for
-    /// only then: the other traversals pay nothing), where the secondary rays leaving from it
-    /// start their rope walk instead of at the root
+    /// Ropes++ only (the thesis' algorithm 8, [`Traversal::starts_in_origin_leaf`]; the GPU
+    /// render's `start_leaf` in shaders/common.wgsl is the same): the leaf node holding the
+    /// point `p()` (asked for only then: the other traversals pay nothing), where the secondary
+    /// rays leaving from it start their rope walk instead of at the root
     /// (`TraverseOptions::start_node`, which the walk checks against the leaf's box). The
     /// thesis keeps the leaf in which the hit was found; here it is located from the root, a
     /// descent that costs about what the walk's own first descent does, once for all the
@@ -102,7 +103,7 @@ impl<'a> Tracer<'a> {
     /// ropes++ --backend cpu --threads 1`, 1376×768) ran 1.06× as fast on the bunny, 1.04–1.08×
     /// on spheres3 and 1.10× on spheres2.
     pub fn start_leaf(&self, p: impl FnOnce() -> Vec3) -> Option<u32> {
-        (self.traversal == Traversal::RopesPlusPlus && self.scene.tree.ropes.is_some())
+        (self.traversal.starts_in_origin_leaf() && self.scene.tree.ropes.is_some())
             .then(|| self.scene.tree.locate_leaf(p()))
     }
 

@@ -45,9 +45,15 @@ fn traversal_files(t: Traversal) -> &'static [&'static str] {
     }
 }
 
-/// Full WGSL source of one traversal's query or render module.
+/// Full WGSL source of one traversal's query or render module. Its first line says whether the
+/// traversal starts secondary rays in the leaf of their origin (`start_leaf` in common.wgsl),
+/// from the one place the CPU asks too.
 pub fn source(t: Traversal, p: Program) -> String {
-    let mut s = String::from(COMMON);
+    let mut s = format!(
+        "const STARTS_IN_ORIGIN_LEAF: bool = {};\n",
+        t.starts_in_origin_leaf()
+    );
+    s.push_str(COMMON);
     for f in traversal_files(t) {
         s.push('\n');
         s.push_str(f);

@@ -37,7 +37,7 @@ impl KdTree {
     /// the plane when `p[axis] <= split`. For points outside the root box it is the leaf the
     /// point would fall in if the outer voxels were extended to infinity; ropes++ starts
     /// secondary rays here instead of at the root (the CPU's depth-first render,
-    /// `Tracer::start_leaf`).
+    /// `Tracer::start_leaf`; the GPU's render, `start_leaf` in shaders/common.wgsl).
     pub fn locate_leaf(&self, p: Vec3) -> u32 {
         let mut node = 0u32;
         loop {

@@ -63,6 +63,13 @@ impl Traversal {
         Self::ALL.into_iter().find(|t| t.name() == name)
     }
 
+    /// Whether a renderer starts its secondary rays in the leaf holding their origin
+    /// ([`TraverseOptions::start_node`]): ropes++, as the thesis defines it (algorithm 8). The
+    /// others descend from the root, or restart there, whatever leaf they are given.
+    pub fn starts_in_origin_leaf(self) -> bool {
+        self == Traversal::RopesPlusPlus
+    }
+
     /// Whether the tree must carry ropes and leaf boxes (`KdTree::ensure_ropes`). Without them a
     /// rope traversal falls back to [`Traversal::Standard`] (same answer, other statistics).
     pub fn needs_ropes(self) -> bool {
