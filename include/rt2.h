@@ -1109,8 +1109,9 @@ enum rt2_status rt2_scene_add_plane(rt2_scene *scene,
  * (`f`) are read; normals, texture coordinates, free-form parameter vertices (`vp`), object
  * and group names, smoothing and merging groups (`o`, `g`, `s`, `mg`), materials, points and
  * lines (no surface) are skipped; free-form curves and surfaces (`cstype`, `curv`, `surf`...)
- * and any other statement are a PARSE error rather than dropped. Geometry that `rt2_scene_add_mesh` would refuse (a triangle that does not fit in
- * f32) is INVALID_ARGUMENT, naming the file and the triangle (in face order). The file is read
+ * and any other statement are a PARSE error rather than dropped. Geometry that
+ * `rt2_scene_add_mesh` would refuse (a triangle that does not fit in f32) is INVALID_ARGUMENT,
+ * naming the file and the triangle (in face order). The file is read
  * and parsed before the scene is locked, so other calls on the scene do not wait for a slow
  * file.
  *

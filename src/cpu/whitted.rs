@@ -14,6 +14,7 @@ use crate::scene::{Committed, Material};
 use crate::shading::{phong, reflect, refract, schlick};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
+use std::cell::OnceCell;
 
 /// Rows per parallel band: small enough to balance two cores, large enough to amortise.
 const BAND_ROWS: usize = 4;
@@ -99,9 +100,9 @@ impl<'a> Tracer<'a> {
     /// (`TraverseOptions::start_node`, which the walk checks against the leaf's box). The
     /// thesis keeps the leaf in which the hit was found; here it is located from the root, a
     /// descent that costs about what the walk's own first descent does, once for all the
-    /// shadow rays of a point. Same images; CPU ropes++ renders (`rt2 render S --traversal
-    /// ropes++ --backend cpu --threads 1`, 1376×768) ran 1.06× as fast on the bunny, 1.04–1.08×
-    /// on spheres3 and 1.10× on spheres2.
+    /// shadow rays of a point and its mirror ray. Same images; CPU ropes++ renders (`rt2 render
+    /// S --traversal ropes++ --backend cpu --threads 1`, 1376×768) ran 1.06× as fast on the
+    /// bunny, 1.04–1.08× on spheres3 and 1.10× on spheres2.
     pub fn start_leaf(&self, p: impl FnOnce() -> Vec3) -> Option<u32> {
         (self.traversal.starts_in_origin_leaf() && self.scene.tree.ropes.is_some())
             .then(|| self.scene.tree.locate_leaf(p()))
@@ -126,32 +127,35 @@ impl<'a> Tracer<'a> {
 
     /// Radiance along a primary ray: pops pending rays until none is left.
     pub fn radiance(&self, primary: Ray) -> Vec3 {
-        let mut pending: Vec<(Ray, PrimIndex, Vec3, u32)> =
+        // Each pending ray with the leaf its walk starts in: none for the primary; a secondary
+        // ray's is located when it is pushed ([`Self::start_leaf`]).
+        let mut pending: Vec<(Ray, PrimIndex, Vec3, u32, Option<u32>)> =
             Vec::with_capacity(2 * self.opts.max_depth as usize + 2);
-        pending.push((primary, INVALID, Vec3::ONE, 1));
+        pending.push((primary, INVALID, Vec3::ONE, 1, None));
         let mut color = Vec3::ZERO;
-        while let Some((ray, exclude, weight, depth)) = pending.pop() {
-            // Secondary rays (below the primary's depth) start in the leaf of their origin.
-            let start = if depth > 1 {
-                self.start_leaf(|| ray.org)
-            } else {
-                None
-            };
+        while let Some((ray, exclude, weight, depth, start)) = pending.pop() {
             let hit = self.intersect(&ray, exclude, start);
             if !hit.is_hit() {
                 color += weight * self.opts.background;
                 continue;
             }
             let s = self.surface(&ray, &hit);
+            // The shadow rays and the mirror ray all leave from one point (`leave(s, s.n)`):
+            // its leaf is located once, by the first of them that is traced.
+            let above = OnceCell::new();
+            let above_leaf = || *above.get_or_init(|| self.start_leaf(|| self.leave(&s, s.n).0));
             if s.local_weight > 0.0 {
-                // Every shadow ray leaves from the same point (`shadow_rays`).
-                let start = self.start_leaf(|| self.leave(&s, s.n).0);
+                let start = above_leaf();
                 let local =
                     self.local(&s, &ray, |shadow, skip| !self.occluded(shadow, skip, start));
                 color += weight * s.local_weight * local;
             }
-            self.secondary(&s, &ray, weight, depth, |r, skip, w, d| {
-                pending.push((r, skip, w, d))
+            self.secondary(&s, &ray, weight, depth, |r, skip, w, d, leaves_above| {
+                let start = match leaves_above {
+                    true => above_leaf(),
+                    false => self.start_leaf(|| r.org),
+                };
+                pending.push((r, skip, w, d, start))
             });
         }
         color
@@ -228,14 +232,16 @@ impl<'a> Tracer<'a> {
         local
     }
 
-    /// The reflected and transmitted rays of a surface with their weights, below the depth limit.
+    /// The reflected and transmitted rays of a surface with their weights, below the depth limit,
+    /// each with whether it leaves from the side of the facing normal, where the shadow rays
+    /// leave from (`leave(s, s.n)`: the same origin).
     fn secondary(
         &self,
         s: &Surface,
         ray: &Ray,
         weight: Vec3,
         depth: u32,
-        mut out: impl FnMut(Ray, PrimIndex, Vec3, u32),
+        mut out: impl FnMut(Ray, PrimIndex, Vec3, u32, bool),
     ) {
         if depth >= self.opts.max_depth {
             return;
@@ -245,7 +251,8 @@ impl<'a> Tracer<'a> {
             let w = weight * w;
             if w.max_element() >= self.min_weight {
                 let (org, skip) = self.leave(s, side * n);
-                out(Ray::new(org, dir, 0.0, f32::INFINITY), skip, w, depth + 1);
+                let ray = Ray::new(org, dir, 0.0, f32::INFINITY);
+                out(ray, skip, w, depth + 1, side > 0.0);
             }
         };
         let mut mirror = m.reflectivity;
@@ -588,7 +595,7 @@ fn trace_wavefronts(
                 &r.ray,
                 r.weight,
                 r.depth,
-                |ray, exclude, weight, depth| {
+                |ray, exclude, weight, depth, _| {
                     next.push(WaveRay {
                         ray,
                         exclude,
