@@ -275,6 +275,13 @@ pub fn octant_runs_at_least(rays: &[Ray], run: usize) -> bool {
 /// most [`STREAM_MAX`] rays; others are sorted by octant (a stable counting sort) and each
 /// octant cut into streams of at most `incoherent_max` rays, each traced on a gathered copy,
 /// with `out` filled from its answers.
+///
+/// Measured and dropped (2 M incoherent rays, one thread): an octant cut in the order of cells
+/// of rays that start near each other and point alike (two levels of halves of the origin's
+/// place in the tree's box, one of the direction, 512 cells; a counting sort into one copy of
+/// the batch) rather than in the batch's order, so that a stream's rays share more nodes. The
+/// streams traced in 193 ms on the bunny and 149 ms on the Snowden bust against 198 and 148 in
+/// octant order, and the sort cost 45 ms more than the octant sort.
 fn streamed<T: RayAnswer>(
     (rays, exclude): Rays,
     out: &mut [T],
