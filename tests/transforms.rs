@@ -549,3 +549,53 @@ fn a_mirrored_closed_mesh_stays_watertight() {
         assert!((a - b).abs() <= 1e-6 * a, "t {a} against {b}");
     }
 }
+
+/// A shear whose columns end up on one axis once rounding is zeroed (x' = x + 2^21 y, or a
+/// second column of (1, 1e-7, 0)) would leave a box's transform singular: the box flattened to
+/// zero thickness. Refused as turning the box off its axes, and the box keeps its transform.
+#[test]
+fn a_box_refuses_a_shear_that_would_flatten_it() {
+    let mut scene = Scene::new();
+    let cube = Shape::Box {
+        min: Vec3::splat(-1.0),
+        max: Vec3::splat(1.0),
+    };
+    let id = scene.add_object(cube, 0).unwrap();
+    let shears = [
+        Affine3A::from_cols(
+            Vec3::X.into(),
+            Vec3::new(2097152.0, 1.0, 0.0).into(),
+            Vec3::Z.into(),
+            Vec3::ZERO.into(),
+        ),
+        Affine3A::from_cols(
+            Vec3::X.into(),
+            Vec3::new(1.0, 1e-7, 0.0).into(),
+            Vec3::Z.into(),
+            Vec3::ZERO.into(),
+        ),
+    ];
+    for shear in shears {
+        assert_ne!(shear.matrix3.determinant(), 0.0, "not singular as given");
+        let e = scene.set_transform(id, shear).unwrap_err();
+        assert_eq!(e.status, Rt2Status::Unsupported, "{}", e.message);
+        assert!(e.message.contains("column 1"), "{}", e.message);
+    }
+    scene.commit().unwrap();
+    let down = [Ray::new(
+        Vec3::new(0.0, 5.0, 0.0),
+        -Vec3::Y,
+        0.0,
+        f32::INFINITY,
+    )];
+    let mut hit = [Hit::MISS];
+    let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
+    ctx.intersect(
+        scene.committed().unwrap(),
+        &down,
+        &mut hit,
+        &QueryOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(hit[0].t, 4.0, "the cube's top stays at y = 1");
+}

@@ -66,21 +66,37 @@ impl Object {
 /// column must have one entry, and others at most 2^-20 of it are taken for rounding (a
 /// quarter turn built with `cosf` and `sinf` has a cosine of -4.4e-8, not 0, and was
 /// refused). Zeroed, not kept: an entry of 2^-20 would tilt a face by that much of the box's
-/// extent along another axis, many times the thickness of a flat box. An error otherwise.
+/// extent along another axis, many times the thickness of a flat box. The columns' entries
+/// must lie on three different axes: a shear whose large entry shares a row with another
+/// column's (x' = x + 2^21 y) would otherwise be left singular, the box flattened. An error
+/// otherwise.
 fn axis_aligned(t: &Affine3A) -> Result<Affine3A> {
+    let refuse = |why: String| {
+        Err(Error::unsupported(format!(
+            "boxes are axis-aligned: their transform may only translate, scale and swap axes, \
+             but {why}"
+        )))
+    };
     let mut m = Mat3::from(t.matrix3);
+    let mut axes = 0;
     for c in 0..3 {
         let col = m.col(c);
         let keep = col
             .abs()
             .cmpgt(Vec3::splat(col.abs().max_element() * (-20f32).exp2()));
         if keep.bitmask().count_ones() != 1 {
-            return Err(Error::unsupported(format!(
-                "boxes are axis-aligned: their transform may only translate, scale and swap \
-                 axes, but column {c} of its 3x3 part is {:?}",
+            return refuse(format!(
+                "column {c} of its 3x3 part is {:?}",
                 col.to_array()
-            )));
+            ));
         }
+        if axes & keep.bitmask() != 0 {
+            return refuse(format!(
+                "column {c} of its 3x3 part, {:?}, lies on the same axis as an earlier column",
+                col.to_array()
+            ));
+        }
+        axes |= keep.bitmask();
         *m.col_mut(c) = Vec3::select(keep, col, Vec3::ZERO);
     }
     Ok(Affine3A::from_mat3_translation(m, t.translation.into()))
