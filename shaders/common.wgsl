@@ -26,7 +26,7 @@ struct Light { position: array<f32, 3>, intensity: f32, color: array<f32, 3>, pa
 struct RayIn { org: array<f32, 3>, tmin: f32, dir: array<f32, 3>, tmax: f32 }
 struct HitOut { t: f32, u: f32, v: f32, prim: u32 }
 struct StatsOut { nodes: u32, leaves: u32, prims: u32, cut: u32 }
-struct Item { org: array<f32, 3>, pixel: u32, dir: array<f32, 3>, depth: u32, weight: array<f32, 3>, skip: u32 }
+struct Item { org: array<f32, 3>, pixel: u32, dir: array<f32, 3>, depth: u32, weight: array<f32, 3>, skip: u32, start: u32 }
 struct Params {
     bounds_min: vec4<f32>, bounds_max: vec4<f32>,
     eye: vec4<f32>, forward: vec4<f32>, right: vec4<f32>, up: vec4<f32>, background: vec4<f32>,

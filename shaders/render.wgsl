@@ -16,7 +16,7 @@ fn pixel(sum: vec3<f32>, cut: bool) -> u32 {
     return select(pack(sum), pack(sum) & 0x00ffffffu, cut);
 }
 
-struct Pending { org: vec3<f32>, dir: vec3<f32>, w: vec3<f32>, depth: u32, skip: u32 }
+struct Pending { org: vec3<f32>, dir: vec3<f32>, w: vec3<f32>, depth: u32, skip: u32, start: u32 }
 // Longest pending list: each pop pushes at most two, so it grows by one per level at most.
 const PENDING_MAX: u32 = 72u;
 
@@ -31,21 +31,21 @@ fn megakernel(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
     for (var s = 0u; s < params.samples; s++) {
         let r0 = primary(i, s);
         var color = vec3<f32>(0.0);
-        pending[0] = Pending(r0.org, r0.dir, vec3<f32>(1.0), 1u, INVALID);
+        pending[0] = Pending(r0.org, r0.dir, vec3<f32>(1.0), 1u, INVALID, INVALID);
         var sp = 1u;
         while (sp > 0u) {
             sp -= 1u;
             let q = pending[sp];
-            let sh = shade(Ray(q.org, q.dir, 0.0, inf(), q.skip, INVALID), q.w, q.depth);
+            let sh = shade(Ray(q.org, q.dir, 0.0, inf(), q.skip, q.start), q.w, q.depth);
             color += sh.color;
             if (sh.transmitted.ok && sp < PENDING_MAX) {
                 let t = sh.transmitted;
-                pending[sp] = Pending(t.org, t.dir, t.w, q.depth + 1u, t.skip);
+                pending[sp] = Pending(t.org, t.dir, t.w, q.depth + 1u, t.skip, t.start);
                 sp += 1u;
             }
             if (sh.mirror.ok && sp < PENDING_MAX) {
                 let m = sh.mirror;
-                pending[sp] = Pending(m.org, m.dir, m.w, q.depth + 1u, m.skip);
+                pending[sp] = Pending(m.org, m.dir, m.w, q.depth + 1u, m.skip, m.start);
                 sp += 1u;
             }
         }
@@ -56,8 +56,8 @@ fn megakernel(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
 
 // ---- Wavefront: one kernel per bounce, live rays compacted by a prefix sum ----
 
-fn item(org: vec3<f32>, pixel: u32, dir: vec3<f32>, depth: u32, w: vec3<f32>, skip: u32) -> Item {
-    return Item(a3(org), pixel, a3(dir), depth, a3(w), skip);
+fn item(org: vec3<f32>, pixel: u32, dir: vec3<f32>, depth: u32, w: vec3<f32>, skip: u32, start: u32) -> Item {
+    return Item(a3(org), pixel, a3(dir), depth, a3(w), skip, start);
 }
 
 // Primary rays of sample `params.sample` into the child slots (slot 2i, flag set unless
@@ -68,7 +68,7 @@ fn wave_generate(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocatio
     if (i >= params.count) { return; }
     if (params.sample == 0u) { accum[i] = vec4<f32>(0.0); }
     let r = primary(i, params.sample);
-    slots[2u * i] = item(r.org, i, r.dir, 1u, vec3<f32>(1.0), INVALID);
+    slots[2u * i] = item(r.org, i, r.dir, 1u, vec3<f32>(1.0), INVALID, INVALID);
     scan[2u * i] = select(1u, 0u, masked(i));
     scan[2u * i + 1u] = 0u;
 }
@@ -79,13 +79,13 @@ fn wave_trace(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
     let i = flat_id(wid, lid, nwg);
     if (i >= params.count) { return; }
     let q = queue[i];
-    let sh = shade(Ray(v3(q.org), v3(q.dir), 0.0, inf(), q.skip, INVALID), v3(q.weight), q.depth);
+    let sh = shade(Ray(v3(q.org), v3(q.dir), 0.0, inf(), q.skip, q.start), v3(q.weight), q.depth);
     // w: 1 when the driver cut this ray short, summed per pixel by wave_accumulate.
     contrib[i] = vec4<f32>(sh.color, select(1.0, 0.0, loops_ran_to_the_end()));
     let t = sh.transmitted;
     let m = sh.mirror;
-    slots[2u * i] = item(t.org, q.pixel, t.dir, q.depth + 1u, t.w, t.skip);
-    slots[2u * i + 1u] = item(m.org, q.pixel, m.dir, q.depth + 1u, m.w, m.skip);
+    slots[2u * i] = item(t.org, q.pixel, t.dir, q.depth + 1u, t.w, t.skip, t.start);
+    slots[2u * i + 1u] = item(m.org, q.pixel, m.dir, q.depth + 1u, m.w, m.skip, m.start);
     scan[2u * i] = select(0u, 1u, t.ok);
     scan[2u * i + 1u] = select(0u, 1u, m.ok);
 }

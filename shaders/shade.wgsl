@@ -283,22 +283,24 @@ fn leave(p: vec3<f32>, prim: u32, n_geo: vec3<f32>, side: vec3<f32>) -> Origin {
     return Origin(offset_ray_origin(p, side), INVALID);
 }
 
-struct Child { ok: bool, org: vec3<f32>, dir: vec3<f32>, w: vec3<f32>, skip: u32 }
+// `start`: the leaf of `org` where it was located (`start_leaf`), else INVALID.
+struct Child { ok: bool, org: vec3<f32>, dir: vec3<f32>, w: vec3<f32>, skip: u32, start: u32 }
 // One ray's work: its contribution and its children (transmitted, mirror), in the order the
 // CPU pushes them onto its stack of pending rays.
 struct Shaded { color: vec3<f32>, transmitted: Child, mirror: Child }
 
-fn child(o: Origin, dir: vec3<f32>, w: vec3<f32>) -> Child {
-    return Child(max(w.x, max(w.y, w.z)) >= params.min_weight, o.org, dir, w, o.skip);
+fn child(o: Origin, dir: vec3<f32>, w: vec3<f32>, start: u32) -> Child {
+    return Child(max(w.x, max(w.y, w.z)) >= params.min_weight, o.org, dir, w, o.skip, start);
 }
 
 fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
-    let none = Child(false, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), INVALID);
+    let none = Child(false, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), INVALID, INVALID);
     var out = Shaded(vec3<f32>(0.0), none, none);
     var st = Stats(0u, 0u, 0u);
-    // Secondary rays (below the primary's depth) start in the leaf of their origin (ropes++).
+    // Secondary rays (below the primary's depth) start in the leaf of their origin (ropes++),
+    // located here unless the parent located it already (`Child::start`).
     var traced = r;
-    if (depth > 1u) { traced.start = start_leaf(r.org); }
+    if (depth > 1u && r.start == INVALID) { traced.start = start_leaf(r.org); }
     let hit = closest_hit(traced, &st);
     if (hit.prim == INVALID) {
         out.color = weight * params.background.xyz;
@@ -315,18 +317,20 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
     // Sampled just inside the surface, as on the CPU (no flicker on a checker boundary).
     let base = color_at(m, p - eps * n);
     let local_weight = 1.0 - m.reflectivity - m.transparency;
+    // The leaf of the shadow rays' origin, which the mirror ray leaves from too.
+    var above_leaf = INVALID;
     if (local_weight > 0.0) {
         var local = m.ambient * base;
         let above = leave(p, hit.prim, n_geo, n);
         // Every shadow ray leaves from the same point: its leaf is located once.
-        let start = start_leaf(above.org);
+        above_leaf = start_leaf(above.org);
         for (var k = 0u; k < params.n_lights; k++) {
             let light = lights[k];
             let to_light = v3(light.position) - above.org;
             // `Tracer::shadow_rays`: a light beyond ~1.8e19 squares to infinity.
             let d = distance_of(to_light);
             let dir = select(unit_or_zero(to_light), to_light / d, square_is_normal(to_light));
-            let shadow = Ray(above.org, dir, 0.0, d, above.skip, start);
+            let shadow = Ray(above.org, dir, 0.0, d, above.skip, above_leaf);
             if (d > 0.0 && !occluded(shadow, &st)) {
                 local += phong(m, base, p, n, -r.dir, light);
             }
@@ -337,7 +341,7 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
     var mirror = m.reflectivity;
     if (m.transparency > 0.0) {
         if (params.refract == 0u) {
-            out.transmitted = child(leave(p, hit.prim, n_geo, -n), r.dir, weight * m.transparency);
+            out.transmitted = child(leave(p, hit.prim, n_geo, -n), r.dir, weight * m.transparency, INVALID);
         } else {
             let eta = select(m.ior, 1.0 / m.ior, entering);
             let t = refract_dir(r.dir, n, eta);
@@ -345,14 +349,16 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
                 let f = schlick(-dot(r.dir, n), eta);
                 mirror += m.transparency * f;
                 let w = weight * (m.transparency * (1.0 - f));
-                out.transmitted = child(leave(p, hit.prim, n_geo, -n), t.xyz, w);
+                out.transmitted = child(leave(p, hit.prim, n_geo, -n), t.xyz, w, INVALID);
             } else {
                 mirror += m.transparency;
             }
         }
     }
     if (mirror > 0.0) {
-        out.mirror = child(leave(p, hit.prim, n_geo, n), reflect_dir(r.dir, n), weight * mirror);
+        // Leaves from where the shadow rays did (`above`): their leaf is its leaf.
+        let o = leave(p, hit.prim, n_geo, n);
+        out.mirror = child(o, reflect_dir(r.dir, n), weight * mirror, above_leaf);
     }
     return out;
 }

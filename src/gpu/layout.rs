@@ -139,6 +139,9 @@ pub struct GpuItem {
     pub weight: [f32; 3],
     /// The primitive the ray ignores (`OffsetMode::ExcludePrim`; `INVALID` for none).
     pub skip: u32,
+    /// The leaf of `org` where its parent located it (ropes++: a mirror ray leaves from
+    /// where the parent's shadow rays did), else `INVALID`: the kernel locates it.
+    pub start: u32,
 }
 
 /// The one uniform block of the traversal kernels (queries and renders): scene sizes, the
@@ -282,7 +285,11 @@ mod tests {
         layout!("RayIn", GpuRay, [org, tmin, dir, tmax]);
         layout!("HitOut", GpuHit, [t, u, v, prim]);
         layout!("StatsOut", GpuStats, [nodes, leaves, prims, cut]);
-        layout!("Item", GpuItem, [org, pixel, dir, depth, weight, skip]);
+        layout!(
+            "Item",
+            GpuItem,
+            [org, pixel, dir, depth, weight, skip, start]
+        );
         layout!(
             "Params",
             GpuParams,
