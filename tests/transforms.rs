@@ -248,23 +248,8 @@ fn a_box_takes_a_quarter_turn_made_with_sines_and_cosines() {
     );
     let flat = scene.add_object(flat, 0).unwrap();
     scene.set_transform(flat, lean).unwrap();
-    scene.commit().unwrap();
-    let down = [Ray::new(
-        Vec3::new(-4e4, 1.0, 0.0),
-        -Vec3::Y,
-        0.0,
-        f32::INFINITY,
-    )];
-    let mut hit = [Hit::MISS];
-    let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
-    ctx.intersect(
-        scene.committed().unwrap(),
-        &down,
-        &mut hit,
-        &QueryOptions::default(),
-    )
-    .unwrap();
-    assert_eq!(hit[0].t, 0.99, "the top stays at y = 0.01");
+    let top = straight_down(&mut scene, Vec3::new(-4e4, 1.0, 0.0));
+    assert_eq!(top.t, 0.99, "the top stays at y = 0.01");
 
     let id = scene.add_object(shape, 0).unwrap();
     let eighth = Affine3A::from_rotation_z(std::f32::consts::FRAC_PI_4);
@@ -581,13 +566,14 @@ fn a_box_refuses_a_shear_that_would_flatten_it() {
         assert_eq!(e.status, Rt2Status::Unsupported, "{}", e.message);
         assert!(e.message.contains("column 1"), "{}", e.message);
     }
+    let top = straight_down(&mut scene, Vec3::new(0.0, 5.0, 0.0));
+    assert_eq!(top.t, 4.0, "the cube's top stays at y = 1");
+}
+
+/// The closest hit of a ray from `org` straight down (-y) in `scene`, committed first.
+fn straight_down(scene: &mut Scene, org: Vec3) -> Hit {
     scene.commit().unwrap();
-    let down = [Ray::new(
-        Vec3::new(0.0, 5.0, 0.0),
-        -Vec3::Y,
-        0.0,
-        f32::INFINITY,
-    )];
+    let down = [Ray::new(org, -Vec3::Y, 0.0, f32::INFINITY)];
     let mut hit = [Hit::MISS];
     let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
     ctx.intersect(
@@ -597,5 +583,5 @@ fn a_box_refuses_a_shear_that_would_flatten_it() {
         &QueryOptions::default(),
     )
     .unwrap();
-    assert_eq!(hit[0].t, 4.0, "the cube's top stays at y = 1");
+    hit[0]
 }
