@@ -235,12 +235,17 @@ fn max3(v: vec3<f32>) -> f32 { return max(v.x, max(v.y, v.z)); }
 // conditioned (o_u of a thin ellipsoid seen from afar is ~distance/thickness long, and
 // o_u - (b/a) d_u cancels to an error far past the radius 1). σ and cof(A) come with the
 // ellipsoid (made once by `Ellipsoid::new`); both sides scaled by the largest component of
-// σ d_u before squaring. inf (no hit) for a degenerate input.
+// σ d_u before squaring. inf (no hit) for a degenerate input. The cross product is taken from
+// the line's point nearest the centre (a ray down a needle's axis: o nearly parallel to d).
 fn ell_line_distance2(e: Ellipsoid, o: vec3<f32>, d: vec3<f32>, du: vec3<f32>) -> f32 {
     let kd = pow2_scale(max3(abs(d)));
     if (kd == 0.0) { return inf(); }
     // The direction scaled too (the ratio is unchanged): a long one overflows the cross product.
-    let w = m3(e.cof) * cross(o / e.sigma, d * kd);
+    let os = o / e.sigma;
+    let ds = d * kd;
+    let nearest = os - ds * (dot(os, ds) / dot(ds, ds));
+    let finite = all(abs(nearest) < vec3<f32>(inf()));
+    let w = m3(e.cof) * cross(select(os, nearest, finite), ds);
     let dus = du * e.sigma * kd;
     let k = pow2_scale(max3(abs(dus)));
     if (k == 0.0) { return inf(); }

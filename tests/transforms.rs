@@ -585,3 +585,148 @@ fn straight_down(scene: &mut Scene, org: Vec3) -> Hit {
     .unwrap();
     hit[0]
 }
+
+/// A unit sphere under [`support::needle`] is a needle of half-length 1 and radius `e`: rays across
+/// its axis from 3 units away hit it short of the axis by its radius there, and a ray down
+/// the axis from 3 units hits its tip at 2 (up to the ray's own rounding off the axis: a few
+/// thousandths at `e` = 1e-5). The
+/// inverse taken in f32 was 5x too large at `e` = 1e-5, and 18 of the 19 rays across missed;
+/// the ray down the axis missed, its `o × d` cancelled to rounding that the cofactors multiply
+/// by 1/e² (at 1e-4 it hit at 2.20).
+#[test]
+fn a_needle_made_by_a_thin_scale_between_rotations_is_hit_along_and_across() {
+    for e in [1e-3f32, 1e-4, 1e-5] {
+        let (t, axis) = support::needle(e);
+        let mut scene = Scene::new();
+        let sphere = Shape::Sphere {
+            center: Vec3::ZERO,
+            radius: 1.0,
+        };
+        let id = scene.add_object(sphere, 0).unwrap();
+        scene.set_transform(id, t).unwrap();
+        scene.commit().unwrap();
+        let side = axis.any_orthonormal_vector();
+        let mut rays: Vec<Ray> = (0..19)
+            .map(|k| {
+                let p = axis * (-0.9 + 0.1 * k as f64);
+                let o = p + side * 3.0;
+                Ray::new(o.as_vec3(), (p - o).as_vec3(), 0.0, f32::INFINITY)
+            })
+            .collect();
+        rays.push(Ray::new(
+            (axis * 3.0).as_vec3(),
+            (-axis).as_vec3(),
+            0.0,
+            f32::INFINITY,
+        ));
+        let mut hits = vec![Hit::MISS; rays.len()];
+        let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
+        let c = scene.committed().unwrap();
+        ctx.intersect(c, &rays, &mut hits, &QueryOptions::default())
+            .unwrap();
+        for (k, h) in hits[..19].iter().enumerate() {
+            // The needle's radius where the ray crosses the axis at s is e √(1 - s²), and t
+            // is in units of the direction's length, 3.
+            let s = -0.9 + 0.1 * k as f64;
+            let want = 1.0 - e as f64 * (1.0 - s * s).sqrt() / 3.0;
+            assert!(
+                (h.t as f64 - want).abs() < 2e-6,
+                "e {e}: ray {k} across the axis: t {} (want {want})",
+                h.t
+            );
+        }
+        let tip = hits[19].t as f64;
+        assert!((tip - 2.0).abs() < 0.01, "e {e}: down the axis: t {tip}");
+    }
+}
+
+/// Under [`support::needle`] (not a mirror: its determinant is positive), a triangle's normal keeps the
+/// side of its corners' winding, `(v1 - v0) × (v2 - v0)` in world space, and a plane's normal
+/// is the object normal through the inverse transpose, both worked out in f64. In f32 the
+/// determinant's sign came out negative at `e` = 1e-5: both normals were flipped.
+#[test]
+fn a_nearly_singular_transform_keeps_normals_on_their_side() {
+    let (t, _) = support::needle(1e-5);
+    let dt = DAffine3::from_cols_array(&t.to_cols_array().map(f64::from));
+    let corners = vec![
+        Vec3::ZERO,
+        Vec3::new(1.0, 0.2, -0.3),
+        Vec3::new(-0.2, 0.9, 0.4),
+    ];
+    let w: Vec<DVec3> = corners
+        .iter()
+        .map(|p| dt.transform_point3(p.as_dvec3()))
+        .collect();
+    let face = (w[1] - w[0]).cross(w[2] - w[0]).normalize();
+    let centre = (w[0] + w[1] + w[2]) / 3.0;
+    let plane_normal = Vec3::new(0.0, 1.0, 0.5);
+    let at = dt.transform_point3(plane_normal.as_dvec3() * (0.7 / 1.25));
+    let world_normal = (dt.matrix3.inverse().transpose() * plane_normal.as_dvec3()).normalize();
+    let shapes = [
+        (
+            Shape::Mesh {
+                positions: corners,
+                triangles: vec![[0, 1, 2]],
+            },
+            centre,
+            face,
+        ),
+        (
+            Shape::Plane {
+                normal: plane_normal,
+                offset: 0.7,
+            },
+            at,
+            world_normal,
+        ),
+    ];
+    for (shape, point, normal) in shapes {
+        let mut scene = Scene::new();
+        let id = scene.add_object(shape, 0).unwrap();
+        scene.set_transform(id, t).unwrap();
+        scene.commit().unwrap();
+        let o = point + normal;
+        let ray = Ray::new(o.as_vec3(), (point - o).as_vec3(), 0.0, f32::INFINITY);
+        let mut hit = [Hit::MISS];
+        let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
+        let c = scene.committed().unwrap();
+        ctx.intersect(c, &[ray], &mut hit, &QueryOptions::default())
+            .unwrap();
+        let got = c.hit_surface(&ray, &hit[0]).expect("hit").normal;
+        assert!(
+            got.as_dvec3().dot(normal) > 0.999,
+            "normal {got} against {normal}"
+        );
+    }
+}
+
+/// A plane whose transform's entries span more than f32's range of ratios (scales 1e15 and
+/// 1e-30, 1e19 and 1e-19, 1 and 1e-44): its world plane fits in f32, as a box's and a mesh's
+/// under the same transforms do, and is placed (the inverse is taken in f64; in f32 its
+/// determinant turned subnormal and the plane was refused as not fitting).
+#[test]
+fn planes_take_scales_whose_ratio_passes_f32s_range() {
+    let scales = [
+        Vec3::new(1e15, 1e15, 1e-30),
+        Vec3::new(1e19, 1e-19, 1.0),
+        Vec3::new(1.0, 1.0, 1e-44),
+    ];
+    for s in scales {
+        let mut scene = Scene::new();
+        let plane = Shape::Plane {
+            normal: Vec3::Z,
+            offset: 0.0,
+        };
+        let id = scene.add_object(plane, 0).unwrap();
+        scene.set_transform(id, Affine3A::from_scale(s)).unwrap();
+        // The world plane is z = 0 whatever the scale.
+        let ray = Ray::new(Vec3::new(0.0, 0.0, 1.0), -Vec3::Z, 0.0, f32::INFINITY);
+        let mut hit = [Hit::MISS];
+        scene.commit().unwrap();
+        let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
+        let c = scene.committed().unwrap();
+        ctx.intersect(c, &[ray], &mut hit, &QueryOptions::default())
+            .unwrap();
+        assert_eq!(hit[0].t, 1.0, "scale {s}");
+    }
+}

@@ -146,19 +146,21 @@ impl Ellipsoid {
     ///
     /// The inverse is taken of `m` with unit-length columns and scaled back: the determinant
     /// and cofactors of `m` itself overflow or underflow for semi-axes far from 1 (radii 1e13
-    /// have determinant 1e39), although the ellipsoid and its inverse are representable.
+    /// have determinant 1e39), although the ellipsoid and its inverse are representable. It is
+    /// taken in f64: in f32 the products cancel when the columns are nearly parallel (a needle
+    /// 1e-5 thick turned between two rotations had an inverse 5x too large and was missed).
     pub fn new(center: Vec3, m: Mat3) -> Option<Self> {
         let lengths = Vec3::new(m.x_axis.length(), m.y_axis.length(), m.z_axis.length());
         if !(lengths.min_element() > 0.0 && lengths.is_finite()) {
             return None;
         }
-        let unit = m * Mat3::from_diagonal(lengths.recip());
+        let unit = (m * Mat3::from_diagonal(lengths.recip())).as_dmat3();
         let det = unit.determinant();
         if det == 0.0 || !det.is_finite() {
             return None;
         }
         // M = U D, so M⁻¹ = D⁻¹ U⁻¹: row i of U⁻¹ divided by the length of column i.
-        let inv = Mat3::from_diagonal(lengths.recip()) * unit.inverse();
+        let inv = Mat3::from_diagonal(lengths.recip()) * unit.inverse().as_mat3();
         // Extent along axis i is the length of row i of M.
         let half = Vec3::new(m.row(0).length(), m.row(1).length(), m.row(2).length());
         if !(inv.is_finite() && half.is_finite() && center.is_finite()) {
@@ -215,13 +217,23 @@ impl Ellipsoid {
     /// direction is scaled by its own power of two first (a long one would overflow the cross
     /// product), which leaves the ratio unchanged too. A degenerate input gives infinity: no
     /// hit.
+    ///
+    /// The cross product is taken from the line's point nearest the centre, not from `o`:
+    /// for a ray along a needle's axis `o` is nearly parallel to `d`, `o × d` cancels to its
+    /// rounding in every direction, and the cofactors multiply the part along the axis by up
+    /// to 1/thickness² (a needle 1e-5 thick was missed by a ray down its axis). The nearest
+    /// point is orthogonal to `d`, so its cross product does not cancel.
     #[inline(always)]
     fn line_distance2(&self, o: Vec3, d: Vec3, du: Vec3) -> f32 {
         let Some(kd) = power_of_two_scale(d.abs().max_element()) else {
             return f32::INFINITY;
         };
         let sigma = self.sigma;
-        let w = Mat3::from_cols_array(&self.cof) * (o / sigma).cross(d * kd);
+        let (o, d) = (o / sigma, d * kd);
+        let nearest = o - d * (o.dot(d) / d.dot(d));
+        // An origin near the end of f32's range overflows the dot product: `o` as it is.
+        let o = if nearest.is_finite() { nearest } else { o };
+        let w = Mat3::from_cols_array(&self.cof) * o.cross(d);
         let du = du * sigma * kd;
         let Some(k) = power_of_two_scale(du.abs().max_element()) else {
             return f32::INFINITY;

@@ -406,12 +406,12 @@ impl Scene {
     pub fn set_transform(&mut self, object: u32, t: Affine3A) -> Result<()> {
         let obj = self.object(object)?;
         check_finite("transform", &t.to_cols_array())?;
-        let det = t.matrix3.determinant();
-        if det == 0.0 || !det.is_finite() {
+        let det = object::determinant(&t);
+        if det == 0.0 || det.abs() > f32::MAX as f64 {
             // An overflowing determinant makes the inverse (normals, ellipsoids) unusable too.
             return Err(Error::invalid_argument(format!(
                 "transform is singular or its scale is out of range (its 3x3 part has \
-                 determinant {det:?}, must be finite and non-zero)"
+                 determinant {det:e}, must be non-zero and within f32's range)"
             )));
         }
         // Placement refuses what a shape cannot take (a box turned off its axes, one that

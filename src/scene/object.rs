@@ -105,7 +105,16 @@ fn axis_aligned(t: &Affine3A) -> Result<Affine3A> {
 /// Whether `t` mirrors (see [`Object::mirrors`]); one test for the placement of the
 /// triangles, their exact corners and the hits' barycentrics.
 fn mirrors(t: &Affine3A) -> bool {
-    Mat3::from(t.matrix3).determinant() < 0.0
+    determinant(t) < 0.0
+}
+
+/// The determinant of `t`'s 3x3 part, in f64. In f32 its products cancel for a nearly
+/// singular map that a scene graph easily makes (a rotation, a scale of 1e-5 on two axes,
+/// another rotation: -1.4e-10 where it is +1.0e-10), flipping the sign that says whether
+/// the map mirrors, or giving 0 for a map that is not singular. In f64 no product of f32
+/// entries overflows or underflows.
+pub(crate) fn determinant(t: &Affine3A) -> f64 {
+    Mat3::from(t.matrix3).as_dmat3().determinant()
 }
 
 /// Where a global primitive index came from, for hits reported to the caller.
@@ -322,8 +331,9 @@ fn ellipsoid(center: Vec3, m: Mat3, what: &str) -> Result<Ellipsoid> {
 }
 
 /// The world-space plane of `normal · x = offset` under `t`. `normal` may have any non-zero
-/// finite length (as documented): plane equation and transform are scaled to unit size before
-/// anything is squared or inverted.
+/// finite length (as documented): the plane equation is scaled to unit size before anything
+/// is squared, and the inverse transpose is taken in f64, where a nearly singular map (see
+/// [`determinant`]) keeps the normal's side and the inverse of any f32 map is finite.
 fn plane(t: &Affine3A, normal: Vec3, offset: f32) -> Result<Plane> {
     let fail = || {
         Error::invalid_argument(format!(
@@ -333,15 +343,11 @@ fn plane(t: &Affine3A, normal: Vec3, offset: f32) -> Result<Plane> {
     };
     let m = normal.abs().max_element();
     let (n, d) = (normal / m, offset / m);
-    let lin = Mat3::from(t.matrix3);
-    // The normal transforms by the inverse transpose, whose direction does not depend on the
-    // scale of `lin`.
-    let scale = lin
-        .to_cols_array()
-        .iter()
-        .fold(0.0f32, |a, e| a.max(e.abs()));
-    let lin = lin * (1.0 / scale);
-    let world = unit(lin.inverse().transpose() * n).ok_or_else(fail)?;
+    let lin = Mat3::from(t.matrix3).as_dmat3();
+    let world = (lin.inverse().transpose() * n.as_dvec3())
+        .normalize()
+        .as_vec3();
+    let world = unit(world).ok_or_else(fail)?;
     let p0 = t.transform_point3(n * (d / n.length_squared()));
     let offset = world.dot(p0);
     if !(d.is_finite() && p0.is_finite() && offset.is_finite()) {

@@ -4,13 +4,16 @@
 //! fork tests' wait for a child; the C API tests' smallest scene and meshes; rays around a
 //! target and the sequence behind them; whether a GPU context can be had; renders of shading
 //! extremes (`shading_cases`); the tests' random numbers (`rng`); spheres and ellipsoids far
-//! from the origin with their shading worked out in f64.
+//! from the origin with their shading worked out in f64; a nearly singular transform that a
+//! scene graph makes (`needle`).
 
 #![allow(dead_code)]
 
 pub mod any_hit_stats;
 pub mod rng;
 pub mod shading_cases;
+
+use glam::{Affine3A, DVec3, Quat, Vec3};
 
 use std::path::{Path, PathBuf};
 
@@ -433,4 +436,18 @@ pub fn pixel_difference(pixels: &[u8], expected: &[u8], steps: u8) -> (f64, u8, 
     let mean = d.iter().map(|&x| x as f64).sum::<f64>() / d.len() as f64;
     let off = d.chunks(4).filter(|p| p.iter().any(|&x| x > steps)).count();
     (mean, d.into_iter().max().unwrap_or(0), off)
+}
+
+/// A thin scale between two rotations, as a scene graph makes it (a parent's rotation, a
+/// child's scale of `e` on two axes, the child's rotation): nearly singular in f32, whose
+/// determinant there comes out -1.4e-10 at `e` = 1e-5 where the matrix's is +1.0e-10 (the
+/// rotations' determinants are 1). Returns the transform and the world image of its long
+/// axis (unit length, in f64).
+pub fn needle(e: f32) -> (Affine3A, DVec3) {
+    let r1 = Quat::from_axis_angle(Vec3::new(1.0, 1.0, 0.3).normalize(), 0.7);
+    let r2 = Quat::from_axis_angle(Vec3::new(-0.2, 1.0, 0.5).normalize(), 1.9);
+    let t = Affine3A::from_quat(r1)
+        * Affine3A::from_scale(Vec3::new(e, e, 1.0))
+        * Affine3A::from_quat(r2);
+    (t, r1.as_dquat() * DVec3::Z)
 }
