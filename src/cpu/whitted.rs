@@ -151,9 +151,10 @@ impl<'a> Tracer<'a> {
                 color += weight * s.local_weight * local;
             }
             self.secondary(&s, &ray, weight, depth, |r, skip, w, d, leaves_above| {
-                let start = match leaves_above {
-                    true => above_leaf(),
-                    false => self.start_leaf(|| r.org),
+                let start = if leaves_above {
+                    above_leaf()
+                } else {
+                    self.start_leaf(|| r.org)
                 };
                 pending.push((r, skip, w, d, start))
             });

@@ -155,8 +155,8 @@ impl Ellipsoid {
             return None;
         }
         let unit = (m * Mat3::from_diagonal(lengths.recip())).as_dmat3();
-        let det = unit.determinant();
-        if det == 0.0 || !det.is_finite() {
+        // Finite: the columns are unit vectors (and f64 holds any product of their entries).
+        if unit.determinant() == 0.0 {
             return None;
         }
         // M = U D, so M⁻¹ = D⁻¹ U⁻¹: row i of U⁻¹ divided by the length of column i.

@@ -4,7 +4,7 @@
 
 use crate::error::{Error, Result};
 use crate::fallible::{Fallible, TryGrow};
-use crate::geometry::{unit, Aabb, Ellipsoid, Plane, PrimitiveSet, Sphere, Triangle};
+use crate::geometry::{Aabb, Ellipsoid, Plane, PrimitiveSet, Sphere, Triangle};
 use glam::{Affine3A, Mat3, Vec3};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -345,9 +345,9 @@ fn plane(t: &Affine3A, normal: Vec3, offset: f32) -> Result<Plane> {
     let (n, d) = (normal / m, offset / m);
     let lin = Mat3::from(t.matrix3).as_dmat3();
     let world = (lin.inverse().transpose() * n.as_dvec3())
-        .normalize()
+        .try_normalize()
+        .ok_or_else(fail)?
         .as_vec3();
-    let world = unit(world).ok_or_else(fail)?;
     let p0 = t.transform_point3(n * (d / n.length_squared()));
     let offset = world.dot(p0);
     if !(d.is_finite() && p0.is_finite() && offset.is_finite()) {
