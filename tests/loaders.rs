@@ -269,6 +269,43 @@ fn ply_binary_little_and_big_endian_with_extras() {
     }
 }
 
+/// Triangle strips (`tristrips`, a list of vertex indices like a face's) are surfaces: a file
+/// holding them is refused, naming the element, rather than loaded without them, beside faces
+/// or alone (where "no face element" named the wrong cause).
+#[test]
+fn ply_triangle_strips_are_refused_not_dropped() {
+    let strips = "element tristrips 1\nproperty list int int vertex_indices\n";
+    let beside = PLY_HEAD.replace("end_header\n", &format!("{strips}end_header\n"))
+        + "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n4 0 1 2 0\n";
+    assert_parse_err(
+        parse_ply(beside.as_bytes(), "strips.ply"),
+        "strips.ply",
+        &[
+            "line 9:",
+            "'tristrips'",
+            "triangle strips are not supported",
+        ],
+    );
+    let alone = format!(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+         property float z\n{strips}end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
+    );
+    assert_parse_err(
+        parse_ply(alone.as_bytes(), "stripsonly.ply"),
+        "stripsonly.ply",
+        &["line 7:", "'tristrips'"],
+    );
+    // Other elements, lists among them, are still skipped.
+    let other = PLY_HEAD.replace(
+        "end_header\n",
+        "element edge 1\nproperty list uchar int corners\nend_header\n",
+    ) + "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n2 0 1\n";
+    assert_eq!(
+        parse_ply(other.as_bytes(), "edges.ply").unwrap().triangles,
+        vec![[0, 1, 2]]
+    );
+}
+
 #[test]
 fn ply_faces_may_come_before_vertices() {
     // Indices are checked against the header's vertex count, not the vertices read so far.
@@ -452,6 +489,16 @@ fn obj_points_and_lines_are_skipped_curves_refused() {
     );
 }
 
+/// The OBJ spec's render attributes say how surfaces are drawn (texture maps, level of
+/// detail, shadow and reflection objects) and carry no surface: skipped, as materials are.
+#[test]
+fn obj_render_attributes_are_skipped() {
+    let text = "maplib a.mpc\nusemap wood\nlod 1\nbevel off\nc_interp on\nd_interp off\n\
+        shadow_obj shadow.obj\ntrace_obj trace.obj\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n\
+        usemap off\n";
+    assert_reads_as(text.as_bytes(), b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+}
+
 /// A line ending in `\` continues on the next (long face lists); a comment does not (a
 /// Windows path at its end), and an error on a continued statement names its first line.
 #[test]
@@ -524,6 +571,23 @@ fn stray_carriage_returns_in_files_that_parse() {
     let ply = format!("{PLY_HEAD}0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").replace('\n', "\r\r\n");
     let mesh = parse_ply(ply.as_bytes(), "crcrlf.ply").unwrap();
     assert_eq!(mesh.triangles, vec![[0, 1, 2]]);
+}
+
+/// A stray CR on the first line of a file that fails further down does not hide the real error
+/// behind the CR-alone message: that message is for an error on the first line, where a file
+/// with CR-only line ends has all of its text.
+#[test]
+fn a_stray_carriage_return_does_not_hide_a_later_error() {
+    let obj = "# exported\rby tool\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n";
+    assert_parse_err(
+        parse_obj(obj.as_bytes(), "crbad.obj"),
+        "crbad.obj",
+        &["line 5:", "out of range"],
+    );
+    let ply = format!("{PLY_HEAD}0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n").replace('\n', "\r\r\n");
+    let err = parse_ply(ply.as_bytes(), "crbad.ply").unwrap_err();
+    assert_parse_err(Err(err.clone()), "crbad.ply", &["line 13:", "out of range"]);
+    assert!(!err.message.contains("CR alone"), "{}", err.message);
 }
 
 #[test]

@@ -360,9 +360,14 @@ pub unsafe extern "C" fn rt2_scene_add_plane(
 /// at, even for a missing file or a directory. Then only regular files are read: a missing
 /// file, a FIFO, device or directory is an IO error. Parse errors name the file and the line or
 /// byte offset at fault. Triangles keep the file's face order (polygons are fan-triangulated);
-/// a file without faces is a PARSE error, whatever its format. OBJ: positions (`v`) and faces
+/// a file without faces is a PARSE error, whatever its format. PLY: `vertex` x, y, z and the
+/// `face` element's `vertex_indices` (or `vertex_index`) are read and other properties and
+/// elements skipped, except another element of vertex index lists (`tristrips`), a PARSE error
+/// rather than dropped. OBJ: positions (`v`) and faces
 /// (`f`) are read; normals, texture coordinates, free-form parameter vertices (`vp`), object
-/// and group names, smoothing and merging groups (`o`, `g`, `s`, `mg`), materials, points and
+/// and group names, smoothing and merging groups (`o`, `g`, `s`, `mg`), materials and the
+/// other render attributes (`usemap`, `maplib`, `lod`, `bevel`, `c_interp`, `d_interp`,
+/// `shadow_obj`, `trace_obj`), points and
 /// lines (no surface) are skipped; free-form curves and surfaces (`cstype`, `curv`, `surf`...)
 /// and any other statement are a PARSE error rather than dropped. Geometry that
 /// `rt2_scene_add_mesh` would refuse (a triangle that does not fit in f32) is INVALID_ARGUMENT,

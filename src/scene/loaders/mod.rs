@@ -153,17 +153,19 @@ impl std::fmt::Display for Quoted<'_> {
 /// What some editors write at the start of a UTF-8 file.
 const UTF8_BOM: &[u8] = b"\xef\xbb\xbf";
 
-/// `result` of parsing `text`, with a parse error replaced by one naming the cause when the
-/// text's first line holds a CR before its end: lines that end in a CR alone (classic Mac
-/// OS), which both loaders, splitting lines at LF, read as one long line whose error named
-/// the wrong cause. Only on failure: a file that parses (CR CR LF endings, a CR in a comment)
-/// is kept.
+/// `result` of parsing `text`, with a parse error on the first line replaced by one naming
+/// the cause when that line holds a CR before its end: lines that end in a CR alone (classic
+/// Mac OS), which both loaders, splitting lines at LF, read as one long line whose error named
+/// the wrong cause. Only on failure, and only an error on the first line: a file that parses
+/// (CR CR LF endings, a CR in a comment) is kept, and so is an error further down a file whose
+/// first line merely holds a stray CR (a bad index on line 5 is reported as such).
 fn cr_line_ends(result: Result<Mesh>, text: &[u8], name: &str) -> Result<Mesh> {
     result.map_err(|e| {
         let first = text.split(|&b| b == b'\n').next().unwrap_or_default();
         let first = first.strip_suffix(b"\r").unwrap_or(first);
+        let on_first_line = e.message.starts_with(&line_error(name, 1, "").message);
         match e.status {
-            Rt2Status::Parse if first.contains(&b'\r') => Error::parse(format!(
+            Rt2Status::Parse if on_first_line && first.contains(&b'\r') => Error::parse(format!(
                 "{name}: the lines end in a CR alone (classic Mac OS line endings): convert \
                  the file to LF or CRLF line endings"
             )),

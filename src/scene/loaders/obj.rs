@@ -22,7 +22,9 @@ use crate::fallible::TryGrow;
 /// file's face order, each polygon of n vertices fan-triangulated in place into n-2 triangles
 /// `(v0, v(k), v(k+1))`.
 ///
-/// Ignored statements: `vt`, `vn`, `vp`, `g`, `o`, `s`, `mg`, `usemtl`, `mtllib`, points `p`
+/// Ignored statements: `vt`, `vn`, `vp`, `g`, `o`, `s`, `mg`, `usemtl`, `mtllib`, the other
+/// render attributes (`usemap`, `maplib`, `lod`, `bevel`, `c_interp`, `d_interp`,
+/// `shadow_obj`, `trace_obj`: how surfaces are drawn, not surfaces), points `p`
 /// and lines `l` (Blender writes loose edges so; they have no surface), comments and blank
 /// lines; CRLF line endings and a UTF-8 byte-order mark are accepted, a line ending in `\`
 /// outside a comment continues on the next (errors name its first line), and bytes that are
@@ -99,6 +101,9 @@ fn parse(text_bytes: &[u8], name: &str) -> Result<Mesh> {
                 }
             }
             "vt" | "vn" | "vp" | "g" | "o" | "s" | "mg" | "usemtl" | "mtllib" | "p" | "l" => {}
+            // Render attributes: how surfaces are drawn, never a surface.
+            "usemap" | "maplib" | "lod" | "bevel" | "c_interp" | "d_interp" | "shadow_obj"
+            | "trace_obj" => {}
             other => return Err(err(format!("unsupported OBJ statement {}", Quoted(other)))),
         }
     }

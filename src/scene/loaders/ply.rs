@@ -146,7 +146,8 @@ enum Role {
 ///
 /// Formats: `ascii`, `binary_little_endian`, `binary_big_endian`. Keeps `vertex` properties
 /// `x`, `y`, `z` (any scalar type, any position among other properties) and the `face` list
-/// `vertex_indices` (or `vertex_index`); skips everything else. Triangles follow the file's
+/// `vertex_indices` (or `vertex_index`); skips everything else but another element of such
+/// lists (`tristrips`), whose surfaces would be lost, which is refused. Triangles follow the file's
 /// face order, each polygon of n vertices fan-triangulated in place into n-2 triangles
 /// `(v0, v(k), v(k+1))`, so face i maps to a known triangle range (ray sets identify triangles
 /// by face index; for all-triangle files triangle i is face i).
@@ -383,6 +384,11 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header> {
     })
 }
 
+/// The names of a face's vertex index list (the spec's and a common variant).
+fn is_face_list_name(name: &str) -> bool {
+    name == "vertex_indices" || name == "vertex_index"
+}
+
 /// Decides each element's role and checks that the header declares what a mesh needs.
 fn plan(header: &Header, name: &str) -> Result<Vec<Role>> {
     let mut roles = Vec::with_capacity(header.elements.len());
@@ -414,7 +420,7 @@ fn plan(header: &Header, name: &str) -> Result<Vec<Role>> {
             }
             "face" => {
                 have_face = true;
-                let is_list = |p: &Property| p.name == "vertex_indices" || p.name == "vertex_index";
+                let is_list = |p: &Property| is_face_list_name(&p.name);
                 let Some(i) = el.props.iter().position(is_list) else {
                     return Err(err(
                         "element 'face' has no 'vertex_indices' or 'vertex_index' property".into(),
@@ -437,7 +443,23 @@ fn plan(header: &Header, name: &str) -> Result<Vec<Role>> {
                 }
                 Role::Face(i)
             }
-            _ => Role::Skip,
+            _ => {
+                // Another element of index lists (`tristrips`) describes surfaces too, which
+                // skipping would drop unseen.
+                let list = el
+                    .props
+                    .iter()
+                    .find(|p| is_face_list_name(&p.name) && matches!(p.kind, Kind::List { .. }));
+                if let Some(p) = list {
+                    return Err(err(format!(
+                        "element {} holds vertex index lists ('{}'), which would be dropped: \
+                         only 'face' elements are read (triangle strips are not supported)",
+                        Quoted(&el.name),
+                        p.name
+                    )));
+                }
+                Role::Skip
+            }
         };
         roles.push(role);
     }
