@@ -311,7 +311,9 @@ enum rt2_transparency
    */
   RT2_TRANSPARENCY_STRAIGHT = 0,
   /**
-   * Snell refraction with Fresnel reflection.
+   * Snell refraction with Fresnel reflection (Schlick's approximation, taken with the
+   * cosine on the less dense side: the reflected share rises continuously to all of it at
+   * the critical angle).
    */
   RT2_TRANSPARENCY_REFRACT = 1,
 };
@@ -444,7 +446,9 @@ typedef struct rt2_material {
    */
   float ior;
   /**
-   * Non-zero: a world-space checkerboard of `color` and `checker_color`.
+   * Non-zero: a world-space checkerboard of `color` and `checker_color`. A surface point
+   * takes the colour of the square just behind it (inside a solid, behind a plane's or
+   * triangle's normal), the same seen from either side.
    */
   uint32_t checker;
   float checker_color[3];

@@ -19,19 +19,22 @@ fn powf(x: f32, y: f32) -> f32 {
 
 fn reflect_dir(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> { return d - 2.0 * dot(d, n) * n; }
 
-// `refract`: w < 0 signals total internal reflection.
+// `refract`: the direction and the Fresnel reflectance; w < 0 signals total internal
+// reflection.
 fn refract_dir(d: vec3<f32>, n: vec3<f32>, eta: f32) -> vec4<f32> {
     let cos_i = -dot(d, n);
     let sin2_t = eta * eta * max(1.0 - cos_i * cos_i, 0.0);
     if (sin2_t > 1.0) { return vec4<f32>(0.0, 0.0, 0.0, -1.0); }
     let cos_t = sqrt(1.0 - sin2_t);
-    return vec4<f32>(normalize_or_zero(eta * d + (eta * cos_i - cos_t) * n), 1.0);
+    let t = normalize_or_zero(eta * d + (eta * cos_i - cos_t) * n);
+    return vec4<f32>(t, schlick(cos_i, cos_t, eta));
 }
 
-fn schlick(cos_i: f32, eta: f32) -> f32 {
+// `shading::schlick`: the cosine on the less dense side.
+fn schlick(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
     let a = (1.0 - eta) / (1.0 + eta);
     let r0 = a * a;
-    let x = 1.0 - clamp(cos_i, 0.0, 1.0);
+    let x = 1.0 - clamp(select(cos_i, cos_t, eta > 1.0), 0.0, 1.0);
     let x2 = x * x;
     return r0 + (1.0 - r0) * (x2 * x2 * x);
 }
@@ -314,8 +317,9 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
     let n_geo = surface.n;
     let entering = dot(n_geo, r.dir) < 0.0;
     let n = select(-n_geo, n_geo, entering);
-    // Sampled just inside the surface, as on the CPU (no flicker on a checker boundary).
-    let base = color_at(m, p - eps * n);
+    // Sampled just inside the surface (behind the primitive's own normal), as on the CPU: no
+    // flicker on a checker boundary, and one colour from either side.
+    let base = color_at(m, p - eps * n_geo);
     let local_weight = 1.0 - m.reflectivity - m.transparency;
     // The leaf of the shadow rays' origin, which the mirror ray leaves from too.
     var above_leaf = INVALID;
@@ -345,8 +349,8 @@ fn shade(r: Ray, weight: vec3<f32>, depth: u32) -> Shaded {
         } else {
             let eta = select(m.ior, 1.0 / m.ior, entering);
             let t = refract_dir(r.dir, n, eta);
-            if (t.w > 0.0) {
-                let f = schlick(-dot(r.dir, n), eta);
+            if (t.w >= 0.0) {
+                let f = t.w;
                 mirror += m.transparency * f;
                 let w = weight * (m.transparency * (1.0 - f));
                 out.transmitted = child(leave(p, hit.prim, n_geo, -n), t.xyz, w, INVALID);

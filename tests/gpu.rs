@@ -496,7 +496,8 @@ fn images_match_the_cpu_on_the_builtin_scenes() {
 
 /// The shading extremes of `support::shading_cases` (a light 1e30 away, a faint mirror of a
 /// bright background, sample counts that are not squares, a light switched off over a colour
-/// of 1e30) on both render paths, against the images worked out by hand, as on the CPU
+/// of 1e30, glass left near its critical angle, a checkered plane seen from either side) on
+/// both render paths, against the images worked out by hand, as on the CPU
 /// (`tests/shading_extremes.rs`).
 #[test]
 fn extreme_lights_colours_and_sample_counts_render_as_on_the_cpu() {

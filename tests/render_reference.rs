@@ -161,8 +161,8 @@ impl RefScene {
         let n = if n0.dot(dir) < 0.0 { n0 } else { -n0 };
         let base = match m.checker {
             Some(c) => {
-                // Sampled just inside the surface, as documented for checkers.
-                let q = ((p - 1e-6 * n) / c.scale as f64).floor();
+                // Sampled just inside the surface (behind its own normal), as documented.
+                let q = ((p - 1e-6 * n0) / c.scale as f64).floor();
                 if (q.x + q.y + q.z).rem_euclid(2.0) < 1.0 {
                     d(m.color)
                 } else {
@@ -211,7 +211,9 @@ impl RefScene {
                         let cos_t = (1.0 - sin2_t).sqrt();
                         let t = (eta * dir + (eta * cos_i - cos_t) * n).normalize();
                         let r0 = ((1.0 - eta) / (1.0 + eta)).powi(2);
-                        let fresnel = r0 + (1.0 - r0) * (1.0 - cos_i).powi(5);
+                        // Schlick's cosine is the one on the less dense side.
+                        let cos = if eta > 1.0 { cos_t } else { cos_i };
+                        let fresnel = r0 + (1.0 - r0) * (1.0 - cos).powi(5);
                         mirror += transparency * fresnel;
                         Some((t, transparency * (1.0 - fresnel)))
                     }

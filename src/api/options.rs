@@ -88,7 +88,9 @@ pub enum Rt2QueryMode {
 pub enum Rt2Transparency {
     /// RT² mode: rays continue unbent.
     Straight = 0,
-    /// Snell refraction with Fresnel reflection.
+    /// Snell refraction with Fresnel reflection (Schlick's approximation, taken with the
+    /// cosine on the less dense side: the reflected share rises continuously to all of it at
+    /// the critical angle).
     Refract = 1,
 }
 
@@ -279,7 +281,9 @@ pub struct rt2_material {
     /// Index of refraction (> 0, with a finite reciprocal: at least about 2.94e-39), used with
     /// `RT2_TRANSPARENCY_REFRACT`.
     pub ior: f32,
-    /// Non-zero: a world-space checkerboard of `color` and `checker_color`.
+    /// Non-zero: a world-space checkerboard of `color` and `checker_color`. A surface point
+    /// takes the colour of the square just behind it (inside a solid, behind a plane's or
+    /// triangle's normal), the same seen from either side.
     pub checker: u32,
     pub checker_color: [f32; 3],
     /// Edge length of one checker square (> 0).

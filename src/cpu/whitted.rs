@@ -11,7 +11,7 @@ use crate::geometry::{Hit, PrimIndex, Ray, TraversalStats, INVALID};
 use crate::precision::{offset_ray_origin, OffsetMode};
 use crate::render::{RenderOptions, Schedule, Transparency};
 use crate::scene::{Committed, Material};
-use crate::shading::{phong, reflect, refract, schlick};
+use crate::shading::{phong, reflect, refract};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::cell::OnceCell;
@@ -182,7 +182,9 @@ impl<'a> Tracer<'a> {
             entering,
             // The pattern is sampled just inside the surface: a checker boundary lying in the
             // surface itself (a checkered plane at y = 0) would otherwise flicker with rounding.
-            base: m.color_at(p - self.eps * n),
+            // Inside is behind the primitive's own normal, not the one facing the ray: a plane
+            // seen from below showed the other colour of each square.
+            base: m.color_at(p - self.eps * n_geo),
             local_weight: 1.0 - m.reflectivity - m.transparency,
         }
     }
@@ -263,8 +265,7 @@ impl<'a> Tracer<'a> {
                 Transparency::Refract => {
                     let eta = if s.entering { 1.0 / m.ior } else { m.ior };
                     match refract(ray.dir, n, eta) {
-                        Some(t) => {
-                            let f = schlick(-ray.dir.dot(n), eta);
+                        Some((t, f)) => {
                             mirror += m.transparency * f;
                             push(t, -1.0, m.transparency * (1.0 - f));
                         }

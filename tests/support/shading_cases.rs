@@ -1,4 +1,5 @@
-//! Renders whose light, colours or sample counts leave the ordinary range, each with its
+//! Renders at the edges of the shading model (light, colours or sample counts out of the
+//! ordinary range, glass near its critical angle, a surface seen from behind), each with its
 //! expected image worked out by hand from the documented shading model (linear values,
 //! `round(255 v)`, clamped): run on the CPU by `tests/shading_extremes.rs` and on the GPU by
 //! `tests/gpu.rs`. Each case failed before the fix its comment names.
@@ -7,8 +8,8 @@ use glam::Vec3;
 use rt2::camera::Camera;
 use rt2::context::Context;
 use rt2::frame::Frame;
-use rt2::render::RenderOptions;
-use rt2::scene::{Material, PointLight, Scene, Shape};
+use rt2::render::{RenderOptions, Transparency};
+use rt2::scene::{Checker, Material, PointLight, Scene, Shape};
 
 /// What a rendered frame must show: `Err` says what is wrong with it.
 pub type Check = Box<dyn Fn(&Frame) -> Result<(), String>>;
@@ -32,6 +33,8 @@ pub fn cases() -> Vec<Case> {
     all.push(faint_mirror());
     all.extend([2, 3, 4, 5, 9, 10].into_iter().map(half_covered_row));
     all.push(light_switched_off());
+    all.extend([0.2, 0.52, 0.6, 0.64, 0.7].into_iter().map(leaving_glass));
+    all.extend([3.0, -3.0].into_iter().map(checker_seen_from));
     all
 }
 
@@ -209,5 +212,102 @@ fn light_switched_off() -> Case {
         opts: RenderOptions::default(),
         size: (9, 9),
         check: centre_is(1.0),
+    }
+}
+
+/// The share of light a surface between indices `n1` (the ray's side) and `n2` reflects, for
+/// incidence sine `sin_i`: Fresnel's equations for unpolarised light, 1 past the critical
+/// angle.
+fn fresnel(n1: f64, n2: f64, sin_i: f64) -> f64 {
+    let sin_t = n1 / n2 * sin_i;
+    if sin_t >= 1.0 {
+        return 1.0;
+    }
+    let (ci, ct) = ((1.0 - sin_i * sin_i).sqrt(), (1.0 - sin_t * sin_t).sqrt());
+    let rs = ((n1 * ci - n2 * ct) / (n1 * ci + n2 * ct)).powi(2);
+    let rp = ((n1 * ct - n2 * ci) / (n1 * ct + n2 * ci)).powi(2);
+    (rs + rp) / 2.0
+}
+
+/// The eye inside a black glass ball (index 1.5, all light transmitted or reflected), `sin_i`
+/// off its centre, looking along -z with a field of view of 0.01°: every ray meets the wall
+/// from inside at incidence sine `sin_i`, and with two rays in a chain the pixel is the white
+/// background's transmitted share, 1 - F (the reflected ray meets black glass). F must be
+/// within 0.025 of Fresnel's (Schlick's approximation stays that close taken with the cosine
+/// on the air's side). Taken with the glass side's cosine it stayed at 0.04 up to the
+/// critical angle (sine 2/3) and jumped to 1 there: 0.04 at sine 0.64, where Fresnel says 0.23.
+fn leaving_glass(sin_i: f32) -> Case {
+    let glass = Material {
+        color: Vec3::ZERO,
+        transparency: 1.0,
+        ior: 1.5,
+        ..Material::default()
+    };
+    let mut camera = Camera::default();
+    let eye = Vec3::new(sin_i, 0.0, 0.0);
+    camera.look_at(eye, eye - Vec3::Z, Vec3::Y).unwrap();
+    camera.set_fov(0.01).unwrap();
+    let want = 1.0 - fresnel(1.5, 1.0, sin_i as f64);
+    Case {
+        name: format!("leaving glass at incidence sine {sin_i}"),
+        scene: sphere_in(glass, None),
+        camera,
+        opts: RenderOptions {
+            max_depth: 2,
+            transparency: Transparency::Refract,
+            background: Vec3::ONE,
+            ..RenderOptions::default()
+        },
+        size: (9, 9),
+        check: Box::new(move |f| {
+            let got = centre(f).map(|c| c as f64 / 255.0);
+            match got.iter().all(|g| (g - want).abs() <= 0.025) {
+                true => Ok(()),
+                false => Err(format!("centre pixel {got:.3?}, want 1 - F = {want:.3}")),
+            }
+        }),
+    }
+}
+
+/// The checkered plane y = 0 (normal +y, red and blue squares of side 1, ambient light only)
+/// seen straight down or straight up (`eye_y` above or below) at (0.5, 0, 0.5): one square,
+/// one colour from both sides, the square behind the normal, (0, -1, 0): blue. Sampled behind
+/// the normal turned to the ray, it was blue from above and red from below.
+fn checker_seen_from(eye_y: f32) -> Case {
+    let (red, blue) = (Vec3::X, Vec3::Z);
+    let material = Material {
+        color: red,
+        ambient: 1.0,
+        diffuse: 0.0,
+        specular: 0.0,
+        checker: Some(Checker {
+            color2: blue,
+            scale: 1.0,
+        }),
+        ..Material::default()
+    };
+    let mut s = Scene::new();
+    let m = s.add_material(material).unwrap();
+    let plane = Shape::Plane {
+        normal: Vec3::Y,
+        offset: 0.0,
+    };
+    s.add_object(plane, m).unwrap();
+    s.commit().unwrap();
+    let target = Vec3::new(0.5, 0.0, 0.5);
+    let mut camera = Camera::default();
+    camera
+        .look_at(target + eye_y * Vec3::Y, target, Vec3::Z)
+        .unwrap();
+    Case {
+        name: format!("a checkered plane seen from y = {eye_y}"),
+        scene: s,
+        camera,
+        opts: RenderOptions::default(),
+        size: (9, 9),
+        check: Box::new(|f| match centre(f) {
+            [0, 0, 255] => Ok(()),
+            c => Err(format!("centre pixel {c:?}, want blue [0, 0, 255]")),
+        }),
     }
 }
