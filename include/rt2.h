@@ -437,12 +437,16 @@ typedef struct rt2_material {
    */
   float reflectivity;
   /**
-   * Fraction of light carried by the transmitted ray.
+   * Fraction of light carried by the transmitted ray. Shadows stay hard, as in Whitted's
+   * model: a shadow ray stops at any object, so a transparent one casts a full shadow.
    */
   float transparency;
   /**
    * Index of refraction (> 0, with a finite reciprocal: at least about 2.94e-39), used with
-   * `RT2_TRANSPARENCY_REFRACT`.
+   * `RT2_TRANSPARENCY_REFRACT`. The side a ray enters is the side its normal points to
+   * (outside a solid, in front of a plane or triangle), and the ray stays bent until it
+   * leaves through a surface from behind: a lone transparent triangle or plane bends rays
+   * as the face of a solid would, not as a thin pane.
    */
   float ior;
   /**

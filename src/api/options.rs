@@ -276,10 +276,14 @@ pub struct rt2_material {
     pub shininess: f32,
     /// Fraction of light carried by the mirror ray.
     pub reflectivity: f32,
-    /// Fraction of light carried by the transmitted ray.
+    /// Fraction of light carried by the transmitted ray. Shadows stay hard, as in Whitted's
+    /// model: a shadow ray stops at any object, so a transparent one casts a full shadow.
     pub transparency: f32,
     /// Index of refraction (> 0, with a finite reciprocal: at least about 2.94e-39), used with
-    /// `RT2_TRANSPARENCY_REFRACT`.
+    /// `RT2_TRANSPARENCY_REFRACT`. The side a ray enters is the side its normal points to
+    /// (outside a solid, in front of a plane or triangle), and the ray stays bent until it
+    /// leaves through a surface from behind: a lone transparent triangle or plane bends rays
+    /// as the face of a solid would, not as a thin pane.
     pub ior: f32,
     /// Non-zero: a world-space checkerboard of `color` and `checker_color`. A surface point
     /// takes the colour of the square just behind it (inside a solid, behind a plane's or
