@@ -282,16 +282,24 @@ fn bench_checks_its_write_target_first() {
     }
 }
 
-/// `bench --runs 0` is refused, not silently taken as 1.
+/// `bench --runs 0` is refused, not silently taken as 1, and so is a count no bench could
+/// finish, with the range in words a user can act on (it read 1..=18446744073709551615).
 #[test]
-fn bench_refuses_zero_runs() {
-    let out = Command::new(env!("CARGO_BIN_EXE_rt2"))
-        .args(["bench", "memory", "--runs", "0"])
-        .env("RT2_SHARED", support::scratch("cli-no-models"))
-        .output()
-        .expect("run the rt2 binary");
-    assert_refused(&out, "--runs");
-    assert!(out.stdout.is_empty(), "a benchmark ran");
+fn bench_refuses_zero_and_endless_runs() {
+    for runs in ["0", "1001"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_rt2"))
+            .args(["bench", "memory", "--runs", runs])
+            .env("RT2_SHARED", support::scratch("cli-no-models"))
+            .output()
+            .expect("run the rt2 binary");
+        assert_refused(&out, "--runs");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("1..=1000"),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(out.stdout.is_empty(), "a benchmark ran");
+    }
 }
 
 /// `render -h` and `--help` print the usage, as `bench -h` does.

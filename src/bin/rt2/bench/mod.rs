@@ -34,7 +34,7 @@ const USAGE: &str = "usage: rt2 bench [frames|build|rays|tables|streams|gpu|char
            docs/chart.svg and .png with --features chart
   memory   bytes per primitive of each part of each built-in scene and the bunny, beside a
            tessellation of their analytic primitives
-  --runs N       timed runs per figure (default 5; the median is reported)
+  --runs N       timed runs per figure, 1 to 1000 (default 5; the median is reported)
   --write FILE   also replace this benchmark's section in FILE (e.g. BENCHMARKS.md)
 Model files come from $RT2_SHARED (default ../shared); Embree from $RT2_EMBREE_BENCH or
 target/peers/bench_embree (make -C ../shared/peers BUILD=$PWD/target/peers).";
@@ -67,8 +67,9 @@ pub fn run(args: &[OsString]) -> Result<()> {
             }
         }
     }
-    // A median needs a run: 0 is refused (as render refuses --samples 0), not taken as 1.
-    rt2::error::check_range("--runs", a.runs, 1..=usize::MAX)?;
+    // A median needs a run: 0 is refused (as render refuses --samples 0), not taken as 1. A
+    // thousand runs of the slowest figure already take hours.
+    rt2::error::check_range("--runs", a.runs, 1..=1000)?;
     // Before any benchmark: a bad --write target found only after a run of many minutes
     // wastes the run (as `render` checks -o first).
     if let Some(path) = &a.write {
