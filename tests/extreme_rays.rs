@@ -152,6 +152,23 @@ impl Scene {
         (st == Rt2Status::Ok).then_some(hits).ok_or(st)
     }
 
+    /// Whether each of `rays` is occluded with `opt` (`rt2_occluded`).
+    fn occluded(&self, rays: &[rt2_ray], opt: &rt2_query_options) -> Vec<u8> {
+        let mut found = vec![7u8; rays.len()];
+        unsafe {
+            ok(rt2_occluded(
+                self.ctx,
+                self.scene,
+                rays.as_ptr(),
+                rays.len(),
+                found.as_mut_ptr(),
+                opt,
+                null_mut(),
+            ))
+        };
+        found
+    }
+
     /// Checks that every hit is a miss or a point of its ray: finite `t`, `u`, `v`, and a
     /// surface `rt2_hit_surfaces` accepts.
     fn check_hits(&self, what: &str, rays: &[rt2_ray], hits: &[rt2_hit]) -> usize {
@@ -289,6 +306,32 @@ fn rays_whose_crossings_lie_beyond_f32_miss() {
         let hits = s.intersect(&rays, &opt).unwrap();
         for (r, h) in rays.iter().zip(&hits) {
             assert_eq!(h.object, RT2_INVALID_ID, "{what}: {r:?} hit {h:?}");
+        }
+    }
+}
+
+/// A ray 1e-20 long starting on a quad: its hit is at `t = 0`, inside the window `[0, 1e-26)`
+/// and `[-1e-26, inf)` but not `[1e-26, inf)`. The queries scale such a direction by 2^66, and
+/// the window's ends divided by it are subnormal: rounded to nearest, `tmin` 1e-26 became 0
+/// (the hit was reported) and `tmax` 1e-26 became 0 (the hit was lost).
+#[test]
+fn a_tiny_direction_keeps_its_window_exactly() {
+    let s = Scene::empty(Rt2Backend::Cpu).expect("a CPU context");
+    let quad = [
+        -1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0,
+    ];
+    s.add_mesh(&quad, &[0, 1, 2, 0, 2, 3]);
+    let s = s.commit();
+    let down = |tmin, tmax| ray([0.3, -0.2, 0.0], tmin, [0.0, 0.0, -1e-20], tmax);
+    let rays = [down(1e-26, INF), down(0.0, 1e-26), down(-1e-26, INF)];
+    for (what, opt) in every_option() {
+        let hits = s.intersect(&rays, &opt).unwrap();
+        let found = s.occluded(&rays, &opt);
+        assert_eq!(hits[0].object, RT2_INVALID_ID, "{what}: {:?}", hits[0]);
+        assert_eq!(found[0], 0, "{what}: occluded past its tmin");
+        for (h, f) in hits[1..].iter().zip(&found[1..]) {
+            assert!(h.object == 0 && h.t == 0.0, "{what}: {h:?}");
+            assert_eq!(*f, 1, "{what}");
         }
     }
 }

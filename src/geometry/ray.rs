@@ -42,8 +42,9 @@ impl Ray {
     /// long, the watertight test put a triangle 1e-6 across at `t = 0` along one 1e30 long).
     /// A power of two scales exactly wherever the scaled values stay normal, so a scaled ray's
     /// hits are then the unscaled one's, bit for bit. (A component more than 2^126 times
-    /// smaller than the largest, or a window end that the scale makes subnormal, loses bits:
-    /// they are below anything a hit can resolve at that length.)
+    /// smaller than the largest loses bits: they are below anything a hit can resolve at that
+    /// length. A window end that the scale makes subnormal is rounded so that the scaled
+    /// window admits exactly the hits the caller's does: see [`Ray::scaled`].)
     pub(crate) fn direction_scale(&self) -> Option<f32> {
         const NEAR_UNIT: std::ops::RangeInclusive<f32> = 1.0 / 1024.0..=1024.0;
         let m = self.dir.abs().max_element();
@@ -56,13 +57,16 @@ impl Ray {
     /// This (non-degenerate) ray with its direction multiplied by the power of two `s` and
     /// its window divided by it, so that `t' * s` of a hit on it is the hit's `t` on this
     /// ray. The window lies within `±f32::MAX / s` and `±f32::MAX`: every hit's `t'` and
-    /// `t' * s` are finite.
+    /// `t' * s` are finite. Both ends are rounded up onto f32 ([`div_up`]): `t' * s` is then
+    /// in `[tmin, tmax)` exactly when `t'` is in the scaled window (rounded to nearest, a
+    /// `tmin` of 1e-26 under a scale of 2^66 became 0, and a hit at `t = 0` was reported).
+    /// The GPU flushes subnormals to zero, so there such an end still reads as 0.
     pub(crate) fn scaled(&self, s: f32) -> Ray {
         Ray {
             org: self.org,
             dir: self.dir * s,
-            tmin: finite_start(self.tmin / s),
-            tmax: self.tmax.min(f32::MAX) / s,
+            tmin: finite_start(div_up(self.tmin, s)),
+            tmax: div_up(self.tmax.min(f32::MAX), s),
         }
     }
 
@@ -75,6 +79,19 @@ impl Ray {
             || self.tmin.is_nan()
             || self.tmax.is_nan()
             || self.tmin > self.tmax
+    }
+}
+
+/// `x / s` for a power of two `s`, rounded up to the next f32 where the quotient is inexact
+/// (subnormal): the least f32 `q` with `q * s >= x`, so that for every f32 `t`, `t >= q`
+/// exactly when `t * s >= x` (`t * s` is exact: `s` is a power of two). Both window ends
+/// need it: `t * s < tmax` holds exactly when `t < q` too.
+fn div_up(x: f32, s: f32) -> f32 {
+    let q = x / s;
+    if q * s < x {
+        q.next_up()
+    } else {
+        q
     }
 }
 
