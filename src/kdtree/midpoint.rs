@@ -5,7 +5,7 @@
 //! (`BuildOptions::references_per_prim`). Cheap to build and the natural tree for
 //! breadth-first ray streams.
 
-use super::split::{child_voxels, classify, clip, fork, Budget, Side, Slot, Subtree};
+use super::split::{centre_plane, child_voxels, classify, clip, fork, Budget, Side, Slot, Subtree};
 use super::{BuildInput, BuildOptions};
 use crate::fallible::{Fallible, TryGrow};
 use crate::geometry::Aabb;
@@ -92,18 +92,9 @@ impl Midpoint<'_> {
         if prims.len() <= self.leaf_size || depth >= self.max_depth {
             return Ok(None);
         }
-        let e = voxel.extent();
-        let axis = if e.x >= e.y && e.x >= e.z {
-            0
-        } else if e.y >= e.z {
-            1
-        } else {
-            2
-        };
-        let split = voxel.center()[axis];
-        if !(split > voxel.min[axis] && split < voxel.max[axis]) {
+        let Some((axis, split)) = centre_plane(voxel) else {
             return Ok(None);
-        }
+        };
         let sides = self.partition(prims, voxel, axis, split)?;
         // Each primitive is at most once on each side: a side shorter than `prims` misses one.
         if sides.iter().all(|s| s.len() == prims.len()) {

@@ -131,6 +131,21 @@ pub(super) fn classify(lo: f32, hi: f32, split: f32) -> Side {
     }
 }
 
+/// The plane through the centre of `voxel` across its longest axis (the midpoint builder's
+/// split), or `None` when the voxel is too thin there to be halved in `f32`.
+pub(super) fn centre_plane(voxel: &Aabb) -> Option<(usize, f32)> {
+    let e = voxel.extent();
+    let axis = if e.x >= e.y && e.x >= e.z {
+        0
+    } else if e.y >= e.z {
+        1
+    } else {
+        2
+    };
+    let split = voxel.center()[axis];
+    (split > voxel.min[axis] && split < voxel.max[axis]).then_some((axis, split))
+}
+
 /// The two child voxels of `voxel` split at `axis = split`.
 pub(super) fn child_voxels(voxel: &Aabb, axis: usize, split: f32) -> [Aabb; 2] {
     let (mut below, mut above) = (*voxel, *voxel);
