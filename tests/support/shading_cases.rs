@@ -79,13 +79,18 @@ fn centre_is(v: f32) -> Check {
 
 /// A unit sphere at the origin seen from (0, 0, 5), a committed scene of it in `material`.
 fn sphere_in(material: Material, light: Option<PointLight>) -> Scene {
-    let mut s = Scene::new();
-    let m = s.add_material(material).unwrap();
     let sphere = Shape::Sphere {
         center: Vec3::ZERO,
         radius: 1.0,
     };
-    s.add_object(sphere, m).unwrap();
+    scene_of(sphere, material, light)
+}
+
+/// A committed scene of `shape` in `material`, lit by `light` if any.
+fn scene_of(shape: Shape, material: Material, light: Option<PointLight>) -> Scene {
+    let mut s = Scene::new();
+    let m = s.add_material(material).unwrap();
+    s.add_object(shape, m).unwrap();
     if let Some(l) = light {
         s.add_light(l).unwrap();
     }
@@ -286,14 +291,11 @@ fn checker_seen_from(eye_y: f32) -> Case {
         }),
         ..Material::default()
     };
-    let mut s = Scene::new();
-    let m = s.add_material(material).unwrap();
     let plane = Shape::Plane {
         normal: Vec3::Y,
         offset: 0.0,
     };
-    s.add_object(plane, m).unwrap();
-    s.commit().unwrap();
+    let s = scene_of(plane, material, None);
     let target = Vec3::new(0.5, 0.0, 0.5);
     let mut camera = Camera::default();
     camera
