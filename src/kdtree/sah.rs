@@ -54,13 +54,15 @@ const KIND_SHIFT: u32 = PRIM_BITS + 1;
 /// primitives that end, start or lie there, and `split::classify` keeps those on both sides
 /// (conservative leaf membership). On geometry aligned to a grid (voxel models, boxes in a
 /// row) every event plane is such a plane: the cube faces along it stay in every leaf beside
-/// it and no split pays, so a filled 18³ grid of cubes (70k triangles) ended in leaves of 164
-/// triangles, 207 primitive tests per ray against the midpoint builder's 9; with gap planes,
-/// 21 (random rays through the grid, a scratch harness; `tests/kdtree.rs` checks a 12³ grid).
-/// In small nodes gap planes bought nothing on meshes but more nodes: weighed in every node,
-/// the bunny's tree grew by 37% (dragon 31%) for the same ray speed; from 32 primitives on, the
-/// three models' trees grow by 1–2.5%, their SAH costs move by −1% to +1%, and their build
-/// times and ray speeds stay within the machine's noise.
+/// it and no split pays, so a filled 12³ grid of cubes (20k triangles) took 200 primitive
+/// tests per ray against the midpoint builder's 12; with gap planes, 19 (random rays through
+/// the grid, `tests/kdtree.rs`). In small nodes gap planes bought nothing on meshes but more
+/// nodes: weighed in every node, the bunny's tree grew by 37% (dragon 31%) for the same ray
+/// speed; from 32 primitives on, the three models' trees grow by 1–2%, their SAH costs move
+/// by under 1%, and their build times and ray speeds stay within the machine's noise. Gap
+/// planes lie between two event positions only: one past the last position cut off empty
+/// space that the event plane there cuts off anyway, and on 20k random slivers it made the
+/// tree take 16% more tests per ray.
 const GAP_PLANES_MIN_PRIMS: usize = 32;
 
 /// Most splits per path from the root that may go ahead although the SAH finds no plane
@@ -69,16 +71,26 @@ const GAP_PLANES_MIN_PRIMS: usize = 32;
 /// where every primitive's bounds span much of the node (20k slivers each running from one
 /// face of a cube to the opposite one), no single split pays, yet a few levels down the
 /// clipped primitives are told apart. The root stayed one leaf of all 20k slivers (20000
-/// tests per ray), and of most of 20k triangles fanned around one vertex (19880); with centre
-/// splits, 2582 and 620 (the midpoint builder: 804 and 2685). Splitting at the least bad
-/// plane the SAH found instead did not help with gap planes on: it cut off thin slabs of
-/// empty space. Limited per path, as PBRT's bad refines are, so a scene no split can help
-/// (coincident primitives) ends in leaves soon; on the bunny, dragon and Snowden bust no node
-/// takes one.
+/// tests per ray), and of most of 20k triangles fanned around one vertex (19411); with centre
+/// splits, 1215 and 665, the midpoint builder 808 and 578 (`tests/kdtree.rs`). Splitting at
+/// the least bad plane the SAH found instead did not help with gap planes on: it cut off thin
+/// slabs of empty space. Limited per path, as PBRT's bad refines are, and never a split that
+/// leaves every primitive on both sides (coincident or nested ones), which only copies the
+/// node; on the bunny, dragon and Snowden bust no node takes one.
 const CENTRE_SPLITS: u32 = 3;
 
 /// Fewest primitives of a node that may take a centre split ([`CENTRE_SPLITS`]).
 const CENTRE_SPLIT_MIN_PRIMS: usize = 64;
+
+/// The gap plane between the event positions `a < b`: midway, if that lies more than `gap`
+/// from both, as an event plane at padded faces must lie from its neighbours. A plane a
+/// rounding error from geometry would bound a slab a ray may skip, or put a ray's hit on that
+/// geometry in the wrong child. (A centre split, half its voxel on each side, makes no thin
+/// slab; a plane on geometry keeps the geometry on both sides.)
+fn gap_plane(a: f32, b: f32, gap: f32) -> Option<f32> {
+    let mid = 0.5 * a + 0.5 * b;
+    (b - a > 2.0 * gap && mid > a && mid < b).then_some(mid)
+}
 
 /// Most primitives the SAH builder takes; `build` hands larger inputs to the midpoint builder.
 pub(super) const MAX_PRIMS: usize = PRIM_MASK as usize;
@@ -250,23 +262,33 @@ impl Sah<'_> {
         } else {
             None
         };
-        let (plane, centre) = match plane {
-            Some(p) if p.cost < leaf_cost => (p, centre),
+        // The SAH's plane, or else a centre split (`forced`), which the cost does not vouch for.
+        let (plane, forced) = match plane {
+            Some(p) if p.cost < leaf_cost => (p, false),
+            // `best_plane` found candidates (depth and area allow a split) but none pays.
             Some(_) if centre > 0 && n >= CENTRE_SPLIT_MIN_PRIMS => match centre_plane(&voxel) {
                 Some((axis, pos)) => (
                     Plane {
                         axis,
                         pos,
-                        cost: 0.0,
+                        cost: leaf_cost,
                     },
-                    centre - 1,
+                    true,
                 ),
                 None => return slot.leaf(prims),
             },
             _ => return slot.leaf(prims),
         };
+        let centre = centre - u32::from(forced);
         let voxels = child_voxels(&voxel, plane.axis, plane.pos);
         let [(pb, eb), (pa, ea)] = self.distribute(&prims, events, &voxels, &plane)?;
+        // A centre split that leaves every primitive on both sides only copies the node
+        // (primitives that all contain its centre: coincident or nested spheres, where 256
+        // copies of one sphere took 8 times the references and 56% more tests per ray): a
+        // leaf, as the midpoint builder makes it.
+        if forced && pb.len() == n && pa.len() == n {
+            return slot.leaf(prims);
+        }
         let Some([bb, ba]) = budget.split(pb.len(), pa.len()) else {
             return slot.leaf(prims);
         };
@@ -347,6 +369,7 @@ impl Sah<'_> {
         // hold 38% more references: clipped triangles propose most of the useful planes.)
         let gap = 8.0 * f32::EPSILON * voxel.min.abs().max(voxel.max.abs()).max_element();
         let mut previous = lo;
+        let gap_planes = n >= GAP_PLANES_MIN_PRIMS;
         let mut i = 0;
         while i < list.len() {
             let key = list[i].pos_key();
@@ -378,16 +401,12 @@ impl Sah<'_> {
             above -= ends + planar;
             below += starts + planar;
             // The gap plane up to the next position touches nothing: `below` and `above` as
-            // they now stand, no primitive on both sides. Apart from both positions, as an
-            // event plane from its neighbours: a plane a rounding error from geometry would
-            // put a ray's hit there in the wrong child.
-            let gap_plane = 0.5 * pos + 0.5 * next;
-            if n >= GAP_PLANES_MIN_PRIMS
-                && next - pos > 2.0 * gap
-                && gap_plane > pos.max(lo)
-                && gap_plane < next
-            {
-                weigh(gap_plane, [below, above], [below, above]);
+            // they now stand, no primitive on both sides. Only between two positions: past the
+            // last (or before the first) it would cut off empty space, which the event plane
+            // there already does, touching what lies on it.
+            let between = gap_planes && i < list.len();
+            if let Some(p) = gap_plane(pos.max(lo), next, gap).filter(|_| between) {
+                weigh(p, [below, above], [below, above]);
             }
         }
         (best_cost < f32::INFINITY).then_some(Plane {
