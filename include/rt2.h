@@ -784,7 +784,11 @@ enum rt2_status rt2_camera_look_at(rt2_camera *camera,
                                    const float *up);
 
 /**
- * Sets the vertical field of view in degrees, in (0, 180) (zoom).
+ * Sets the vertical field of view in degrees, in (0, 180) (zoom). Ray directions are f32,
+ * which resolve angles to a few 1e-8 radians: below about 2e-6° times the image height in
+ * pixels (0.0015° at 768 rows) neighbouring rows can get the same ray, and the image shows
+ * bands rather than finer detail (a view off the axes, 768 rows: all rows distinct at
+ * 0.004°, 587 of 768 at 0.001°, 7 at 1e-5°).
  *
  * # Safety
  * `camera` is a live camera.
