@@ -18,17 +18,29 @@ mod support;
 
 use support::rng::{Draws, Rng};
 
+/// `n` triangles, the `i`-th with the corners `corners` draws from one generator of `seed`.
+fn triangles(
+    n: usize,
+    seed: u64,
+    mut corners: impl FnMut(&mut Rng, usize) -> [Vec3; 3],
+) -> PrimitiveSet {
+    let mut rng = Rng(seed);
+    let mut set = PrimitiveSet::default();
+    for i in 0..n {
+        let [a, b, c] = corners(&mut rng, i);
+        set.triangles.push(Triangle::from_vertices(a, b, c));
+    }
+    set
+}
+
 /// `n` triangles of size up to `size` around centres uniform in the unit cube, mapped by
 /// `offset + scale * p`.
 fn soup(n: usize, seed: u64, size: f32, scale: f32, offset: Vec3) -> PrimitiveSet {
-    let mut rng = Rng(seed);
-    let mut set = PrimitiveSet::default();
-    for _ in 0..n {
+    triangles(n, seed, |rng, _| {
         let c = rng.vec(0.0, 1.0);
         let mut v = || offset + scale * (c + size * (rng.vec(0.0, 1.0) - 0.5));
-        set.triangles.push(Triangle::from_vertices(v(), v(), v()));
-    }
-    set
+        [v(), v(), v()]
+    })
 }
 
 /// Triangles in a few tight clusters with empty space between them.
@@ -831,28 +843,17 @@ fn voxel_grid(k: usize) -> PrimitiveSet {
 /// `n` slivers each running from one face of the unit cube to the opposite one: every
 /// primitive's bounds span the whole cube along its axis and much of it across.
 fn straws(n: usize, seed: u64) -> PrimitiveSet {
-    let mut rng = Rng(seed);
-    let mut set = PrimitiveSet::default();
-    for i in 0..n {
+    triangles(n, seed, |rng, i| {
         let (mut a, mut b) = (rng.vec(0.0, 1.0), rng.vec(0.0, 1.0));
         (a[i % 3], b[i % 3]) = (0.0, 1.0);
-        let c = a.lerp(b, rng.unit()) + 1e-3 * rng.dir();
-        set.triangles.push(Triangle::from_vertices(a, b, c));
-    }
-    set
+        [a, b, a.lerp(b, rng.unit()) + 1e-3 * rng.dir()]
+    })
 }
 
 /// `n` triangles sharing the vertex at the origin, their other two at random on the unit
 /// sphere: every one reaches the centre.
 fn fan(n: usize, seed: u64) -> PrimitiveSet {
-    let mut rng = Rng(seed);
-    let mut set = PrimitiveSet::default();
-    for _ in 0..n {
-        let (b, c) = (rng.dir(), rng.dir());
-        set.triangles
-            .push(Triangle::from_vertices(Vec3::ZERO, b, c));
-    }
-    set
+    triangles(n, seed, |rng, _| [Vec3::ZERO, rng.dir(), rng.dir()])
 }
 
 /// Mean primitive tests per ray of the standard traversal of `tree`: rays from random
