@@ -283,7 +283,7 @@ fn bench_checks_its_write_target_first() {
 }
 
 /// `bench --runs 0` is refused, not silently taken as 1, and so is a count no bench could
-/// finish, with the range in words a user can act on (it read 1..=18446744073709551615).
+/// finish, with a range a user can act on (it read 1..=18446744073709551615).
 #[test]
 fn bench_refuses_zero_and_endless_runs() {
     for runs in ["0", "1001"] {
@@ -302,7 +302,6 @@ fn bench_refuses_zero_and_endless_runs() {
     }
 }
 
-/// `render -h` and `--help` print the usage, as `bench -h` does.
 /// No command is an error (exit 1, the usage on stderr); `help` and `--version` answer on
 /// stdout with success.
 #[test]
@@ -323,6 +322,7 @@ fn help_version_and_no_command() {
     }
 }
 
+/// `render -h` and `--help` print the usage, as `bench -h` does.
 #[test]
 fn render_help_prints_the_usage() {
     for flag in ["-h", "--help"] {

@@ -2,8 +2,10 @@
 //! builds beside, and what two build options do to speed: the node layout and the SAH's
 //! traversal cost.
 
-use super::{embree_rows, find_set, median, mib, model_scene, shared, time_ms, Args};
-use crate::output::warn;
+use super::{
+    embree_harness, embree_rows, find_set, median, mib, model_scene, paired_ratio, shared, time_ms,
+    Args, EmbreeRow, MAX_RUNS_LARGE,
+};
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::query::QueryMode;
 use rt2::cpu::traverse::Traversal;
@@ -24,14 +26,18 @@ pub(super) fn build(a: &Args) -> Result<String> {
     let mut embree = String::new();
     let mut ratios = String::new();
     for model in ["bunny.ply", "snowden.ply", "dragon.ply"] {
-        let Some(scene) = model_scene(model)? else {
+        let Some(mut scene) = model_scene(a, model)? else {
             continue;
         };
-        let mut scene = scene;
         let tris = scene.objects()[0]
             .as_ref()
             .map_or(0, |o| o.shape.prim_count());
-        let mut sah_ms = f64::NAN;
+        // The dragon's builds take seconds each.
+        let runs = if tris > 500_000 {
+            a.runs.min(MAX_RUNS_LARGE)
+        } else {
+            a.runs
+        };
         for builder in [Builder::Sah, Builder::Midpoint] {
             scene.set_build_options(BuildOptions {
                 builder,
@@ -40,15 +46,7 @@ pub(super) fn build(a: &Args) -> Result<String> {
             let mut ms = [0.0; 2];
             for (k, threads) in [1u32, 2].into_iter().enumerate() {
                 let ctx = Context::new(BackendRequest::Cpu, threads)?;
-                let runs = if tris > 500_000 {
-                    a.runs.min(3)
-                } else {
-                    a.runs
-                };
-                ms[k] = median_build_ms(&ctx, &mut scene, runs);
-            }
-            if builder == Builder::Sah {
-                sah_ms = ms[1];
+                ms[k] = median_build_ms(&ctx, &mut scene, runs)?;
             }
             let c = scene.committed()?;
             let bytes = c.tree.node_bytes() + c.tree.leaf_list_bytes();
@@ -64,52 +62,16 @@ pub(super) fn build(a: &Args) -> Result<String> {
             )
             .ok();
         }
-        if let Some(shadow) = find_set(model.trim_end_matches(".ply"), "shadow") {
-            // Embree's multi-threaded medians by build name, for the ratios: the harness builds
-            // with one thread and with every hardware thread.
-            let mut many = std::collections::HashMap::new();
-            for r in embree_rows(
-                &shared().join("models").join(model),
-                &[shadow],
-                a.runs,
-                "1,2",
-            ) {
-                if r.get(2).is_some_and(|s| s == "BUILD") {
-                    let threads: u32 = r[4].parse().unwrap_or(1);
-                    if threads > 1 {
-                        let ms = r[6].parse::<f64>().unwrap_or(f64::NAN);
-                        many.insert(r[3].clone(), (threads, ms));
-                    }
-                    writeln!(
-                        embree,
-                        "| {model} | {} | {} | {} | {:.2} |",
-                        r[3],
-                        r[4],
-                        r[6],
-                        r[5].parse::<f64>().unwrap_or(0.0) / 1048576.0
-                    )
-                    .ok();
-                }
-            }
-            let ratio = |name: &str| {
-                many.get(name).map_or("—".into(), |&(t, e)| {
-                    format!("{:.2}x ({t} threads)", sah_ms / e)
-                })
-            };
-            if !many.is_empty() {
-                writeln!(
-                    ratios,
-                    "| {model} | {sah_ms:.1} | {} | {} |",
-                    ratio("high(non-robust)"),
-                    ratio("robust+high")
-                )
-                .ok();
-            }
+        if let Some((ratio, rows)) = versus_embree(a, &mut scene, model, runs)? {
+            ratios += &ratio;
+            embree += &rows;
         }
     }
     if !ratios.is_empty() {
         out += "\nSAH with perfect splits on 2 threads against Embree 3 on every hardware thread \
-                (RT2 ms / Embree ms). Embree's \
+                (RT2 ms / Embree ms), run by run: each run times one build of RT2's, then one \
+                of each of Embree's (after its warm-up build), and the ratio is the median of \
+                the runs' own ratios. Embree's \
                 high-quality build is `RTC_BUILD_QUALITY_HIGH` without `RTC_SCENE_FLAG_ROBUST`: \
                 an SBVH, whose spatial splits are the BVH analogue of perfect splits. With the \
                 ROBUST flag Embree 3.13 ignores the quality and runs its static SAH builder \
@@ -121,25 +83,94 @@ pub(super) fn build(a: &Args) -> Result<String> {
     out += &layout_effect(a)?;
     out += &traversal_cost_effect(a)?;
     if !embree.is_empty() {
-        out += "\nEmbree 3 in the same run:\n\n| model | build | threads | median ms | MiB |\n|---|---|---|---|---|\n";
+        out += "\nEmbree 3 in the same run (median over the runs above):\n\n\
+                | model | build | threads | median ms | MiB |\n|---|---|---|---|---|\n";
         out += &embree;
     }
     Ok(out)
 }
 
-/// Median tree build time of `runs` commits of `scene` on `ctx`'s threads (NaN for a failed
-/// commit).
-fn median_build_ms(ctx: &Context, scene: &mut Scene, runs: usize) -> f64 {
-    median(
-        (0..runs)
-            .map(|_| {
-                let _ = ctx.install(|| scene.rebuild());
-                scene
-                    .committed()
-                    .map_or(f64::NAN, |c| c.tree.stats.build_ms as f64)
+/// RT2's SAH build of `scene` (the shared `model`) on 2 threads against Embree's builds of
+/// it, `runs` runs each of one RT2 build and then one run of Embree's harness (which builds
+/// each kind once on one thread and on every hardware thread, after a warm-up build). Returns
+/// the ratio row (RT2 ms over Embree's multi-threaded ms, the median of the runs' own ratios)
+/// and Embree's rows (median ms and MiB of each build); `None` without the harness or the
+/// model's shadow set (the harness traces a set after building: the smallest one).
+fn versus_embree(
+    a: &Args,
+    scene: &mut Scene,
+    model: &str,
+    runs: usize,
+) -> Result<Option<(String, String)>> {
+    let Some(shadow) = find_set(a, model.trim_end_matches(".ply"), "shadow") else {
+        return Ok(None);
+    };
+    if embree_harness(a).is_none() {
+        return Ok(None);
+    }
+    scene.set_build_options(BuildOptions::default());
+    let ctx = Context::new(BackendRequest::Cpu, 2)?;
+    let mesh = shared().join("models").join(model);
+    let mut ours = Vec::with_capacity(runs);
+    // Each build of Embree's by name and thread count: its ms in every run, and its bytes.
+    let mut theirs: Vec<((String, u32), Vec<f64>, u64)> = Vec::new();
+    for _ in 0..runs {
+        ours.push(median_build_ms(&ctx, scene, 1)?);
+        for row in embree_rows(a, &mesh, std::slice::from_ref(&shadow), 1, "1")? {
+            if let EmbreeRow::Build {
+                name,
+                threads,
+                bytes,
+                ms,
+            } = row
+            {
+                let key = (name, threads);
+                match theirs.iter_mut().find(|b| b.0 == key) {
+                    Some(b) => {
+                        b.1.push(ms);
+                        b.2 = bytes;
+                    }
+                    None => theirs.push((key, vec![ms], bytes)),
+                }
+            }
+        }
+    }
+    let ours_ms = median(ours.clone());
+    let ratio = |name: &str| {
+        theirs
+            .iter()
+            .find(|((n, t), ms, _)| n == name && *t > 1 && ms.len() == runs)
+            .map_or("—".into(), |((_, t), ms, _)| {
+                format!("{:.2}x ({t} threads)", paired_ratio(&ours, ms))
             })
-            .collect(),
-    )
+    };
+    let ratio_row = format!(
+        "| {model} | {ours_ms:.1} | {} | {} |\n",
+        ratio("high(non-robust)"),
+        ratio("robust+high")
+    );
+    let mut rows = String::new();
+    for ((name, threads), ms, bytes) in &theirs {
+        writeln!(
+            rows,
+            "| {model} | {name} | {threads} | {:.2} | {:.2} |",
+            median(ms.clone()),
+            mib(*bytes as usize)
+        )
+        .ok();
+    }
+    Ok(Some((ratio_row, rows)))
+}
+
+/// Median tree build time of `runs` commits of `scene` on `ctx`'s threads; a failed build is
+/// an error (the scene would keep its last tree, whose time would be reported).
+fn median_build_ms(ctx: &Context, scene: &mut Scene, runs: usize) -> Result<f64> {
+    let mut ms = Vec::with_capacity(runs);
+    for _ in 0..runs {
+        ctx.install(|| scene.rebuild())?;
+        ms.push(scene.committed()?.tree.stats.build_ms as f64);
+    }
+    Ok(median(ms))
 }
 
 /// The SAH's traversal cost `K_T` trades memory and build time against speed: a larger `K_T`
@@ -160,21 +191,25 @@ fn traversal_cost_effect(a: &Args) -> Result<String> {
         Context::new(BackendRequest::Cpu, 1)?,
     );
     for model in ["bunny", "dragon"] {
-        let Some(mut scene) = model_scene(&format!("{model}.ply"))? else {
+        let Some(mut scene) = model_scene(a, &format!("{model}.ply"))? else {
             continue;
         };
-        let sets: Vec<Vec<Ray>> = ["incoherent", "primary"]
+        // A missing set leaves its columns empty ("—"), so every row keeps its cells.
+        let sets: Vec<Option<Vec<Ray>>> = ["incoherent", "primary"]
             .iter()
-            .filter_map(|kind| find_set(model, kind))
-            .filter_map(|path| rayset::read_rays(&path).ok())
-            .collect();
+            .map(|kind| {
+                find_set(a, model, kind)
+                    .map(|p| rayset::read_rays(&p))
+                    .transpose()
+            })
+            .collect::<Result<_>>()?;
         for traversal_cost in [1.0, 1.5, 2.0, 2.5, 3.0, 4.0] {
             let options = BuildOptions {
                 traversal_cost,
                 ..BuildOptions::default()
             };
             scene.set_build_options(options);
-            let build_ms = median_build_ms(&build_ctx, &mut scene, a.runs.min(3));
+            let build_ms = median_build_ms(&build_ctx, &mut scene, a.runs.min(MAX_RUNS_LARGE))?;
             scene.ensure_ropes()?;
             let c = scene.committed()?;
             let plain = c.tree.node_bytes() + c.tree.leaf_list_bytes();
@@ -194,15 +229,17 @@ fn traversal_cost_effect(a: &Args) -> Result<String> {
             );
             for rays in &sets {
                 for mode in [QueryMode::Single, QueryMode::Packet, QueryMode::Stream] {
+                    let Some(rays) = rays else {
+                        row += " — |";
+                        continue;
+                    };
                     let q = QueryOptions {
                         traversal: Some(Traversal::Standard),
                         mode: Some(mode),
                         ..QueryOptions::default()
                     };
                     let mut hits = vec![Hit::MISS; rays.len()];
-                    let ms = time_ms(a.runs, || {
-                        let _ = ctx.intersect(c, rays, &mut hits, &q);
-                    });
+                    let ms = time_ms(a.runs, || ctx.intersect(c, rays, &mut hits, &q).map(drop))?;
                     write!(row, " {:.2} |", rays.len() as f64 / ms / 1e3).ok();
                 }
             }
@@ -215,7 +252,7 @@ fn traversal_cost_effect(a: &Args) -> Result<String> {
 /// Effect of the van Emde Boas node order on traversal speed: the standard traversal on the
 /// bunny's incoherent and primary sets, 1 thread, depth-first vs van Emde Boas trees.
 fn layout_effect(a: &Args) -> Result<String> {
-    let Some(mut scene) = model_scene("bunny.ply")? else {
+    let Some(mut scene) = model_scene(a, "bunny.ply")? else {
         return Ok(String::new());
     };
     let ctx = Context::new(BackendRequest::Cpu, 1)?;
@@ -223,15 +260,14 @@ fn layout_effect(a: &Args) -> Result<String> {
         "\nEffect of the node layout (bunny, standard traversal, 1 thread, Mrays/s):\n\n\
          | set | depth-first | van Emde Boas |\n|---|---|---|\n",
     );
-    for set in ["incoherent_262144", "primary_262144"] {
-        let path = shared().join("raysets/bunny").join(format!("{set}.rays"));
-        let Ok(rays) = rayset::read_rays(&path) else {
-            warn(format_args!(
-                "bench: {} is missing; skipped",
-                path.display()
-            ));
+    for kind in ["incoherent", "primary"] {
+        let Some(path) = find_set(a, "bunny", kind) else {
             continue;
         };
+        let rays = rayset::read_rays(&path)?;
+        let set = path
+            .file_stem()
+            .map_or(String::new(), |s| s.to_string_lossy().into());
         let mut row = format!("| {set} |");
         for layout in [Layout::DepthFirst, Layout::VanEmdeBoas] {
             scene.set_build_options(BuildOptions {
@@ -246,9 +282,7 @@ fn layout_effect(a: &Args) -> Result<String> {
                 ..QueryOptions::default()
             };
             let mut hits = vec![Hit::MISS; rays.len()];
-            let ms = time_ms(a.runs, || {
-                let _ = ctx.intersect(c, &rays, &mut hits, &q);
-            });
+            let ms = time_ms(a.runs, || ctx.intersect(c, &rays, &mut hits, &q).map(drop))?;
             write!(row, " {:.2} |", rays.len() as f64 / ms / 1e3).ok();
         }
         writeln!(out, "{row}").ok();

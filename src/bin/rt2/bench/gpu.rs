@@ -1,8 +1,7 @@
 //! `rt2 bench gpu`: the thesis' table 2 on the GPU backend, both render paths, against the CPU.
 
-use super::{shared, time_ms, Args};
+use super::{shared_model, time_ms, Args};
 use crate::load_scene;
-use crate::output::warn;
 use rt2::context::Context;
 use rt2::cpu::traverse::Traversal;
 use rt2::dispatch::BackendRequest;
@@ -52,15 +51,7 @@ pub(super) fn gpu(a: &Args) -> Result<String> {
     );
     let mut names: Vec<String> = Vec::new();
     for m in ["bunny.ply", "dragon.ply", "snowden.ply"] {
-        let p = shared().join("models").join(m);
-        if p.exists() {
-            names.push(p.display().to_string());
-        } else {
-            warn(format_args!(
-                "bench gpu: {} is missing; skipped",
-                p.display()
-            ));
-        }
+        names.extend(shared_model(a, m).map(|p| p.display().to_string()));
     }
     names.extend(["spheres1", "spheres2", "spheres3"].map(String::from));
     for name in names {
@@ -77,10 +68,7 @@ pub(super) fn gpu(a: &Args) -> Result<String> {
             ..RenderOptions::default()
         };
         let mut time = |ctx: &Context, opts: RenderOptions| -> Result<f64> {
-            ctx.render(c, &l.camera, &opts, &mut frame)?;
-            Ok(time_ms(a.runs, || {
-                let _ = ctx.render(c, &l.camera, &opts, &mut frame);
-            }))
+            time_ms(a.runs, || ctx.render(c, &l.camera, &opts, &mut frame))
         };
         write!(out, "| {label} (depth {}) |", l.max_depth).ok();
         for t in Traversal::ALL {

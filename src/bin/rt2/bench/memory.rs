@@ -8,7 +8,7 @@ use std::fmt::Write as _;
 
 /// Bytes per primitive of each part of each built-in scene and the bunny, and what the same
 /// analytic primitives would cost tessellated (a 16×32 uv sphere per sphere: 960 triangles).
-pub(super) fn memory(_: &Args) -> Result<String> {
+pub(super) fn memory(a: &Args) -> Result<String> {
     let tess = tessellate::uv_sphere(16, 32);
     let tri_bytes = std::mem::size_of::<rt2::geometry::Triangle>();
     let per_sphere = tess.triangles.len() * tri_bytes;
@@ -26,7 +26,7 @@ pub(super) fn memory(_: &Args) -> Result<String> {
     for name in builtin::NAMES {
         scenes.push((name.to_string(), builtin::by_name(name)?.scene));
     }
-    if let Some(s) = model_scene("bunny.ply")? {
+    if let Some(s) = model_scene(a, "bunny.ply")? {
         scenes.push(("bunny".into(), s));
     }
     for (name, mut s) in scenes {

@@ -15,12 +15,15 @@ use crate::args::{Arg, Reader};
 use crate::output::{say, warn};
 use rt2::error::{Error, Result};
 use rt2::scene::{loaders, Scene, Shape};
+use std::cell::RefCell;
 use std::ffi::OsString;
+use std::fmt::Display;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
 const USAGE: &str = "usage: rt2 bench [frames|build|rays|tables|streams|gpu|chart|memory|all] [--runs N] [--write FILE]
+  (no name: all of them, which takes hours)
   frames   ms per 1376x768 frame on the CPU: spheres3 and the bunny, with build time and memory
   build    kd-tree build time (SAH+perfect splits, midpoint) at 1 and 2 threads, Embree beside
   rays     Mrays/s per traversal on ../shared/raysets, agreement with Embree's hits, Embree beside
@@ -34,8 +37,11 @@ const USAGE: &str = "usage: rt2 bench [frames|build|rays|tables|streams|gpu|char
            docs/chart.svg and .png with --features chart
   memory   bytes per primitive of each part of each built-in scene and the bunny, beside a
            tessellation of their analytic primitives
-  --runs N       timed runs per figure, 1 to 1000 (default 5; the median is reported)
-  --write FILE   also replace this benchmark's section in FILE (e.g. BENCHMARKS.md)
+  --runs N       timed runs per figure, 1 to 1000 (default 5; the median is reported); figures
+                 that take seconds a run (the dragon's builds and frames, the K_T sweep's
+                 builds, the 1376x768 orbit) take at most 3
+  --write FILE   also replace this benchmark's section in FILE (e.g. BENCHMARKS.md); a section
+                 measured without some of its inputs (a model, a ray set, Embree) is not written
 Model files come from $RT2_SHARED (default ../shared); Embree from $RT2_EMBREE_BENCH or
 target/peers/bench_embree (make -C ../shared/peers BUILD=$PWD/target/peers).";
 
@@ -45,6 +51,23 @@ type Bench = fn(&Args) -> Result<String>;
 struct Args {
     runs: usize,
     write: Option<PathBuf>,
+    /// What the running benchmark went without (a model, a ray set, a peer): said on stderr as
+    /// it is found, and a section measured without something is not written to `write` (it
+    /// would replace a complete section with one missing rows or columns).
+    missing: RefCell<Vec<String>>,
+}
+
+impl Args {
+    /// Notes that the running benchmark goes without `what` (which says what it leaves out).
+    /// Said once however often it is found (a peer missing for every model).
+    fn skip(&self, what: impl Display) {
+        let what = what.to_string();
+        let mut missing = self.missing.borrow_mut();
+        if !missing.contains(&what) {
+            warn(format_args!("bench: {what}"));
+            missing.push(what);
+        }
+    }
 }
 
 pub fn run(args: &[OsString]) -> Result<()> {
@@ -52,6 +75,7 @@ pub fn run(args: &[OsString]) -> Result<()> {
     let mut a = Args {
         runs: 5,
         write: None,
+        missing: RefCell::default(),
     };
     let mut args = Reader::new(args);
     while let Some(arg) = args.next_arg() {
@@ -101,21 +125,44 @@ pub fn run(args: &[OsString]) -> Result<()> {
             )))
         }
     };
+    let mut unwritten = Vec::new();
     for (name, f) in sections {
         let body = f(&a)?;
+        let missing = a.missing.take();
+        let incomplete = if missing.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "**Incomplete**, measured without: {}.\n\n",
+                missing.join("; ")
+            )
+        };
+        // `memory` times nothing: its command takes no runs.
+        let runs = match name {
+            "memory" => String::new(),
+            _ => format!(" --runs {}", a.runs),
+        };
         let text = format!(
-            "Machine: {}. Command: `cargo run --release {}--bin rt2 -- bench {name} --runs {}`.\n\n{body}",
+            "Machine: {}. Command: `cargo run --release {}--bin rt2 -- bench {name}{runs}`.\n\n{incomplete}{body}",
             machine(),
             if name == "chart" { "--features chart " } else { "" },
-            a.runs
         );
         // The file first: it keeps the measurement if stdout's reader has gone (`| head`).
-        if let Some(path) = &a.write {
-            replace_section(path, name, &text)?;
+        match &a.write {
+            Some(path) if missing.is_empty() => replace_section(path, name, &text)?,
+            Some(_) => unwritten.push(name),
+            None => {}
         }
         say(format_args!("\n{text}"))?;
     }
-    Ok(())
+    match (&a.write, unwritten.is_empty()) {
+        (Some(path), false) => Err(Error::io(format!(
+            "bench {}: measured without some of its inputs (said above); {} keeps its section",
+            unwritten.join(", "),
+            path.display()
+        ))),
+        _ => Ok(()),
+    }
 }
 
 fn shared() -> PathBuf {
@@ -137,23 +184,40 @@ fn machine() -> String {
     format!("{cpu}, {cores} cores")
 }
 
+/// Most timed runs of a figure that takes seconds a run (the dragon's builds and frames, the
+/// K_T sweep's builds, the 1376×768 orbit): `--runs` above it counts for the other figures.
+const MAX_RUNS_LARGE: usize = 3;
+
+/// The median of `v` (not empty): the middle value, or the mean of the two middle ones for an
+/// even count, as Embree's harness takes it (`rt2io.h`).
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
-    v[v.len() / 2]
+    let m = v.len() / 2;
+    if v.len().is_multiple_of(2) {
+        0.5 * (v[m - 1] + v[m])
+    } else {
+        v[m]
+    }
 }
 
-/// Median wall time in ms of `runs` calls of `f` after one warm-up call.
-fn time_ms(runs: usize, mut f: impl FnMut()) -> f64 {
-    f();
-    median(
-        (0..runs)
-            .map(|_| {
-                let t = Instant::now();
-                f();
-                t.elapsed().as_secs_f64() * 1e3
-            })
-            .collect(),
-    )
+/// The median over runs of `x[run] / y[run]`: a busy spell of this shared machine slows both
+/// sides of a run, so the ratio of one run's pair moves less than the ratio of two medians,
+/// which may come from different runs.
+fn paired_ratio(x: &[f64], y: &[f64]) -> f64 {
+    median(x.iter().zip(y).map(|(x, y)| x / y).collect())
+}
+
+/// Median wall time in ms of `runs` calls of `f` after one warm-up call; the first failure
+/// ends the timing and is returned (a failed call would be timed as work done).
+fn time_ms(runs: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    f()?;
+    let mut times = Vec::with_capacity(runs);
+    for _ in 0..runs {
+        let t = Instant::now();
+        f()?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(median(times))
 }
 
 /// Fails unless `path` can take a section later: it is readable text and opens for
@@ -213,16 +277,26 @@ fn mib(bytes: usize) -> f64 {
     bytes as f64 / 1048576.0
 }
 
-/// A mesh from the shared models as a scene with one object.
-fn model_scene(name: &str) -> Result<Option<Scene>> {
+/// The shared model `name` (e.g. "bunny.ply"), if it is there; a missing one is noted as
+/// skipped in `a`.
+fn shared_model(a: &Args, name: &str) -> Option<PathBuf> {
     let path = shared().join("models").join(name);
-    if !path.exists() {
-        warn(format_args!(
-            "bench: {} is missing; skipped",
-            path.display()
-        ));
-        return Ok(None);
+    if path.exists() {
+        return Some(path);
     }
+    a.skip(format_args!(
+        "{} (missing; its rows skipped)",
+        path.display()
+    ));
+    None
+}
+
+/// A mesh from the shared models as a scene with one object (`None`, noted in `a`, when the
+/// model is missing).
+fn model_scene(a: &Args, name: &str) -> Result<Option<Scene>> {
+    let Some(path) = shared_model(a, name) else {
+        return Ok(None);
+    };
     let mesh = loaders::load_mesh(&path)?;
     let mut s = Scene::new();
     s.add_object(
@@ -235,69 +309,200 @@ fn model_scene(name: &str) -> Result<Option<Scene>> {
     Ok(Some(s))
 }
 
-fn embree_harness() -> Option<PathBuf> {
+/// Embree's harness, if it is built (a missing one is noted in `a`: its columns stay empty).
+fn embree_harness(a: &Args) -> Option<PathBuf> {
     let p = std::env::var_os("RT2_EMBREE_BENCH")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from("target/peers/bench_embree"));
-    p.exists().then_some(p)
+    if p.exists() {
+        return Some(p);
+    }
+    a.skip(format_args!(
+        "Embree's harness {} (not built; its columns are empty)",
+        p.display()
+    ));
+    None
 }
 
 /// The peers' ray set generator (`rt2gen`), built beside Embree's harness.
-fn ray_generator() -> Option<PathBuf> {
-    embree_harness()
+fn ray_generator(a: &Args) -> Option<PathBuf> {
+    embree_harness(a)
         .map(|h| h.with_file_name("rt2gen"))
         .filter(|p| p.exists())
 }
 
+/// One row of the TSV that Embree's harness writes (`Reporter` in
+/// `../shared/peers/src/bench_common.h`), its numbers read.
+#[derive(Clone, Debug, PartialEq)]
+enum EmbreeRow {
+    /// `peer mesh set mode threads rays median_ms Mrays/s others runs_ms`.
+    Trace {
+        set: String,
+        mode: String,
+        threads: u32,
+        mrays: f64,
+    },
+    /// `peer mesh BUILD name threads bytes median_ms - others runs_ms`.
+    Build {
+        name: String,
+        threads: u32,
+        bytes: u64,
+        ms: f64,
+    },
+}
+
+impl EmbreeRow {
+    /// Reads one TSV line; a line short of fields or with a number that is not one is an
+    /// error, never a zero or a NaN in a table.
+    fn parse(line: &str) -> Result<Self> {
+        let f: Vec<&str> = line.split('\t').collect();
+        let bad = |what: &str| {
+            Error::parse(format!(
+                "bench: Embree's harness wrote a row without {what}: {line:?}"
+            ))
+        };
+        if f.len() < 9 {
+            return Err(bad("all of its 9 fields"));
+        }
+        let positive = |k: usize, what: &str| {
+            f[k].parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite() && *x > 0.0)
+                .ok_or_else(|| bad(what))
+        };
+        let threads = f[4]
+            .parse::<u32>()
+            .ok()
+            .filter(|&t| t > 0)
+            .ok_or_else(|| bad("a thread count"))?;
+        Ok(if f[2] == "BUILD" {
+            EmbreeRow::Build {
+                name: f[3].into(),
+                threads,
+                bytes: f[5].parse().map_err(|_| bad("a byte count"))?,
+                ms: positive(6, "a time in ms")?,
+            }
+        } else {
+            EmbreeRow::Trace {
+                set: f[2].into(),
+                mode: f[3].into(),
+                threads,
+                mrays: positive(7, "a speed in Mrays/s")?,
+            }
+        })
+    }
+
+    /// Mrays/s of a trace of `set` in `mode` on `threads` threads.
+    fn speed(&self, set: &str, mode: &str, threads: u32) -> Option<f64> {
+        match self {
+            EmbreeRow::Trace {
+                set: s,
+                mode: m,
+                threads: t,
+                mrays,
+            } if s == set && m == mode && *t == threads => Some(*mrays),
+            _ => None,
+        }
+    }
+}
+
 /// Runs Embree's harness with `runs` runs on each of `threads` (its `--threads` list, e.g.
-/// "1,2") and returns its TSV rows (split into fields).
-fn embree_rows(mesh: &Path, rays: &[PathBuf], runs: usize, threads: &str) -> Vec<Vec<String>> {
-    let Some(exe) = embree_harness() else {
-        warn("bench: Embree's harness is not built; Embree columns are empty");
-        return Vec::new();
+/// "1,2") and returns its rows; none (noted in `a`) where the harness is not built. A harness
+/// that fails, writes nothing or writes what is not its TSV is an error.
+fn embree_rows(
+    a: &Args,
+    mesh: &Path,
+    rays: &[PathBuf],
+    runs: usize,
+    threads: &str,
+) -> Result<Vec<EmbreeRow>> {
+    let Some(exe) = embree_harness(a) else {
+        return Ok(Vec::new());
     };
     let tsv = std::env::temp_dir().join(format!("rt2-embree-{}.tsv", std::process::id()));
     let _ = std::fs::remove_file(&tsv);
-    let status = Command::new(exe)
+    let status = Command::new(&exe)
         .arg(mesh)
         .args(rays)
         .args(["--runs", &runs.to_string(), "--threads", threads, "--tsv"])
         .arg(&tsv)
         .stdout(std::process::Stdio::null())
-        .status();
-    if !status.is_ok_and(|s| s.success()) {
-        warn("bench: Embree's harness failed");
-        return Vec::new();
+        .status()
+        .map_err(|e| Error::io(format!("bench: cannot run {}: {e}", exe.display())))?;
+    if !status.success() {
+        return Err(Error::io(format!(
+            "bench: Embree's harness {} failed ({status}) on {}",
+            exe.display(),
+            mesh.display()
+        )));
     }
-    let text = std::fs::read_to_string(&tsv).unwrap_or_default();
+    let text = std::fs::read_to_string(&tsv);
     let _ = std::fs::remove_file(&tsv);
-    text.lines()
-        .map(|l| l.split('\t').map(str::to_string).collect())
-        .collect()
+    let text = text.map_err(|e| {
+        Error::io(format!(
+            "bench: Embree's harness {} wrote no results ({}: {e})",
+            exe.display(),
+            tsv.display()
+        ))
+    })?;
+    let rows = text
+        .lines()
+        .map(EmbreeRow::parse)
+        .collect::<Result<Vec<_>>>()?;
+    if rows.is_empty() {
+        return Err(Error::io(format!(
+            "bench: Embree's harness {} wrote no results",
+            exe.display()
+        )));
+    }
+    Ok(rows)
 }
 
-/// The first ray set of `kind` (e.g. "incoherent") for `model` in the shared ray sets.
-fn find_set(model: &str, kind: &str) -> Option<PathBuf> {
+/// The shared ray sets of `model` whose names start with one of `kinds` and an underscore
+/// (e.g. "incoherent" for `incoherent_262144.rays`), sorted by name; none, noted in `a`, when
+/// there are none.
+fn ray_sets(a: &Args, model: &str, kinds: &[&str]) -> Vec<PathBuf> {
     let dir = shared().join("raysets").join(model);
-    let found = std::fs::read_dir(&dir).ok().and_then(|d| {
-        d.filter_map(|e| e.ok().map(|e| e.path())).find(|p| {
-            p.file_name().is_some_and(|n| {
-                let n = n.to_string_lossy();
-                n.starts_with(&format!("{kind}_")) && n.ends_with(".rays")
-            })
+    let mut sets: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .map(|d| {
+            d.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    p.extension().is_some_and(|x| x == "rays")
+                        && p.file_name().is_some_and(|n| {
+                            let n = n.to_string_lossy();
+                            kinds.iter().any(|k| n.starts_with(&format!("{k}_")))
+                        })
+                })
+                .collect()
         })
-    });
-    if found.is_none() {
-        warn(format_args!(
-            "bench: no {kind}_*.rays in {}; skipped",
+        .unwrap_or_default();
+    sets.sort();
+    if sets.is_empty() {
+        a.skip(format_args!(
+            "{}_*.rays in {} (none there; their figures skipped)",
+            kinds.join("|"),
             dir.display()
         ));
     }
-    found
+    sets
+}
+
+/// The first ray set of `kind` for `model` ([`ray_sets`]).
+fn find_set(a: &Args, model: &str, kind: &str) -> Option<PathBuf> {
+    ray_sets(a, model, &[kind]).into_iter().next()
 }
 
 #[cfg(test)]
 mod tests {
+    /// An even count's median is the mean of the two middle values, as Embree's harness takes
+    /// it (it was the upper one: with `--runs 2`, always the slower run).
+    #[test]
+    fn an_even_count_has_the_mean_of_its_middle_values_for_median() {
+        assert_eq!(super::median(vec![4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert_eq!(super::median(vec![30.0, 10.0]), 20.0);
+        assert_eq!(super::median(vec![3.0, 1.0, 2.0]), 2.0);
+    }
+
     /// A benchmark file that cannot be read as text is an error and stays as it was; a
     /// missing one is started.
     #[test]

@@ -1,7 +1,7 @@
 //! `rt2 bench rays`: Mrays/s of every single-ray traversal on the shared ray sets at 1 and 2
 //! threads, with their agreement with Embree's hits and Embree's own speed beside.
 
-use super::{embree_rows, model_scene, shared, time_ms, Args};
+use super::{embree_rows, model_scene, ray_sets, shared, time_ms, Args, EmbreeRow};
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::query::QueryMode;
 use rt2::cpu::traverse::Traversal;
@@ -11,7 +11,7 @@ use rt2::geometry::{Hit, Ray};
 use rt2::rayset::{self, HitRecord};
 use std::ffi::CString;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 pub(super) fn rays(a: &Args) -> Result<String> {
     let mut out = String::from(
@@ -22,26 +22,24 @@ pub(super) fn rays(a: &Args) -> Result<String> {
          |---|---|---|---|---|---|---|---|\n",
     );
     for model in ["bunny", "dragon"] {
-        let Some(mut scene) = model_scene(&format!("{model}.ply"))? else {
+        let Some(mut scene) = model_scene(a, &format!("{model}.ply"))? else {
             continue;
         };
         scene.commit()?;
         scene.ensure_ropes()?;
         let c = scene.committed()?;
         let diag = c.bounds.diagonal();
-        let dir = shared().join("raysets").join(model);
-        let mut sets: Vec<PathBuf> = std::fs::read_dir(&dir)
-            .map_err(|e| Error::io(format!("{}: {e}", dir.display())))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "rays"))
-            .collect();
-        sets.sort();
+        let sets = ray_sets(a, model, &["diffuse", "incoherent", "primary", "shadow"]);
+        if sets.is_empty() {
+            continue;
+        }
         let embree = embree_rows(
+            a,
             &shared().join("models").join(format!("{model}.ply")),
             &sets,
             a.runs,
             "1,2",
-        );
+        )?;
         let c_scene = CScene::load(&shared().join("models").join(format!("{model}.ply")))?;
         for set in &sets {
             let rays: Vec<Ray> = rayset::read_rays(set)?;
@@ -61,8 +59,9 @@ pub(super) fn rays(a: &Args) -> Result<String> {
                 for (k, threads) in [1u32, 2].into_iter().enumerate() {
                     let ctx = Context::new(BackendRequest::Cpu, threads)?;
                     let ms = time_ms(a.runs, || {
-                        stats = ctx.intersect(c, &rays, &mut hits, &q).unwrap_or_default();
-                    });
+                        stats = ctx.intersect(c, &rays, &mut hits, &q)?;
+                        Ok(())
+                    })?;
                     mrays[k] = rays.len() as f64 / ms / 1e3;
                 }
                 let mine: Vec<HitRecord> = hits.iter().map(|h| HitRecord::of(h, c)).collect();
@@ -94,18 +93,36 @@ pub(super) fn rays(a: &Args) -> Result<String> {
                 "| {model} {stem} | RT2 default options, a C call per ray | {m1:.2} | {m2:.2} | | | | |"
             )
             .ok();
-            for r in embree
-                .iter()
-                .filter(|r| r.get(2).is_some_and(|s| *s == stem))
-            {
-                if r[4] == "1" || r[3] == "intersect1" {
-                    writeln!(
-                        out,
-                        "| {model} {stem} | Embree {} ({} thr) | {} | | | | | reference |",
-                        r[3], r[4], r[7]
-                    )
-                    .ok();
+            // Embree's speeds of this set, a row per mode in the harness' order, each thread
+            // count in its column. Its hits file is the one-thread `intersect1` on the traced
+            // (robust) scene.
+            let mut modes: Vec<&str> = Vec::new();
+            for r in &embree {
+                if let EmbreeRow::Trace { set, mode, .. } = r {
+                    if *set == stem && !modes.contains(&mode.as_str()) {
+                        modes.push(mode);
+                    }
                 }
+            }
+            for mode in modes {
+                let speed = |threads| {
+                    embree
+                        .iter()
+                        .find_map(|r| r.speed(&stem, mode, threads))
+                        .map_or(String::new(), |m| format!("{m:.2}"))
+                };
+                let reference = if mode == "intersect1" {
+                    "reference"
+                } else {
+                    ""
+                };
+                writeln!(
+                    out,
+                    "| {model} {stem} | Embree {mode} | {} | {} | | | | {reference} |",
+                    speed(1),
+                    speed(2)
+                )
+                .ok();
             }
         }
     }
@@ -161,12 +178,12 @@ impl CScene {
                 tmax: r.tmax,
             })
             .collect();
-        let calls = |share: &[rt2_ray]| {
+        // A failed call would be timed as a traced ray: the first failure ends the timing, its
+        // message read on the thread whose call failed (the library keeps it per thread).
+        let calls = |share: &[rt2_ray]| -> Result<()> {
             let opts = rt2_query_options_default();
             // SAFETY: a plain C struct of numbers.
             let mut hit = unsafe { std::mem::zeroed::<rt2_hit>() };
-            // A failed call would be timed as a traced ray: the last failure is reported.
-            let mut status = Rt2Status::Ok;
             for r in share {
                 // SAFETY: live handles, one ray and one hit.
                 let s = unsafe {
@@ -180,29 +197,26 @@ impl CScene {
                         std::ptr::null_mut(),
                     )
                 };
-                if s != Rt2Status::Ok {
-                    status = s;
-                }
+                c_status("rt2_intersect", s)?;
             }
-            status
+            Ok(())
         };
-        let mut status = Rt2Status::Ok;
         let ms = time_ms(runs, || {
             std::thread::scope(|s| {
                 let shares: Vec<_> = c_rays
                     .chunks(c_rays.len().div_ceil(threads).max(1))
                     .map(|share| s.spawn(move || calls(share)))
                     .collect();
-                for share in shares {
-                    match share.join() {
-                        Ok(Rt2Status::Ok) => {}
-                        Ok(failed) => status = failed,
-                        Err(_) => status = Rt2Status::Internal,
-                    }
-                }
-            });
-        });
-        c_status("rt2_intersect", status)?;
+                shares.into_iter().try_for_each(|share| {
+                    share.join().unwrap_or_else(|_| {
+                        Err(Error::new(
+                            Rt2Status::Internal,
+                            "bench: a thread calling rt2_intersect panicked",
+                        ))
+                    })
+                })
+            })
+        })?;
         Ok(c_rays.len() as f64 / ms / 1e3)
     }
 }

@@ -4,8 +4,10 @@
 //! shared ray sets (diffuse included), Embree's single rays and 8-ray packets measured in the
 //! same run, the lane widths and the stream's ray stack memory.
 
-use super::{embree_harness, embree_rows, median, model_scene, ray_generator, shared, Args};
-use crate::output::warn;
+use super::{
+    embree_harness, embree_rows, median, model_scene, paired_ratio, ray_generator, ray_sets,
+    shared, Args, EmbreeRow, MAX_RUNS_LARGE,
+};
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::query::{self, QueryMode, STREAM_CHUNK, STREAM_MAX};
 use rt2::cpu::ray_order::RayOrder;
@@ -103,7 +105,7 @@ fn seconds(
         .iter()
         .map(|&config| (batches, Some(config)))
         .collect();
-    timed_runs(ctx, c, &jobs, runs, || false)
+    timed_runs(ctx, c, &jobs, runs, || Ok(false))
 }
 
 /// A timed job: batches traced once each per pass, in one mode and lane width, or (`None`)
@@ -129,13 +131,9 @@ impl Timings {
     }
 }
 
-/// The median over runs of `x[run] / y[run]`.
-fn paired_ratio(x: &[f64], y: &[f64]) -> f64 {
-    median(x.iter().zip(y).map(|(x, y)| x / y).collect())
-}
-
 /// `runs` timed passes of each job (after a warm-up pass of each), on `ctx`'s threads. Each
-/// run calls `each_run` (the peer's run, where one is timed beside; it says whether it ran),
+/// run calls `each_run` (the peer's run, where one is timed beside; it says whether it ran,
+/// and its failure ends the timing),
 /// makes one more warm-up pass after a peer's run, and then times the jobs batch by batch:
 /// the first batch of every job, then the second of every job, and so on, the jobs in turn
 /// forwards and backwards (so that none always runs on the caches another left).
@@ -149,7 +147,7 @@ fn timed_runs(
     c: &Committed,
     jobs: &[Job],
     runs: usize,
-    mut each_run: impl FnMut() -> bool,
+    mut each_run: impl FnMut() -> Result<bool>,
 ) -> Result<Timings> {
     let longest = jobs
         .iter()
@@ -191,7 +189,7 @@ fn timed_runs(
     pass(&mut vec![0.0; jobs.len()]);
     let mut times = vec![Vec::with_capacity(runs); jobs.len()];
     for _ in 0..runs {
-        if each_run() {
+        if each_run()? {
             pass(&mut vec![0.0; jobs.len()]);
         }
         let mut run = vec![0.0; jobs.len()];
@@ -236,7 +234,7 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          with perfect splits (the library default; the paper used midpoint trees); on Linux \
          their arrays lie on transparent huge pages, as Embree's do (`huge_pages`). Paper: \
          Pentium-M, 1 core; its third model is the Buddha, the Snowden bust stands in for it. \
-         Everything is measured in this run, on a shared 2-core machine whose load changes \
+         Everything is measured in this run, on a shared machine whose load changes \
          within seconds. Each run times the modes frame by frame \
          (each frame in every mode before the next frame), and on a shared set right after one \
          run of Embree's harness on that set; each speed is the median of the timed runs, as \
@@ -272,7 +270,7 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          | workload | ray stack KiB | ray arrays KiB | bytes per ray |\n|---|---|---|---|\n",
     );
     for model in ["bunny", "dragon", "snowden"] {
-        let Some(mut scene) = model_scene(&format!("{model}.ply"))? else {
+        let Some(mut scene) = model_scene(a, &format!("{model}.ply"))? else {
             continue;
         };
         scene.commit()?;
@@ -354,7 +352,7 @@ pub(super) fn streams(a: &Args) -> Result<String> {
             })
             .collect();
         let configs = MODES.map(|m| (m, width));
-        let t = seconds(&one, c, &big, &configs, a.runs.min(3))?;
+        let t = seconds(&one, c, &big, &configs, a.runs.min(MAX_RUNS_LARGE))?;
         let mw: Vec<f64> = (0..3).map(|j| rays_of(&big) / t.median(j) / 1e6).collect();
         writeln!(
             wide,
@@ -418,11 +416,15 @@ pub(super) fn streams(a: &Args) -> Result<String> {
 
 /// The primary rays of the shared sets' camera at 1024², the resolution of the issue's Embree
 /// figures (the shared sets are 512²), made by the peers' `rt2gen` in a temporary folder:
-/// `None` when it is not built or fails.
-fn primary_1024(mesh: &std::path::Path) -> Option<std::path::PathBuf> {
+/// `None`, noted in `a`, when it is not built or fails.
+fn primary_1024(a: &Args, mesh: &std::path::Path) -> Option<std::path::PathBuf> {
+    let Some(generator) = ray_generator(a) else {
+        a.skip("the peers' rt2gen (not built; the bunny's 1024² primary row left out)");
+        return None;
+    };
     let dir = std::env::temp_dir().join(format!("rt2-primary-1024-{}", std::process::id()));
     std::fs::create_dir_all(&dir).ok()?;
-    let made = std::process::Command::new(ray_generator()?)
+    let made = std::process::Command::new(generator)
         .arg(mesh)
         .arg(&dir)
         .args(["--res", "1024", "--incoherent", "1"])
@@ -431,7 +433,7 @@ fn primary_1024(mesh: &std::path::Path) -> Option<std::path::PathBuf> {
         .is_ok_and(|s| s.success());
     let set = dir.join("primary_1048576.rays");
     if !(made && set.exists()) {
-        warn("bench: rt2gen made no 1024² primary set; that row is left out");
+        a.skip("the bunny's 1024² primary set (rt2gen made none; its row left out)");
         let _ = std::fs::remove_dir_all(&dir);
         return None;
     }
@@ -448,30 +450,14 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
          |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for model in ["bunny", "dragon"] {
-        let Some(mut scene) = model_scene(&format!("{model}.ply"))? else {
+        let Some(mut scene) = model_scene(a, &format!("{model}.ply"))? else {
             continue;
         };
         scene.commit()?;
         let c = scene.committed()?;
-        let dir = shared().join("raysets").join(model);
-        let mut sets: Vec<_> = std::fs::read_dir(&dir)
-            .map(|d| {
-                d.filter_map(|e| e.ok().map(|e| e.path()))
-                    .filter(|p| {
-                        p.extension().is_some_and(|x| x == "rays")
-                            && p.file_name().is_some_and(|n| {
-                                let n = n.to_string_lossy();
-                                ["primary_", "incoherent_", "diffuse_"]
-                                    .iter()
-                                    .any(|k| n.starts_with(k))
-                            })
-                    })
-                    .collect()
-            })
-            .unwrap_or_default();
-        sets.sort();
+        let mut sets = ray_sets(a, model, &["primary", "incoherent", "diffuse"]);
         let generated = if model == "bunny" {
-            primary_1024(&shared().join("models/bunny.ply"))
+            primary_1024(a, &shared().join("models/bunny.ply"))
         } else {
             None
         };
@@ -494,10 +480,7 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
             .chain([None])
             .collect();
         let mesh = shared().join("models").join(format!("{model}.ply"));
-        let peer = embree_harness().is_some();
-        if !peer {
-            warn("bench: Embree's harness is not built; Embree columns are empty");
-        }
+        let peer = embree_harness(a).is_some();
         for (set, rays) in sets.iter().zip(&rays) {
             let stem = set
                 .file_stem()
@@ -506,12 +489,12 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
             // Each run: Embree's harness on this set, then every config of RT2 on it. Embree's
             // rows of each run are kept apart so that each pairs with RT2's run after it.
             let jobs: Vec<Job> = configs.iter().map(|&c| (rays.as_slice(), c)).collect();
-            let mut embree: Vec<Vec<Vec<String>>> = Vec::new();
+            let mut embree: Vec<Vec<EmbreeRow>> = Vec::new();
             let t = timed_runs(one, c, &jobs, a.runs, || {
                 if peer {
-                    embree.push(embree_rows(&mesh, std::slice::from_ref(set), 1, "1"));
+                    embree.push(embree_rows(a, &mesh, std::slice::from_ref(set), 1, "1")?);
                 }
-                peer
+                Ok(peer)
             })?;
             let mrays = |j: usize| rays_of(rays) / t.median(j) / 1e6;
             let mut j = 0;
@@ -542,15 +525,7 @@ fn raysets(a: &Args, one: &Context) -> Result<String> {
             let find = |mode: &str| -> Vec<Option<f64>> {
                 embree
                     .iter()
-                    .map(|rows| {
-                        rows.iter()
-                            .find(|r| {
-                                r.get(2).is_some_and(|s| *s == stem)
-                                    && r.get(3).is_some_and(|s| s == mode)
-                                    && r.get(4).is_some_and(|s| s == "1")
-                            })
-                            .and_then(|r| r.get(7).and_then(|x| x.parse::<f64>().ok()))
-                    })
+                    .map(|rows| rows.iter().find_map(|r| r.speed(&stem, mode, 1)))
                     .collect()
             };
             // Embree's median, and the best config's speed over Embree's paired run by run

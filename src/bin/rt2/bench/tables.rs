@@ -1,9 +1,8 @@
 //! `rt2 bench tables`: the RT² thesis' tables 1 and 2 on the CPU (nodes visited per ray, tree
 //! memory, ms per frame for every traversal) beside the thesis' figures.
 
-use super::{mib, shared, time_ms, Args};
+use super::{mib, shared_model, time_ms, Args, MAX_RUNS_LARGE};
 use crate::load_scene;
-use crate::output::warn;
 use rt2::context::{Context, QueryOptions};
 use rt2::cpu::query::QueryMode;
 use rt2::cpu::traverse::Traversal;
@@ -51,15 +50,7 @@ pub(super) fn tables(a: &Args) -> Result<String> {
     let ctx = Context::new(BackendRequest::Cpu, 0)?;
     let mut scenes: Vec<String> = Vec::new();
     for model in ["bunny", "dragon", "snowden"] {
-        let p = shared().join("models").join(format!("{model}.ply"));
-        if p.exists() {
-            scenes.push(p.display().to_string());
-        } else {
-            warn(format_args!(
-                "bench tables: {} is missing; skipped",
-                p.display()
-            ));
-        }
+        scenes.extend(shared_model(a, &format!("{model}.ply")).map(|p| p.display().to_string()));
     }
     scenes.extend(["spheres1", "spheres2", "spheres3"].map(String::from));
     let mut t1 = String::from(
@@ -94,7 +85,7 @@ pub(super) fn tables(a: &Args) -> Result<String> {
         let plain = c.tree.node_bytes() + c.tree.leaf_list_bytes();
         let ropes = plain + c.tree.rope_bytes() + c.tree.leaf_box_bytes();
         let runs = if c.prims.len() > 500_000 {
-            a.runs.min(3)
+            a.runs.min(MAX_RUNS_LARGE)
         } else {
             a.runs
         };
@@ -128,9 +119,7 @@ pub(super) fn tables(a: &Args) -> Result<String> {
                 ..RenderOptions::default()
             };
             let mut frame = Frame::new(w, h)?;
-            let ms = time_ms(runs, || {
-                let _ = ctx.render(c, &l.camera, &opts, &mut frame);
-            });
+            let ms = time_ms(runs, || ctx.render(c, &l.camera, &opts, &mut frame))?;
             write!(row, " {ms:.1} |").ok();
         }
         writeln!(t2, "{row} {} |", thesis_ms(&label)).ok();

@@ -228,6 +228,7 @@ pub(super) fn chart(a: &Args) -> Result<String> {
     let secs = t0.elapsed().as_secs_f64();
     warn(format_args!("bench chart: measured in {secs:.0} s"));
     let images = draw(
+        a,
         &[("Ray queries", &qp), ("Secondary rays (shadow)", &sp)],
         b.gpu_legend().as_deref(),
     );
@@ -244,7 +245,7 @@ pub(super) fn chart(a: &Args) -> Result<String> {
          be off by 2.5 ULP and a shader compiler fuse multiply-adds), so its leak count on the \
          stress set differs a little from the CPU's. GPU: {}. Colour: the ray set; filled: \
          watertight test. \
-         Mrays/s with all cores (median of the runs) on a shared 2-core machine: speeds are \
+         Mrays/s with all cores (median of the runs) on a shared machine: speeds are \
          noisy (compare points measured in the same run), the error counts are exact. Measured in {secs:.0} s.\n\n\
          Errors against an f64 brute force over the exact triangle corners (a watertight test in f64, \
          closed edges; a neighbour hit at the same distance is a tie, not an error). Failures = false misses (leaks) + false hits + wrong \
@@ -273,20 +274,20 @@ pub(super) fn chart(a: &Args) -> Result<String> {
 }
 
 #[cfg(feature = "chart")]
-fn draw(panels: &[(&str, &Vec<Point>)], gpu: Option<&str>) -> String {
+fn draw(a: &Args, panels: &[(&str, &Vec<Point>)], gpu: Option<&str>) -> String {
     match plot::draw(panels, gpu) {
         Ok(()) => {
             "Chart: [docs/chart.svg](docs/chart.svg), [docs/chart.png](docs/chart.png).".into()
         }
         Err(e) => {
-            warn(format_args!("bench chart: no chart drawn: {e}"));
+            a.skip(format_args!("the chart's images (not drawn: {e})"));
             format!("(chart not drawn: {e})")
         }
     }
 }
 
 #[cfg(not(feature = "chart"))]
-fn draw(_: &[(&str, &Vec<Point>)], _: Option<&str>) -> String {
-    warn("bench chart: built without the `chart` feature; no images drawn");
+fn draw(a: &Args, _: &[(&str, &Vec<Point>)], _: Option<&str>) -> String {
+    a.skip("the chart's images (built without the `chart` feature: none drawn)");
     "(chart not drawn: build with `--features chart`)".into()
 }

@@ -2,8 +2,7 @@
 //! scored against an f64 brute-force reference.
 
 use super::{Backends, Point};
-use crate::bench::{model_scene, shared, time_ms, Args};
-use crate::output::warn;
+use crate::bench::{find_set, model_scene, time_ms, Args};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use rt2::error::Result;
@@ -252,20 +251,17 @@ fn stress_set(scale: f32, offset: f32) -> Result<RaySet> {
     RaySet::new(mesh_scene(&placed)?, rays, inside_of, 1)
 }
 
-fn bunny_sets() -> Result<Vec<(&'static str, RaySet)>> {
+fn bunny_sets(a: &Args) -> Result<Vec<(&'static str, RaySet)>> {
     let mut out = Vec::new();
-    for (label, file) in [
-        ("bunny incoherent", "incoherent_262144"),
-        ("bunny primary", "primary_262144"),
+    for (label, kind) in [
+        ("bunny incoherent", "incoherent"),
+        ("bunny primary", "primary"),
     ] {
-        let path = shared().join("raysets/bunny").join(format!("{file}.rays"));
-        let (Some(scene), Ok(rays)) = (model_scene("bunny.ply")?, rayset::read_rays(&path)) else {
-            warn(format_args!(
-                "bench chart: the bunny or {} is missing; skipped",
-                path.display()
-            ));
+        let (Some(scene), Some(path)) = (model_scene(a, "bunny.ply")?, find_set(a, "bunny", kind))
+        else {
             continue;
         };
+        let rays = rayset::read_rays(&path)?;
         // 4096 of the 262144 rays against the f64 brute force over 69k triangles.
         out.push((label, RaySet::new(scene, rays, Vec::new(), 64)?));
     }
@@ -274,7 +270,7 @@ fn bunny_sets() -> Result<Vec<(&'static str, RaySet)>> {
 
 /// Ray queries: every method of every engine (`Engine::methods`) on every set.
 pub(super) fn queries(a: &Args, b: &Backends) -> Result<(Vec<Point>, String)> {
-    let mut sets: Vec<(&'static str, Vec<RaySet>)> = bunny_sets()?
+    let mut sets: Vec<(&'static str, Vec<RaySet>)> = bunny_sets(a)?
         .into_iter()
         .map(|(l, s)| (l, vec![s]))
         .collect();
@@ -296,11 +292,9 @@ pub(super) fn queries(a: &Args, b: &Backends) -> Result<(Vec<Point>, String)> {
                 for set in group {
                     let c = set.scene.committed()?;
                     let mut hits = vec![Hit::MISS; set.rays.len()];
-                    let mut done = Ok(Default::default());
                     let ms = time_ms(a.runs, || {
-                        done = ctx.intersect(c, &set.rays, &mut hits, &q);
-                    });
-                    done?;
+                        ctx.intersect(c, &set.rays, &mut hits, &q).map(drop)
+                    })?;
                     let mut t = score(c, set, &hits);
                     t.ms = ms;
                     t.timed_rays = set.rays.len();

@@ -88,15 +88,15 @@ pub(super) fn secondary(a: &Args, b: &Backends) -> Result<(Vec<Point>, String)> 
                 for (s, rays, light) in &scenes {
                     let c = s.committed()?;
                     let tracer = Tracer::new(c, &opts, how);
-                    let mut done = Ok(Acne::default());
+                    let mut counts = Acne::default();
                     ms += time_ms(a.runs, || {
-                        done = if engine == Engine::Cpu(QueryMode::Single) {
-                            Ok(depth_first(ctx, &tracer, rays, *light))
+                        counts = if engine == Engine::Cpu(QueryMode::Single) {
+                            depth_first(ctx, &tracer, rays, *light)
                         } else {
-                            breadth_first(ctx, &tracer, &q, rays, *light)
+                            breadth_first(ctx, &tracer, &q, rays, *light)?
                         };
-                    });
-                    let counts = done?;
+                        Ok(())
+                    })?;
                     traced += rays.len() + counts.shadows;
                     acne.add(&counts);
                 }
