@@ -84,6 +84,25 @@ pub fn read_rays(path: &Path) -> Result<Vec<Ray>> {
         .collect())
 }
 
+/// Writes `rays` as a ray-set file that [`read_rays`] (and the peers' tools) read back as they
+/// were.
+pub fn write_rays(path: &Path, rays: &[Ray]) -> Result<()> {
+    let count = u32::try_from(rays.len())
+        .map_err(|_| Error::invalid_argument("a ray-set file holds at most 2^32 - 1 rays"))?;
+    let mut bytes = Vec::with_capacity(16 + 32 * rays.len());
+    bytes.extend(RAYS_MAGIC);
+    bytes.extend(1u32.to_le_bytes());
+    bytes.extend(count.to_le_bytes());
+    for r in rays {
+        let (o, d) = (r.org, r.dir);
+        for v in [o.x, o.y, o.z, r.tmin, d.x, d.y, d.z, r.tmax] {
+            bytes.extend(v.to_le_bytes());
+        }
+    }
+    std::fs::write(path, bytes)
+        .map_err(|e| Error::io(format!("cannot write {}: {e}", path.display())))
+}
+
 pub fn read_hits(path: &Path) -> Result<Vec<HitRecord>> {
     let bytes = read(path)?;
     let body = records(&bytes, HITS_MAGIC, 16, path)?;

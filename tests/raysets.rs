@@ -125,3 +125,18 @@ fn agrees_with_embree(model: &str, sets: [&str; 4]) {
         }
     }
 }
+
+/// `rayset::write_rays` writes what the peers' tools wrote: the bunny's shadow set, read and
+/// written back, is the same file byte for byte (the bench hands Embree's harness rays it
+/// writes). Needs `$RT2_SHARED/raysets/bunny/shadow_68202.rays`.
+#[test]
+fn a_shared_ray_set_written_back_is_the_same_file() {
+    let Some(path) = support::shared_path("raysets/bunny/shadow_68202.rays") else {
+        return;
+    };
+    let copy = support::scratch("raysets").join("shadow_68202.rays");
+    rayset::write_rays(&copy, &rayset::read_rays(&path).unwrap()).unwrap();
+    let (a, b) = (std::fs::read(&path).unwrap(), std::fs::read(&copy).unwrap());
+    assert_eq!(a.len(), b.len());
+    assert!(a == b, "the rewritten file differs");
+}
