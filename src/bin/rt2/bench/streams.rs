@@ -240,7 +240,11 @@ pub(super) fn streams(a: &Args) -> Result<String> {
          run of Embree's harness on that set; each speed is the median of the timed runs, as \
          Embree's harness reports, and each ratio the median of the runs' own ratios (both \
          speeds of a ratio from the same run). Timed a whole mode after another, two runs of \
-         the bench once differed by up to 25% in a ratio of two medians.\n\n",
+         the bench once differed by up to 25% in a ratio of two medians. Timed regions: RT2's \
+         modes trace rays made beforehand and store their hits (AUTO: one \
+         `Context::intersect` call); Embree's harness times its loop that fills each \
+         `RTCRayHit` from the ray record, traces it and stores the hit record: a dozen stores \
+         a ray that RT2's timings leave out.\n\n",
         w = width.lanes(),
         hi = STREAM_MAX,
         inco = query::INCOHERENT_STREAM_MAX
