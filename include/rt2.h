@@ -1037,7 +1037,8 @@ enum rt2_status rt2_scene_add_point_light(rt2_scene *scene,
 
 /**
  * Adds a triangle mesh: `vertex_count` xyz positions and `triangle_count` index triples.
- * The data is copied. `*out_object` (may be NULL) receives the object id.
+ * The data is copied. `*out_object` (may be NULL) receives the object id. A mesh of no
+ * triangles (with or without vertices) is an object too, which nothing hits, as in Embree.
  *
  * `RT2_STATUS_INVALID_ARGUMENT` (and nothing added) for a non-finite position, an index past
  * `vertex_count`, or a triangle that does not fit in f32 in world space: its corners, its
@@ -1113,8 +1114,8 @@ enum rt2_status rt2_scene_add_plane(rt2_scene *scene,
 /**
  * Loads a triangle mesh from a `.ply` (ASCII or binary) or `.obj` file as one object. The
  * extension alone picks the format (`.ply` or `.obj`, any case; the contents are not sniffed)
- * and is checked first: any other extension, or none, is UNSUPPORTED before the path is looked
- * at, even for a missing file or a directory. Then only regular files are read: a missing
+ * and is checked first (after an empty path, INVALID_ARGUMENT): any other extension, or none,
+ * is UNSUPPORTED before the path is looked at, even for a missing file or a directory. Then only regular files are read: a missing
  * file, a FIFO, device or directory is an IO error. Parse errors name the file and the line or
  * byte offset at fault. Triangles keep the file's face order (polygons are fan-triangulated);
  * a file without faces is a PARSE error, whatever its format. PLY: `vertex` x, y, z and the
