@@ -162,7 +162,8 @@ int main(int argc, char **argv) {
         snprintf(nofolder, sizeof nofolder, "%s/no-such-folder/errors-frame.png", tmpdir);
         expect(rt2_frame_save_png(frame, jpg), RT2_STATUS_INVALID_ARGUMENT, ".png", "rt2_frame_save_png(a .jpg name)");
         expect(rt2_frame_save_png(frame, nofolder), RT2_STATUS_IO, "folder", "rt2_frame_save_png(a missing folder)");
-        expect(rt2_frame_save_png(frame, tmpdir), RT2_STATUS_INVALID_ARGUMENT, ".png", "rt2_frame_save_png(a directory)");
+        expect(rt2_frame_save_png(frame, tmpdir), RT2_STATUS_INVALID_ARGUMENT, ".png",
+               "rt2_frame_save_png(a folder's name, no .png)");
     }
 
     /* ---- Camera ---- */

@@ -33,8 +33,21 @@ int main(int argc, char **argv) {
     /* Bunny bounding box [-0.0947, 0.0330, -0.0619]..[0.0610, 0.1873, 0.0588]: centre and edge. */
     float center[3] = {-0.0168f, 0.1102f, -0.0015f}, size = 0.156f;
     if (argc == 7) {
-        for (int k = 0; k < 3; k++) center[k] = strtof(argv[3 + k], NULL);
-        size = strtof(argv[6], NULL);
+        float v[4];
+        for (int k = 0; k < 4; k++) {
+            char *end = NULL;
+            v[k] = strtof(argv[3 + k], &end);
+            if (end == argv[3 + k] || *end != '\0' || !isfinite(v[k])) {
+                fprintf(stderr, "load_model: '%s' is not a finite number\n", argv[3 + k]);
+                return 2;
+            }
+        }
+        if (!(v[3] > 0.0f)) {
+            fprintf(stderr, "load_model: size must be positive, not %s\n", argv[6]);
+            return 2;
+        }
+        for (int k = 0; k < 3; k++) center[k] = v[k];
+        size = v[3];
     }
     FILE *f = fopen(model, "rb");
     if (f == NULL) {

@@ -401,6 +401,29 @@ fn load_model_reports_a_missing_file() {
     );
 }
 
+/// load_model.c's camera numbers are read whole: one with trailing text, not finite, or a size
+/// that is not positive is a usage error (exit 2) before any work, not a partial read
+/// (`strtof` took "1x" as 1) that loads and renders with a wrong camera.
+#[test]
+fn load_model_refuses_bad_numbers_before_any_work() {
+    let load = build_example_as("load_model", "load_model-bad-numbers");
+    let missing = support::scratch("c_examples").join("no-such-model.ply");
+    let out_png = support::scratch("c_examples").join("bad-numbers.png");
+    for (numbers, said) in [
+        (["0", "0", "1x", "1"], "'1x' is not a finite number"),
+        (["0", "inf", "0", "1"], "'inf' is not a finite number"),
+        (["0", "0", "0", "0"], "size must be positive"),
+    ] {
+        let mut args = vec![missing.as_os_str(), out_png.as_os_str()];
+        args.extend(numbers.iter().map(std::ffi::OsStr::new));
+        let out = run(&load, &args);
+        assert_exit(&out, 2, "load_model with a bad number");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(said), "should say {said:?}: {err}");
+    }
+    assert!(!out_png.exists(), "an image was written for bad arguments");
+}
+
 /// ambient_occlusion.c: camera rays and occlusion rays through `rt2_intersect` and
 /// `rt2_occluded` in every query mode, the occlusion rays excluding the primitive they leave.
 #[test]
@@ -451,17 +474,25 @@ fn ambient_occlusion(name: &str, env: &[(&str, &str)]) {
     assert!(dark > 100, "only {dark} pixels at least half occluded");
 }
 
+/// A sample count out of range or with trailing text (`atoi` took "8abc" as 8) is a usage
+/// error before any work.
 #[test]
 fn ambient_occlusion_refuses_a_bad_sample_count() {
     let exe = build_example_as("ambient_occlusion", "ambient_occlusion-args");
     let pgm = support::scratch("c_examples").join("ambient_occlusion-args.pgm");
     let _ = std::fs::remove_file(&pgm);
-    let out = run(&exe, &[pgm.as_os_str(), "0".as_ref()]);
-    assert_exit(&out, 2, "ambient_occlusion with 0 samples");
-    assert!(
-        String::from_utf8_lossy(&out.stderr).contains("SAMPLES"),
-        "the message does not name SAMPLES"
-    );
+    for samples in ["0", "4097", "8abc", ""] {
+        let out = run(&exe, &[pgm.as_os_str(), samples.as_ref()]);
+        assert_exit(
+            &out,
+            2,
+            &format!("ambient_occlusion with samples {samples:?}"),
+        );
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("SAMPLES"),
+            "the message does not name SAMPLES"
+        );
+    }
     assert!(!pgm.exists(), "an image was written for bad arguments");
 }
 
