@@ -29,6 +29,30 @@ class RenderOptions(ctypes.Structure):
     ]
 
 
+class Ray(ctypes.Structure):
+    # Mirrors rt2_ray.
+    _fields_ = [
+        ("org", ctypes.c_float * 3),
+        ("tmin", ctypes.c_float),
+        ("dir", ctypes.c_float * 3),
+        ("tmax", ctypes.c_float),
+    ]
+
+
+class Hit(ctypes.Structure):
+    # Mirrors rt2_hit.
+    _fields_ = [
+        ("t", ctypes.c_float),
+        ("u", ctypes.c_float),
+        ("v", ctypes.c_float),
+        ("object", ctypes.c_uint32),
+        ("prim", ctypes.c_uint32),
+    ]
+
+
+RT2_INVALID_ID = 0xFFFFFFFF
+
+
 def load(path):
     lib = ctypes.CDLL(path)
     p = ctypes.c_void_p
@@ -50,6 +74,10 @@ def load(path):
         "rt2_frame_pixels": ([p], ctypes.POINTER(ctypes.c_uint8)),
         "rt2_render_options_default": ([], RenderOptions),
         "rt2_render": ([p, p, p, ctypes.POINTER(RenderOptions), p], u32),
+        # Arrays of structs and a size_t count: the classic ctypes pitfalls (a count declared
+        # as c_int would be read with garbage in its upper half on x86-64).
+        "rt2_intersect": ([p, p, ctypes.POINTER(Ray), ctypes.c_size_t, ctypes.POINTER(Hit), p, p], u32),
+        "rt2_occluded": ([p, p, ctypes.POINTER(Ray), ctypes.c_size_t, ctypes.POINTER(ctypes.c_uint8), p, p], u32),
         "rt2_status_string": ([u32], ctypes.c_char_p),
         "rt2_last_error_message": ([], ctypes.c_char_p),
     }
@@ -88,6 +116,9 @@ def main():
     assert opts.struct_size == ctypes.sizeof(RenderOptions), (
         f"struct_size {opts.struct_size} != sizeof {ctypes.sizeof(RenderOptions)}: the Python mirror is stale"
     )
+    # A background of our own: its exact bytes in the corners check the mirror's field
+    # offsets (0.2, 0.4, 0.6 times 255 are whole numbers; frames hold linear values).
+    opts.background[0], opts.background[1], opts.background[2] = 0.2, 0.4, 0.6
     ok(lib.rt2_render(ctx, scene, camera, ctypes.byref(opts), frame), "rt2_render")
 
     px = lib.rt2_frame_pixels(frame)
@@ -97,12 +128,34 @@ def main():
         i = 4 * (y * 32 + x)
         return tuple(px[i + k] for k in range(4))
 
-    # Default camera at (0,0,5) looking at the origin: the unit sphere covers the centre
-    # (it spans ~26 of 32 rows at 45 deg), not the corners.
+    # Default camera at (0,0,5) looking at the origin with a 45 deg vertical field of view:
+    # the unit sphere, seen under asin(1/5) either side of the axis, covers
+    # tan(asin(0.2)) / tan(22.5 deg) = 0.49 of the half-height, about 16 of the 32 rows.
+    background = (51, 102, 153, 255)
     centre, corner = pixel(16, 16), pixel(0, 0)
     print(f"centre {centre}, corner {corner}")
-    assert centre != corner, f"centre {centre} equals corner {corner}: the sphere is not visible"
-    assert centre[3] == 255 and corner[3] == 255, "rendered pixels are opaque"
+    assert corner == background, f"corner {corner}, expected the background {background}"
+    assert centre[0] == centre[1] == centre[2] and 0 < centre[0] < 255 and centre[3] == 255, (
+        f"centre {centre}: a lit grey sphere expected"
+    )
+    rows = sum(pixel(16, y) != background for y in range(32))
+    assert 15 <= rows <= 17, f"the sphere spans {rows} rows of column 16, expected about 16"
+
+    # Queries: the camera's axis hits the sphere at t = 4, a parallel ray 2 to the side
+    # misses, and a ray from the centre leaves it at t = 1.
+    rays = (Ray * 3)(
+        Ray(vec3(0, 0, 5), 0.0, vec3(0, 0, -1), float("inf")),
+        Ray(vec3(2, 0, 5), 0.0, vec3(0, 0, -1), float("inf")),
+        Ray(vec3(0, 0, 0), 0.0, vec3(1, 0, 0), float("inf")),
+    )
+    hits = (Hit * 3)()
+    ok(lib.rt2_intersect(ctx, scene, rays, 3, hits, None, None), "rt2_intersect")
+    got = [(round(h.t, 5), h.object) for h in hits]
+    assert got[0] == (4.0, obj.value) and got[2] == (1.0, obj.value), f"hits {got}"
+    assert hits[1].object == RT2_INVALID_ID, f"the side ray hit object {hits[1].object}"
+    occluded = (ctypes.c_uint8 * 3)()
+    ok(lib.rt2_occluded(ctx, scene, rays, 3, occluded, None, None), "rt2_occluded")
+    assert list(occluded) == [1, 0, 1], f"occluded {list(occluded)}"
 
     # An invalid call: a negative radius.
     status = lib.rt2_scene_add_sphere(scene, vec3(0, 0, 0), -1.0, 0, None)
