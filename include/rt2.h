@@ -1270,7 +1270,8 @@ const char *rt2_last_error_message(void);
  * Every entry is checked before anything is written; on any error `surfaces` is untouched:
  * INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks (a disabled
  * object's too, and a removed one's, which the message says), a hit with a non-finite `t`, `u` or
- * `v` or a ray that always misses (a non-finite `org` or `dir`, a zero `dir`, a NaN `tmin` or
+ * `v`, a triangle hit whose `u`, `v` lie outside the triangle (beyond 1e-4 of rounding) or a ray
+ * that always misses (a non-finite `org` or `dir`, a zero `dir`, a NaN `tmin` or
  * `tmax`, `tmin > tmax`; a query never returns such a hit), a hit whose point is too far from its
  * sphere or ellipsoid to be put on the surface (a `t` no query returns: 3e38 on a unit sphere 5
  * units away; a point that far off which the rounding of a huge ray explains, as for a direction

@@ -757,6 +757,31 @@ fn bad_input_is_refused_and_writes_nothing() {
     ] {
         refused(&rays, &with(2, h), bad, "hits[2] has t");
     }
+    // Barycentrics off the triangle name a point off it (u = 2, v = 3 got one, extrapolated);
+    // a sphere's u and v are not read.
+    for (u, v) in [(2.0, 3.0), (-0.01, 0.5), (0.5, -0.01), (0.6, 0.41)] {
+        let h = rt2_hit { u, v, ..hits[0] };
+        refused(&rays, &with(2, h), bad, "on a triangle");
+    }
+    let corner_edge_sphere = [
+        rt2_hit {
+            u: 1.0,
+            v: 0.0,
+            ..hits[0]
+        },
+        rt2_hit {
+            u: 0.5,
+            v: 0.5,
+            ..hits[0]
+        },
+        rt2_hit {
+            u: 7.0,
+            v: 7.0,
+            ..hits[1]
+        },
+    ];
+    let (st, _) = scene.surfaces(&[rays[0], rays[0], rays[1]], &corner_edge_sphere);
+    assert_eq!(st, Rt2Status::Ok, "{}", last_error());
     // Rays that always miss cannot have given a hit (a zero direction gave a zero normal).
     let mut far = rays;
     far[1].org[0] = f32::INFINITY;

@@ -6,7 +6,7 @@ use super::ffi::{check_disjoint, guard, handle, slice, slice_mut};
 use super::query::{named_prim, rt2_hit, rt2_ray, RT2_INVALID_ID};
 use super::scene::rt2_scene;
 use crate::error::{Error, Result, Rt2Status};
-use crate::geometry::{Hit, Ray, INVALID};
+use crate::geometry::{Hit, PrimKind, Ray, INVALID};
 use crate::scene::{Committed, HitSurface, PrimLookup};
 
 /// The surface at one hit, in world space (28 bytes).
@@ -47,7 +47,8 @@ const NO_SURFACE: rt2_surface = rt2_surface {
 /// Every entry is checked before anything is written; on any error `surfaces` is untouched:
 /// INVALID_ARGUMENT for a hit naming an object or primitive the committed scene lacks (a disabled
 /// object's too, and a removed one's, which the message says), a hit with a non-finite `t`, `u` or
-/// `v` or a ray that always misses (a non-finite `org` or `dir`, a zero `dir`, a NaN `tmin` or
+/// `v`, a triangle hit whose `u`, `v` lie outside the triangle (beyond 1e-4 of rounding) or a ray
+/// that always misses (a non-finite `org` or `dir`, a zero `dir`, a NaN `tmin` or
 /// `tmax`, `tmin > tmax`; a query never returns such a hit), a hit whose point is too far from its
 /// sphere or ellipsoid to be put on the surface (a `t` no query returns: 3e38 on a unit sphere 5
 /// units away; a point that far off which the rounding of a huge ray explains, as for a direction
@@ -127,6 +128,16 @@ fn surface(
     library_hit(c, lookup, i, ray, h)?.map(surface).transpose()
 }
 
+/// How far a triangle hit's barycentrics may lie outside the triangle: the intersectors'
+/// rounding (the watertight test divides by the sum of its edge functions) stays far inside it,
+/// and weights past it name a point off the triangle, which `surface_at` would extrapolate.
+const BARYCENTRIC_SLACK: f32 = 1e-4;
+
+/// Whether barycentric weights `u`, `v` (and `1 - u - v`) name a point of the triangle.
+fn within_triangle(u: f32, v: f32) -> bool {
+    u >= -BARYCENTRIC_SLACK && v >= -BARYCENTRIC_SLACK && u + v <= 1.0 + BARYCENTRIC_SLACK
+}
+
 /// Entry `i`'s hit in the library's numbering (`None` for a miss), once checked.
 fn library_hit(
     c: &Committed,
@@ -150,6 +161,14 @@ fn library_hit(
         return Err(Error::invalid_argument(format!(
             "hits[{i}] has t = {:?}, u = {:?}, v = {:?}: a hit has finite ones",
             h.t, h.u, h.v
+        )));
+    }
+    let triangle = matches!(c.prims.locate(prim as usize).0, PrimKind::Triangle);
+    if triangle && !within_triangle(h.u, h.v) {
+        return Err(Error::invalid_argument(format!(
+            "hits[{i}] has u = {:?}, v = {:?} on a triangle: a point of it has u, v >= 0 and \
+             u + v <= 1 (no query returns such a hit)",
+            h.u, h.v
         )));
     }
     if ray.is_degenerate() {
