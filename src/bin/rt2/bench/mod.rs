@@ -277,18 +277,22 @@ fn mib(bytes: usize) -> f64 {
     bytes as f64 / 1048576.0
 }
 
-/// The shared model `name` (e.g. "bunny.ply"), if it is there; a missing one is noted as
-/// skipped in `a`.
-fn shared_model(a: &Args, name: &str) -> Option<PathBuf> {
-    let path = shared().join("models").join(name);
+/// `path` if it exists; else `None`, noted in `a` with what its absence leaves out.
+fn present(a: &Args, path: PathBuf, left_out: &str) -> Option<PathBuf> {
     if path.exists() {
         return Some(path);
     }
-    a.skip(format_args!(
-        "{} (missing; its rows skipped)",
-        path.display()
-    ));
+    a.skip(format_args!("{} ({left_out})", path.display()));
     None
+}
+
+/// The shared model `name` (e.g. "bunny.ply"), if it is there ([`present`]).
+fn shared_model(a: &Args, name: &str) -> Option<PathBuf> {
+    present(
+        a,
+        shared().join("models").join(name),
+        "missing; its rows skipped",
+    )
 }
 
 /// A mesh from the shared models as a scene with one object (`None`, noted in `a`, when the
@@ -309,19 +313,16 @@ fn model_scene(a: &Args, name: &str) -> Result<Option<Scene>> {
     Ok(Some(s))
 }
 
-/// Embree's harness, if it is built (a missing one is noted in `a`: its columns stay empty).
+/// Embree's harness, if it is built ([`present`]: its columns stay empty without it).
 fn embree_harness(a: &Args) -> Option<PathBuf> {
-    let p = std::env::var_os("RT2_EMBREE_BENCH")
+    let path = std::env::var_os("RT2_EMBREE_BENCH")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from("target/peers/bench_embree"));
-    if p.exists() {
-        return Some(p);
-    }
-    a.skip(format_args!(
-        "Embree's harness {} (not built; its columns are empty)",
-        p.display()
-    ));
-    None
+    present(
+        a,
+        path,
+        "Embree's harness, not built; its columns are empty",
+    )
 }
 
 /// The peers' ray set generator (`rt2gen`), built beside Embree's harness.
