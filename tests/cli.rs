@@ -282,6 +282,34 @@ fn bench_checks_its_write_target_first() {
     }
 }
 
+/// An unknown benchmark or option, or an option without its value or with one that is not a
+/// number, is refused with a message naming it before any benchmark runs.
+#[test]
+fn bench_refuses_unknown_names_and_bad_options() {
+    let cases: [(&[&str], &str); 5] = [
+        (&["bench", "frobnicate"], "unknown benchmark 'frobnicate'"),
+        (
+            &["bench", "memory", "--frobnicate"],
+            "unknown option '--frobnicate'",
+        ),
+        (
+            &["bench", "memory", "--runs", "abc"],
+            "--runs: cannot parse 'abc'",
+        ),
+        (&["bench", "memory", "--runs"], "--runs needs a value"),
+        (&["bench", "memory", "--write"], "--write needs a value"),
+    ];
+    for (args, named) in cases {
+        let out = Command::new(env!("CARGO_BIN_EXE_rt2"))
+            .args(args)
+            .env("RT2_SHARED", support::scratch("cli-no-models"))
+            .output()
+            .expect("run the rt2 binary");
+        assert_refused(&out, named);
+        assert!(out.stdout.is_empty(), "{args:?}: a benchmark ran");
+    }
+}
+
 /// `bench --runs 0` is refused, not silently taken as 1, and so is a count no bench could
 /// finish, with a range a user can act on (it read 1..=18446744073709551615).
 #[test]
