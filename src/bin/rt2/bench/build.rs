@@ -104,12 +104,12 @@ fn versus_embree(
     if embree_harness(a).is_none() {
         return Ok(None);
     }
+    // The harness traces a ray set after its builds: one ray from the model's centre (the
+    // builder table's last commit has its bounds), written here, takes it no time (and the
+    // Snowden bust has no shared sets).
+    let centre = scene.committed()?.bounds.center();
     scene.set_build_options(BuildOptions::default());
     let ctx = Context::new(BackendRequest::Cpu, 2)?;
-    ctx.install(|| scene.rebuild())?;
-    // The harness traces a ray set after its builds: one ray from the model's centre, written
-    // here, takes it no time (and the Snowden bust has no shared sets).
-    let centre = scene.committed()?.bounds.center();
     let one_ray = std::env::temp_dir().join(format!("rt2-build-{}.rays", std::process::id()));
     rayset::write_rays(
         &one_ray,
@@ -117,8 +117,7 @@ fn versus_embree(
     )?;
     let mesh = shared().join("models").join(model);
     let mut ours = Vec::with_capacity(runs);
-    // Each build of Embree's by name and thread count: its ms in every run, and its bytes.
-    let mut theirs: Vec<((String, u32), Vec<f64>, u64)> = Vec::new();
+    let mut theirs: Vec<EmbreeBuild> = Vec::new();
     let mut timed = || -> Result<()> {
         for _ in 0..runs {
             ours.push(median_build_ms(&ctx, scene, 1)?);
@@ -130,13 +129,17 @@ fn versus_embree(
                     ms,
                 } = row
                 {
-                    let key = (name, threads);
-                    match theirs.iter_mut().find(|b| b.0 == key) {
-                        Some(b) => {
-                            b.1.push(ms);
-                            b.2 = bytes;
-                        }
-                        None => theirs.push((key, vec![ms], bytes)),
+                    match theirs
+                        .iter_mut()
+                        .find(|b| b.name == name && b.threads == threads)
+                    {
+                        Some(b) => b.ms.push(ms),
+                        None => theirs.push(EmbreeBuild {
+                            name,
+                            threads,
+                            ms: vec![ms],
+                            bytes,
+                        }),
                     }
                 }
             }
@@ -150,9 +153,9 @@ fn versus_embree(
     let ratio = |name: &str| {
         theirs
             .iter()
-            .find(|((n, t), ms, _)| n == name && *t > 1 && ms.len() == runs)
-            .map_or("—".into(), |((_, t), ms, _)| {
-                format!("{:.2}x ({t} threads)", paired_ratio(&ours, ms))
+            .find(|b| b.name == name && b.threads > 1 && b.ms.len() == runs)
+            .map_or("—".into(), |b| {
+                format!("{:.2}x ({} threads)", paired_ratio(&ours, &b.ms), b.threads)
             })
     };
     let ratio_row = format!(
@@ -161,16 +164,27 @@ fn versus_embree(
         ratio("robust+high")
     );
     let mut rows = String::new();
-    for ((name, threads), ms, bytes) in &theirs {
+    for b in &theirs {
         writeln!(
             rows,
-            "| {model} | {name} | {threads} | {:.2} | {:.2} |",
-            median(ms.clone()),
-            mib(*bytes as usize)
+            "| {model} | {} | {} | {:.2} | {:.2} |",
+            b.name,
+            b.threads,
+            median(b.ms.clone()),
+            mib(b.bytes as usize)
         )
         .ok();
     }
     Ok(Some((ratio_row, rows)))
+}
+
+/// One of Embree's builds (a kind on a number of threads) over the runs of [`versus_embree`]:
+/// its time in each run, and the memory it held (the same in every run).
+struct EmbreeBuild {
+    name: String,
+    threads: u32,
+    ms: Vec<f64>,
+    bytes: u64,
 }
 
 /// Median tree build time of `runs` commits of `scene` on `ctx`'s threads; a failed build is
