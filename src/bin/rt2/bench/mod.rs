@@ -430,6 +430,9 @@ fn embree_rows(
         .stdout(std::process::Stdio::null())
         .status()
         .map_err(|e| Error::io(format!("bench: cannot run {}: {e}", exe.display())))?;
+    // Read and removed before the status is looked at: a failed run may have started the file.
+    let text = std::fs::read_to_string(&tsv);
+    let _ = std::fs::remove_file(&tsv);
     if !status.success() {
         return Err(Error::io(format!(
             "bench: Embree's harness {} failed ({status}) on {}",
@@ -437,8 +440,6 @@ fn embree_rows(
             mesh.display()
         )));
     }
-    let text = std::fs::read_to_string(&tsv);
-    let _ = std::fs::remove_file(&tsv);
     let text = text.map_err(|e| {
         Error::io(format!(
             "bench: Embree's harness {} wrote no results ({}: {e})",
@@ -520,5 +521,6 @@ mod tests {
         super::replace_section(&missing, "x", "new").unwrap();
         let text = std::fs::read_to_string(&missing).unwrap();
         assert!(text.starts_with("# Benchmarks") && text.contains("<!-- bench:x -->\nnew\n"));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
