@@ -1,12 +1,12 @@
 // Generates `include/rt2.h` from `src/api` with cbindgen (settings in `cbindgen.toml`).
-// The header is committed; `tests/header.rs` includes this file and fails if the committed
-// header differs from a fresh generation with [`header_config`].
+// The header is committed; `tests/header.rs` fails if the committed header differs from the
+// copy this script also leaves in OUT_DIR.
 
 /// cbindgen's settings: `cbindgen.toml` plus the macros that come from Cargo.toml, so the
 /// header cannot disagree with the library, and the opaque handle typedefs (the handles are
 /// `#[repr(C)]` in Rust so their magic number sits at offset 0, and cbindgen must not print
 /// their fields). `version` is major, minor, patch and the full string.
-pub fn header_config(crate_dir: &str, version: [&str; 4]) -> cbindgen::Config {
+fn header_config(crate_dir: &str, version: [&str; 4]) -> cbindgen::Config {
     let mut config = cbindgen::Config::from_file(format!("{crate_dir}/cbindgen.toml"))
         .expect("cbindgen.toml is valid");
     let [major, minor, patch, full] = version;
@@ -25,7 +25,6 @@ pub fn header_config(crate_dir: &str, version: [&str; 4]) -> cbindgen::Config {
     config
 }
 
-#[allow(dead_code)] // also compiled into tests/header.rs, where only header_config is used
 fn main() {
     println!("cargo:rerun-if-changed=src/api");
     println!("cargo:rerun-if-changed=src/error.rs");
@@ -39,11 +38,21 @@ fn main() {
         v("CARGO_PKG_VERSION"),
     ];
     let config = header_config(&crate_dir, version.each_ref().map(String::as_str));
+    // The generation as this build made it, beside the crate's output: tests/header.rs
+    // compares include/rt2.h (in the tree and at HEAD) with it, which catches a hand edit
+    // that no rebuild has overwritten yet.
+    let fresh =
+        std::path::Path::new(&std::env::var("OUT_DIR").expect("cargo sets OUT_DIR")).join("rt2.h");
     match cbindgen::generate_with_config(&crate_dir, config) {
         Ok(bindings) => {
+            bindings.write_to_file(&fresh);
             bindings.write_to_file(format!("{crate_dir}/include/rt2.h"));
         }
-        // A syntax error in the crate is reported by rustc itself, more clearly.
-        Err(e) => println!("cargo:warning=cbindgen could not generate include/rt2.h: {e}"),
+        // A syntax error in the crate is reported by rustc itself, more clearly. No copy is
+        // left in OUT_DIR, so that the header test cannot pass against an older generation.
+        Err(e) => {
+            let _ = std::fs::remove_file(&fresh);
+            println!("cargo:warning=cbindgen could not generate include/rt2.h: {e}");
+        }
     }
 }
