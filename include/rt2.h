@@ -361,8 +361,9 @@ typedef struct rt2_context_desc {
    */
   uint32_t backend;
   /**
-   * Worker threads; 0 (default) uses every core; at most 1024. Commits, renders and ray
-   * batches of more than 4096 rays run on them; a smaller batch runs on the thread that
+   * Worker threads; 0 (default) uses every core, or `RAYON_NUM_THREADS` when that holds a
+   * positive count; at most 1024 either way. Commits, renders and ray batches of more
+   * than 4096 rays run on them; a smaller batch runs on the thread that
    * calls `rt2_intersect` or `rt2_occluded`, so several calling threads trace at once
    * whatever this says.
    */

@@ -44,8 +44,26 @@ impl Drop for Context {
 /// a garbage count is an error rather than an attempt to start millions of threads.
 pub const MAX_THREADS: u32 = 1024;
 
+/// The workers of a context asked for 0: rayon's default count, i.e. `RAYON_NUM_THREADS` (or
+/// its deprecated `RAYON_RS_NUM_CPUS`) when it holds a positive count, else one per core, and
+/// never more than [`MAX_THREADS`]. Resolved here rather than by handing rayon 0, which started
+/// as many workers as the variable said (2000 took 2 s, above the documented cap).
+fn default_threads() -> usize {
+    let from_env = |name: &str| {
+        std::env::var(name)
+            .ok()
+            .and_then(|v| v.parse::<usize>().ok())
+            .filter(|&n| n > 0)
+    };
+    from_env("RAYON_NUM_THREADS")
+        .or_else(|| from_env("RAYON_RS_NUM_CPUS"))
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .min(MAX_THREADS as usize)
+}
+
 impl Context {
-    /// `threads == 0` uses every core, at most [`MAX_THREADS`]. The pool is the context's own:
+    /// `threads == 0` uses every core (`RAYON_NUM_THREADS` when set), at most [`MAX_THREADS`]
+    /// (`default_threads`). The pool is the context's own:
     /// the host program's global rayon pool is never touched. GPU adapters follow
     /// `RT2_ADAPTER` and `RT2_GPU_DEVICES` (see [`GpuOptions::from_env`]).
     pub fn new(request: BackendRequest, threads: u32) -> Result<Self> {
@@ -65,7 +83,11 @@ impl Context {
         }
         let env = crate::env::var("RT2_BACKEND")?;
         let (decision, gpu) = dispatch::decide_backend(request, env.as_deref(), gpu_opts)?;
-        let pool = Pool::new(threads as usize).map_err(|e| {
+        let threads = match threads {
+            0 => default_threads(),
+            n => n as usize,
+        };
+        let pool = Pool::new(threads).map_err(|e| {
             // The system refused a thread (a process or memory limit): a resource failure,
             // not a bug.
             Error::out_of_memory(format!("cannot start {threads} worker threads: {e}"))

@@ -194,3 +194,56 @@ fn renders_queries_and_commits_share_a_context_and_a_scene() {
         rt2_context_destroy(ctx);
     }
 }
+
+/// Set in the child process of [`default_thread_count_follows_rayon_num_threads_up_to_the_cap`]:
+/// the worker count that context must report.
+const CHILD_EXPECTS: &str = "RT2_TEST_THREADS_EXPECTED";
+
+/// `threads = 0` takes `RAYON_NUM_THREADS` when it is set (the C examples' harness keeps
+/// parallel test runs from oversubscribing the machine with it), and never more than the
+/// documented 1024: handed 0, rayon started as many workers as the variable said (2000 took
+/// 2 s and the context reported 2000 threads). Each count runs in a child process of this test
+/// binary, whose environment no other test shares.
+#[test]
+fn default_thread_count_follows_rayon_num_threads_up_to_the_cap() {
+    if let Ok(want) = std::env::var(CHILD_EXPECTS) {
+        let mut d = rt2_context_desc_default();
+        d.backend = Rt2Backend::Cpu as u32;
+        assert_eq!(d.threads, 0);
+        let mut ctx = null_mut();
+        unsafe {
+            assert_eq!(rt2_context_create(&d, &mut ctx), Rt2Status::Ok);
+            let mut p: rt2_context_properties = std::mem::zeroed();
+            p.struct_size = std::mem::size_of::<rt2_context_properties>() as u32;
+            assert_eq!(rt2_context_info(ctx, &mut p), Rt2Status::Ok);
+            rt2_context_destroy(ctx);
+            assert_eq!(
+                p.threads.to_string(),
+                want,
+                "threads of a context asked for 0"
+            );
+        }
+        return;
+    }
+    let exe = std::env::current_exe().expect("the test knows its own path");
+    for (rayon, want) in [("3", 3), ("1500", 1024)] {
+        let out = std::process::Command::new(&exe)
+            .args([
+                "--exact",
+                "default_thread_count_follows_rayon_num_threads_up_to_the_cap",
+                "--test-threads",
+                "1",
+            ])
+            .env("RAYON_NUM_THREADS", rayon)
+            .env("RT2_BACKEND", "cpu")
+            .env(CHILD_EXPECTS, want.to_string())
+            .output()
+            .expect("the test binary runs");
+        assert!(
+            out.status.success(),
+            "RAYON_NUM_THREADS={rayon}, expected {want} threads:\n{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}

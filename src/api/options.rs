@@ -242,8 +242,9 @@ pub struct rt2_context_desc {
     pub struct_size: u32,
     /// An `rt2_backend` value. Default AUTO; the `RT2_BACKEND` environment variable overrides.
     pub backend: u32,
-    /// Worker threads; 0 (default) uses every core; at most 1024. Commits, renders and ray
-    /// batches of more than 4096 rays run on them; a smaller batch runs on the thread that
+    /// Worker threads; 0 (default) uses every core, or `RAYON_NUM_THREADS` when that holds a
+    /// positive count; at most 1024 either way. Commits, renders and ray batches of more
+    /// than 4096 rays run on them; a smaller batch runs on the thread that
     /// calls `rt2_intersect` or `rt2_occluded`, so several calling threads trace at once
     /// whatever this says.
     pub threads: u32,
