@@ -643,6 +643,22 @@ fn minimal_on_the_gpu_backend_renders_the_triangle() {
     assert!(stdout(&out).contains("minimal: OK"));
 }
 
+/// `RT2_BACKEND`, `RT2_ADAPTER` and `RT2_GPU_DEVICES` set but empty (a shell's `VAR= program`)
+/// count as unset, all three alike: an empty `RT2_BACKEND` made every context creation fail
+/// ("expected cpu, gpu or auto") where the other two were already taken as unset.
+#[test]
+fn empty_environment_variables_count_as_unset() {
+    let exe = build_example_as("minimal", "minimal-empty-env");
+    let empty = [
+        ("RT2_BACKEND", ""),
+        ("RT2_ADAPTER", ""),
+        ("RT2_GPU_DEVICES", ""),
+    ];
+    let out = run_with(&exe, &[], &empty);
+    assert_exit(&out, 0, "minimal with the RT2_* variables empty");
+    assert!(stdout(&out).contains("minimal: OK"), "{}", stdout(&out));
+}
+
 /// No usable adapter (`RT2_ADAPTER` names none, or `WGPU_BACKEND` a backend RT2 lacks): the
 /// GPU requested is
 /// `RT2_STATUS_BACKEND_UNAVAILABLE` with the reason; AUTO traces on the CPU and

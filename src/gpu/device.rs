@@ -35,7 +35,7 @@ impl GpuOptions {
     /// that is set but unreadable (see the `env` module).
     pub fn from_env() -> Result<Self> {
         Ok(GpuOptions {
-            adapter: crate::env::var("RT2_ADAPTER")?.filter(|s| !s.is_empty()),
+            adapter: crate::env::var("RT2_ADAPTER")?,
             logical_devices: logical_devices(crate::env::var("RT2_GPU_DEVICES")?.as_deref())?,
             ..GpuOptions::default()
         })
