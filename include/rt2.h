@@ -110,9 +110,10 @@ enum rt2_gpu_path
 #endif // __cplusplus
  {
   /**
-   * The library picks by the share of reflective and transparent primitives; on a
-   * software adapter (lavapipe) it takes WAVEFRONT for more than one sample per pixel, as
-   * a megakernel pixel of many samples may exceed the driver's loop budget
+   * The library picks MEGAKERNEL for `max_depth` 1 (no secondary rays), else WAVEFRONT
+   * when at least half the primitives reflect or transmit and MEGAKERNEL otherwise; but on
+   * a software adapter (lavapipe) it takes WAVEFRONT whenever a pixel has more than one
+   * sample, as a megakernel pixel of many samples may exceed the driver's loop budget
    * (`RT2_BACKEND_GPU`).
    */
   RT2_GPU_PATH_AUTO = 0,
@@ -289,7 +290,10 @@ typedef enum rt2_status {
    */
   RT2_STATUS_UNSUPPORTED = 6,
   /**
-   * The GPU was asked for and none is usable.
+   * The GPU was asked for and none is usable: no adapter at context creation; for a job on
+   * a context that asked for the GPU, a job beyond a device limit, a lost device, or
+   * (lavapipe only) a job the driver's loop budget cut short. An AUTO context runs such a
+   * job on the CPU instead.
    */
   RT2_STATUS_BACKEND_UNAVAILABLE = 7,
   /**

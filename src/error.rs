@@ -18,7 +18,10 @@ pub enum Rt2Status {
     Parse = 5,
     /// Valid input that this version does not handle.
     Unsupported = 6,
-    /// The GPU was asked for and none is usable.
+    /// The GPU was asked for and none is usable: no adapter at context creation; for a job on
+    /// a context that asked for the GPU, a job beyond a device limit, a lost device, or
+    /// (lavapipe only) a job the driver's loop budget cut short. An AUTO context runs such a
+    /// job on the CPU instead.
     BackendUnavailable = 7,
     /// A bug in RT2: a panic caught at the C boundary.
     Internal = 8,

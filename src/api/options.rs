@@ -109,9 +109,10 @@ pub enum Rt2Schedule {
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Rt2GpuPath {
-    /// The library picks by the share of reflective and transparent primitives; on a
-    /// software adapter (lavapipe) it takes WAVEFRONT for more than one sample per pixel, as
-    /// a megakernel pixel of many samples may exceed the driver's loop budget
+    /// The library picks MEGAKERNEL for `max_depth` 1 (no secondary rays), else WAVEFRONT
+    /// when at least half the primitives reflect or transmit and MEGAKERNEL otherwise; but on
+    /// a software adapter (lavapipe) it takes WAVEFRONT whenever a pixel has more than one
+    /// sample, as a megakernel pixel of many samples may exceed the driver's loop budget
     /// (`RT2_BACKEND_GPU`).
     Auto = 0,
     /// One kernel traces every ray of a pixel.
