@@ -420,7 +420,6 @@ fn gpu_lacks(intersector: Intersector) -> Option<&'static str> {
         .then_some("the GPU kernels test triangles with Möller–Trumbore only (no watertight test)")
 }
 
-/// One excluded primitive per ray, when there are any.
 /// Refuses a batch whose exclusions or answers are not one per ray: the backends index all
 /// three by ray, and a shorter slice would leave rays untraced on the CPU and panic on the GPU.
 fn check_lengths<T>(rays: &[Ray], exclude: Option<&[PrimIndex]>, out: &[T]) -> Result<()> {
