@@ -730,3 +730,94 @@ fn planes_take_scales_whose_ratio_passes_f32s_range() {
         assert_eq!(hit[0].t, 1.0, "scale {s}");
     }
 }
+
+/// Columns `x`, `y`, `z` of a map whose `z` is `x` with its last entry one ulp lower: nearly
+/// singular, with entries of mixed size (one of 322, others of 1e-4), as a product of f32
+/// matrices can come out. Its determinant is `x · (x × y) + (z - x) · (x × y)`, i.e. exactly
+/// `(z.z - x.z) (x.x y.y - x.y y.x)`: positive (+6.8e-14), not a mirror. Summed in f64 its six
+/// products of three entries (72 bits each) cancel to -5.3e-13.
+const SLIVER: [[f32; 3]; 3] = [
+    [-8.993_936, -322.205_84, 1.300_467_1e-4],
+    [-2.242_331_7e-5, -2.858_686_2e-4, 3.085_747_7],
+    [-8.993_936, -322.205_84, 1.300_467e-4],
+];
+
+/// The transform of columns `cols`, not moving the origin.
+fn linear(cols: [[f32; 3]; 3]) -> Affine3A {
+    Affine3A::from_mat3(glam::Mat3::from_cols_array_2d(&cols))
+}
+
+/// A triangle under [`SLIVER`] keeps the normal the header gives it, `(v1 - v0) × (v2 - v0)`
+/// of its corners as given carried by the inverse transpose: for `(0,0,0) (1,0,0) (0,1,0)`,
+/// `(x × y) / det`, on the side of `x × y` since the determinant is positive. A determinant
+/// summed in f64 came out negative: the mesh was taken for a mirrored one, its corners swapped
+/// and its normal flipped.
+#[test]
+fn a_nearly_singular_map_is_a_mirror_only_if_its_exact_determinant_is_negative() {
+    let [x, y, z] = SLIVER.map(|c| DVec3::from_array(c.map(f64::from)));
+    // Exact: z - x is one entry, an exact difference; the two products are exact in f64 and
+    // their difference keeps its sign.
+    let det_sign = (z.z - x.z) * (x.x * y.y - x.y * y.x);
+    assert!(det_sign > 0.0);
+    let normal = x.cross(y).normalize();
+    let mut scene = Scene::new();
+    let corners = vec![Vec3::ZERO, Vec3::X, Vec3::Y];
+    let mesh = Shape::Mesh {
+        positions: corners,
+        triangles: vec![[0, 1, 2]],
+    };
+    let id = scene.add_object(mesh, 0).unwrap();
+    scene.set_transform(id, linear(SLIVER)).unwrap();
+    scene.commit().unwrap();
+    let centre = (x + y) / 3.0;
+    let o = centre + normal * 10.0;
+    let ray = Ray::new(o.as_vec3(), (centre - o).as_vec3(), 0.0, f32::INFINITY);
+    let mut hit = [Hit::MISS];
+    let ctx = Context::new(BackendRequest::Cpu, 1).unwrap();
+    let c = scene.committed().unwrap();
+    ctx.intersect(c, &[ray], &mut hit, &QueryOptions::default())
+        .unwrap();
+    assert!((hit[0].t - 1.0).abs() < 1e-4, "{:?}", hit[0]);
+    let got = c.hit_surface(&ray, &hit[0]).expect("hit").normal;
+    assert!(
+        got.as_dvec3().dot(normal) > 0.999,
+        "normal {got} against {normal}"
+    );
+}
+
+/// A map with two equal columns is singular, whatever the size of its entries: refused as the
+/// header says (INVALID_ARGUMENT, the object keeps its transform). Its determinant summed in
+/// f64 came out 7.1e-15, and it was taken: a mesh placed flat (counted, never hit), a sphere
+/// made a disc, a plane given a normal out of rounding.
+#[test]
+fn a_map_with_two_equal_columns_is_singular() {
+    let x = [9.717_422, 28.761_31, 13.942_774];
+    let y = [-2.263_274e-4, 0.371_033, -1.755_306_9e-2];
+    let shapes = [
+        Shape::Mesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            triangles: vec![[0, 1, 2]],
+        },
+        Shape::Sphere {
+            center: Vec3::ZERO,
+            radius: 1.0,
+        },
+        Shape::Plane {
+            normal: Vec3::Z,
+            offset: 0.5,
+        },
+    ];
+    for shape in shapes {
+        for cols in [[x, y, x], [x, x, y], [y, x, x]] {
+            let mut scene = Scene::new();
+            let id = scene.add_object(shape.clone(), 0).unwrap();
+            let e = scene.set_transform(id, linear(cols)).unwrap_err();
+            assert_eq!(e.status, Rt2Status::InvalidArgument, "{shape:?} {cols:?}");
+            assert!(e.message.contains("singular"), "{}", e.message);
+            assert_eq!(
+                scene.objects()[0].as_ref().unwrap().transform,
+                Affine3A::IDENTITY
+            );
+        }
+    }
+}

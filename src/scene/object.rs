@@ -5,7 +5,7 @@
 use crate::error::{Error, Result};
 use crate::fallible::{Fallible, TryGrow};
 use crate::geometry::{Aabb, Ellipsoid, Plane, PrimitiveSet, Sphere, Triangle};
-use glam::{Affine3A, Mat3, Vec3};
+use glam::{Affine3A, DVec3, Mat3, Vec3};
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum Shape {
@@ -108,13 +108,72 @@ fn mirrors(t: &Affine3A) -> bool {
     determinant(t) < 0.0
 }
 
-/// The determinant of `t`'s 3x3 part, in f64. In f32 its products cancel for a nearly
-/// singular map that a scene graph easily makes (a rotation, a scale of 1e-5 on two axes,
-/// another rotation: -1.4e-10 where it is +1.0e-10), flipping the sign that says whether
-/// the map mirrors, or giving 0 for a map that is not singular. In f64 no product of f32
-/// entries overflows or underflows.
+/// The determinant of `t`'s 3x3 part: its sign exact (0 only for a singular map), its value
+/// within an ulp or so. In f32 its products cancel for a nearly singular map that a scene
+/// graph easily makes (a rotation, a scale of 1e-5 on two axes, another rotation: -1.4e-10
+/// where it is +1.0e-10), flipping the sign that says whether the map mirrors, or giving 0
+/// for a map that is not singular. Summed in f64 they still can: a product of three f32
+/// entries takes 72 bits, and a map with two equal columns came out 7.1e-15 (taken for not
+/// singular), one whose determinant is +6.8e-14 came out -5.3e-13 (taken for a mirror).
+/// So the f64 sum is kept only where its error bound says its sign is right; otherwise the
+/// six products are split exactly into two f64 each and summed exactly
+/// ([`exact_determinant`]). In f64 no product of f32 entries overflows or underflows.
 pub(crate) fn determinant(t: &Affine3A) -> f64 {
-    Mat3::from(t.matrix3).as_dmat3().determinant()
+    let m = Mat3::from(t.matrix3).as_dmat3();
+    let (x, y, z) = (m.x_axis, m.y_axis, m.z_axis);
+    let det = m.determinant();
+    // `z · (x × y)`: each cross term is a difference of exact products, rounded once, then
+    // three products and two sums: at most 4 roundings of terms bounded by the permanent.
+    let (xa, ya) = (x.abs(), y.abs());
+    let permanent = z.abs().dot(DVec3::new(
+        xa.y * ya.z + ya.y * xa.z,
+        xa.z * ya.x + ya.z * xa.x,
+        xa.x * ya.y + ya.x * xa.y,
+    ));
+    if det.abs() > 8.0 * f64::EPSILON * permanent {
+        return det;
+    }
+    exact_determinant([x, y, z].map(|c| c.to_array()))
+}
+
+/// The determinant of the columns `c` (f32 values), summed exactly: each of its six products
+/// is `a b` (exact in f64: 48 bits) times `c`, split into the rounded product and its exact
+/// error (an FMA), and the twelve parts are added into a nonoverlapping expansion (Shewchuk's
+/// Grow-Expansion), whose largest part has the sign of the sum.
+fn exact_determinant(c: [[f64; 3]; 3]) -> f64 {
+    let two_sum = |a: f64, b: f64| {
+        let s = a + b;
+        let bv = s - a;
+        (s, (a - (s - bv)) + (b - bv))
+    };
+    let mut parts = [0.0f64; 12];
+    let mut n = 0;
+    for (i, j, k, sign) in [
+        (0, 1, 2, 1.0),
+        (1, 2, 0, 1.0),
+        (2, 0, 1, 1.0),
+        (0, 2, 1, -1.0),
+        (1, 0, 2, -1.0),
+        (2, 1, 0, -1.0),
+    ] {
+        let ab = sign * c[0][i] * c[1][j];
+        let p = ab * c[2][k];
+        for b in [ab.mul_add(c[2][k], -p), p] {
+            let mut q = b;
+            for h in &mut parts[..n] {
+                (q, *h) = two_sum(q, *h);
+            }
+            parts[n] = q;
+            n += 1;
+        }
+    }
+    // Smallest parts first; the largest nonzero part decides the sign (a sum rounded onto 0
+    // or across it, which nonoverlapping parts all but rule out, falls back to it).
+    let sum: f64 = parts.iter().sum();
+    match parts.iter().rev().find(|&&p| p != 0.0) {
+        Some(&top) if sum == 0.0 || sum.signum() != top.signum() => top,
+        _ => sum,
+    }
 }
 
 /// Where a global primitive index came from, for hits reported to the caller.
@@ -357,4 +416,42 @@ fn plane(t: &Affine3A, normal: Vec3, offset: f32) -> Result<Plane> {
         normal: world.to_array(),
         offset,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// Maps of columns `x`, `y`, `x + d e_k` (`x`'s entry `k` moved an ulp or two): nearly
+    /// singular, with entries spread over 2^±12. The determinant is `d (x × y)_k`, whose sign
+    /// f64 gets exactly (`d` is an exact difference of f32, each cross product term an exact
+    /// product); and with `d = 0` (two equal columns), zero. [`determinant`] agrees on every
+    /// one, where the f64 sum alone gave a wrong sign, or a non-zero one for equal columns.
+    #[test]
+    fn the_determinant_has_the_sign_of_the_exact_one() {
+        let mut rng = Rng(7);
+        let mut entry = || {
+            let e = (rng.index(25) as f32 - 12.0).exp2();
+            (rng.unit() * 2.0 - 1.0) * e
+        };
+        for _ in 0..100_000 {
+            let x = Vec3::new(entry(), entry(), entry());
+            let y = Vec3::new(entry(), entry(), entry());
+            let k = (x.x.to_bits() % 3) as usize;
+            let mut z = x;
+            let ulps = [0i32, 1, -1, 2][(y.x.to_bits() % 4) as usize];
+            z[k] = f32::from_bits((z[k].to_bits() as i32 + ulps) as u32);
+            let (xd, yd) = (x.as_dvec3(), y.as_dvec3());
+            let cross_k = xd.cross(yd)[k];
+            let want = (z[k] as f64 - x[k] as f64) * cross_k;
+            let t = Affine3A::from_mat3(Mat3::from_cols(x, y, z));
+            let got = determinant(&t);
+            assert_eq!(
+                (got > 0.0, got < 0.0),
+                (want > 0.0, want < 0.0),
+                "{x} {y} {z}: {got:e}, want the sign of {want:e}"
+            );
+        }
+    }
 }
