@@ -326,6 +326,18 @@ unsafe fn add(
     (st, id)
 }
 
+/// Removes object `id` from the scene and from the model, whose commit is then stale.
+unsafe fn remove(scene: *mut rt2_scene, model: &mut Model, id: u32) {
+    assert_eq!(
+        rt2_scene_remove(scene, id),
+        Rt2Status::Ok,
+        "{}",
+        last_error()
+    );
+    model.objects[id as usize] = None;
+    model.fresh = false;
+}
+
 /// `shape` made invalid in one way its add refuses (a NaN or infinite value, a non-positive
 /// size, min past max, a zero normal, an index past the vertices).
 fn spoiled(rng: &mut Rng, shape: &Shape) -> Shape {
@@ -661,27 +673,13 @@ fn sequence(seed: u64, steps: usize) -> [usize; 4] {
                 }
                 5 | 6 if !live.is_empty() => {
                     let id = pick(&mut rng);
-                    assert_eq!(
-                        rt2_scene_remove(scene, id),
-                        Rt2Status::Ok,
-                        "{}",
-                        last_error()
-                    );
-                    model.objects[id as usize] = None;
-                    model.fresh = false;
+                    remove(scene, &mut model, id);
                     what = format!("remove {id}");
                 }
                 7 if !live.is_empty() && rng.below(4) == 0 => {
                     for &id in &live {
-                        assert_eq!(
-                            rt2_scene_remove(scene, id),
-                            Rt2Status::Ok,
-                            "{}",
-                            last_error()
-                        );
-                        model.objects[id as usize] = None;
+                        remove(scene, &mut model, id);
                     }
-                    model.fresh = false;
                     what = "remove every object".into();
                 }
                 8 | 9 if !live.is_empty() => {
