@@ -156,7 +156,9 @@ unsafe fn prepare_and_edit<P>(
 /// materials, lights and an object's material are fixed once added, and cannot be removed.
 /// A scene gives at most 2^32 - 1 object ids (0 to `RT2_INVALID_ID` - 1), removed ones
 /// included: an add past them is UNSUPPORTED, and one whose id's slot (8 bytes) cannot be
-/// allocated is OUT_OF_MEMORY, with nothing added.
+/// allocated is OUT_OF_MEMORY, with nothing added. It holds fewer than 2^30 primitives at
+/// once (a triangle each, one per analytic shape; removed objects' no longer count): an add
+/// that would reach 2^30 is UNSUPPORTED too.
 ///
 /// # Safety
 /// `ctx` is a live context; `out` is writable.
