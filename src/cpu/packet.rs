@@ -182,7 +182,9 @@ pub(crate) fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
             continue;
         }
         let list = tree.leaf_prims(n);
-        if rays_per_triangle(live, list) {
+        if list.is_empty() {
+            dead |= b.visit_empty_leaf(&id, live, &cur.t1);
+        } else if rays_per_triangle(live, list) {
             let lanes = match lanes {
                 Some(ref mut lanes) => lanes,
                 None => lanes.insert(b.packet_lanes(isa, &id, p.mask, known.take())),

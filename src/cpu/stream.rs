@@ -248,7 +248,12 @@ fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
                     b.prefetch_leaf(i);
                 }
                 let (id, _, t1) = lists.load::<N>(at);
-                b.visit_leaf_rays(isa, leaf, &id, first::<N>(count - k), &t1);
+                let live = first::<N>(count - k);
+                if leaf.is_empty() {
+                    b.visit_empty_leaf(&id, live, &t1);
+                } else {
+                    b.visit_leaf_rays(isa, leaf, &id, live, &t1);
+                }
             }
             continue;
         }
