@@ -11,7 +11,7 @@
 
 use super::batch::{positive, run, Answer, Batch, Mode, RayTests, Root, Split};
 use super::ray_order::{Blocks, RayOrder};
-use super::simd::{self, Isa, LeafPrims, RayLanes, Width};
+use super::simd::{self, Isa, LeafPrims, PreparedLeaf, RayLanes, Width, GATHER_MIN_RAYS};
 use crate::geometry::{Hit, PrimitiveSet, Ray, TraversalStats};
 use crate::kdtree::KdTree;
 
@@ -85,10 +85,12 @@ pub(crate) struct Entry<const N: usize> {
 /// nodes lie at depth `MAX_DEPTH_LIMIT - 1` at most.
 const STACK_SLOTS: usize = crate::kdtree::MAX_DEPTH_LIMIT as usize;
 
-/// Reused buffers of one thread: the packet stack and the leaf's gathered triangles.
+/// Reused buffers of one thread: the packet stack and the leaf's gathered triangles (`lone`:
+/// in blocks of [`LONE_BLOCK`] for a ray or two).
 pub(crate) struct Scratch<const N: usize> {
     stack: Vec<Entry<N>>,
     pub leaf: LeafPrims<N>,
+    lone: LeafPrims<LONE_BLOCK>,
 }
 
 impl<const N: usize> Scratch<N> {
@@ -102,6 +104,7 @@ impl<const N: usize> Scratch<N> {
         Scratch {
             stack: vec![empty; STACK_SLOTS],
             leaf: LeafPrims::default(),
+            lone: LeafPrims::default(),
         }
     }
 }
@@ -191,22 +194,7 @@ pub(crate) fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
             };
             dead |= b.visit_packet_leaf(isa, list, lanes, &id, live, &cur.t1);
         } else {
-            let leaf = s.leaf.gather(
-                b.prims,
-                list,
-                live.count_ones() as usize,
-                Batch::<A, WATERTIGHT>::INTERSECTOR,
-            );
-            // A loop, not `for_lanes`: LLVM kept that closure as a call, compiled without the
-            // kernel's SIMD features (see `simd`).
-            let mut m = live;
-            while m != 0 {
-                let l = m.trailing_zeros() as usize;
-                m &= m - 1;
-                if b.visit_leaf(isa, &leaf, id[l], cur.t1[l]) {
-                    dead |= 1 << l;
-                }
-            }
+            dead |= visit_few(isa, b, (&mut s.leaf, &mut s.lone), list, &id, &cur.t1, live);
             if let Some(lanes) = &mut lanes {
                 b.reread(lanes, &id, live);
             }
@@ -223,6 +211,73 @@ pub(crate) fn traverse<const N: usize, A: Answer, const WATERTIGHT: bool>(
             }
         };
     }
+}
+
+/// Triangles per block of a leaf that one or two of a packet's rays reach (fewer than
+/// [`GATHER_MIN_RAYS`]), when it holds more than one block of the single-ray leaf test (4
+/// triangles) and the CPU runs 8 lanes: each ray then tests blocks of 8 triangles (AVX), made
+/// once for both rays, rather than gathering blocks of 4 itself. Such leaves are the large
+/// ones (on the bunny's `incoherent_262144` set most leaf visits of a lone ray met 8
+/// triangles or more), and blocks of 4 took them in two steps or more, each with its block
+/// to gather. With the same hits and statistics, 16-lane streams ran 1.05× as fast on that
+/// set, 1.045× on the dragon's `incoherent_131072` and 1.02× on 262 K incoherent rays of the
+/// Snowden bust, alike on the bunny's `primary_262144`; 8-lane streams 1.025× and 16-lane
+/// packets 1.05× on the bunny's incoherent set (one thread, AMD EPYC, the two paths
+/// alternated in one process, medians of 20–30 paired runs). Blocks of 16 (AVX-512, which
+/// Zen 4 runs as two halves, and twice the lanes to gather) ran alike with blocks of 4 on the
+/// bunny; blocks of 8 for every such leaf, however many rays reach it (instead of
+/// [`LeafPrims::gather`]'s N-lane blocks from three rays on), 1.03× on the bunny and 1.01× on
+/// the Snowden bust.
+const LONE_BLOCK: usize = 8;
+
+/// Tests the leaf `list` against the few lanes `live` (the N-rays × 1-triangle test would
+/// waste most of its lanes: [`rays_per_triangle`]) one ray at a time: in blocks of
+/// [`LONE_BLOCK`] made once for one or two rays, else as [`LeafPrims::gather`] prepares it
+/// (the [`Scratch`] buffers for each). Returns the lanes finished.
+#[inline(always)]
+fn visit_few<const N: usize, A: Answer, const WATERTIGHT: bool>(
+    isa: Isa<N>,
+    b: &mut Batch<A, WATERTIGHT>,
+    (gathered, lone_blocks): (&mut LeafPrims<N>, &mut LeafPrims<LONE_BLOCK>),
+    list: &[u32],
+    id: &[u32; N],
+    t_exit: &[f32; N],
+    live: u32,
+) -> u32 {
+    let rays = live.count_ones() as usize;
+    let intersector = Batch::<A, WATERTIGHT>::INTERSECTOR;
+    if let Some(lone) = isa.narrow::<LONE_BLOCK>() {
+        if rays < GATHER_MIN_RAYS && list.len() > LONE_BLOCK / 2 {
+            if let Some(leaf) = lone_blocks.whole_blocks(b.prims, list, intersector) {
+                return visit_each(lone, b, &leaf, id, t_exit, live);
+            }
+        }
+    }
+    let leaf = gathered.gather(b.prims, list, rays, intersector);
+    visit_each(isa, b, &leaf, id, t_exit, live)
+}
+
+/// Tests the prepared leaf `leaf` against the rays of lanes `live`, one at a time; returns the
+/// lanes finished. A loop, not `for_lanes`: LLVM kept that closure as a call, compiled without
+/// the kernel's SIMD features (see `simd`).
+#[inline(always)]
+fn visit_each<const M: usize, const N: usize, A: Answer, const WATERTIGHT: bool>(
+    isa: Isa<M>,
+    b: &mut Batch<A, WATERTIGHT>,
+    leaf: &PreparedLeaf<M>,
+    id: &[u32; N],
+    t_exit: &[f32; N],
+    live: u32,
+) -> u32 {
+    let (mut finished, mut m) = (0u32, live);
+    while m != 0 {
+        let l = m.trailing_zeros() as usize;
+        m &= m - 1;
+        if b.visit_leaf(isa, leaf, id[l], t_exit[l]) {
+            finished |= 1 << l;
+        }
+    }
+    finished
 }
 
 /// Whether the live lanes `live` test the leaf `prims` as Wald's packets do, all rays against

@@ -88,6 +88,12 @@ impl<const N: usize> Isa<N> {
         const { assert!(N <= 4, "only 1 and 4 lanes run everywhere") };
         Isa(())
     }
+
+    /// The proof for `M` lanes, which one for at least as many gives (a CPU with AVX-512F has
+    /// AVX2, which [`dispatch`]'s 16-lane kernel is compiled for); `None` when `M > N`.
+    pub fn narrow<const M: usize>(self) -> Option<Isa<M>> {
+        (M <= N).then_some(Isa(()))
+    }
 }
 
 /// A computation generic over the lane width, run by [`dispatch`] with the proof that the CPU
@@ -406,6 +412,33 @@ pub const GATHER_MIN_RAYS: usize = 3;
 pub struct LeafPrims<const N: usize> {
     blocks: Vec<TriBlock<N>>,
     others: Vec<u32>,
+}
+
+impl<const N: usize> LeafPrims<N> {
+    /// The leaf `prims` in whole blocks made by [`TriBlock::from_prims`] (columns built in
+    /// registers: these blocks are read at once, by a ray or two), or `None` when it holds
+    /// other primitives than triangles.
+    #[inline(always)]
+    pub fn whole_blocks<'a>(
+        &'a mut self,
+        set: &PrimitiveSet,
+        prims: &[u32],
+        intersector: Intersector,
+    ) -> Option<PreparedLeaf<'a, N>> {
+        if prims.iter().any(|&p| p as usize >= set.triangles.len()) {
+            return None;
+        }
+        self.blocks.clear();
+        for group in prims.chunks(N) {
+            self.blocks
+                .push(TriBlock::from_prims(set, group, intersector));
+        }
+        Some(PreparedLeaf {
+            blocks: &self.blocks,
+            others: &[],
+            count: prims.len(),
+        })
+    }
 }
 
 /// A leaf prepared by [`LeafPrims::gather`]: triangles in [`TriBlock`]s, the rest as indices for
