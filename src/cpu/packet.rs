@@ -288,7 +288,17 @@ fn visit_each<const M: usize, const N: usize, A: Answer, const WATERTIGHT: bool>
 /// from 1081 to 944 on the dragon's, 3% fewer on the bunny's diffuse set and the same on its
 /// incoherent set (callgrind, which lacks AVX-512); testing every leaf so cost 30% more on
 /// incoherent rays. With 16 lanes (AVX-512, the bunny's 1024² primary rays) one, two or four
-/// rays per triangle, or every leaf so, were within the machine's noise of each other.
+/// rays per triangle, or every leaf so, were within the machine's noise of each other. On the
+/// bunny's `incoherent_262144` set (16-lane streams, one thread, 20–30 paired runs in one
+/// process) one ray per triangle ran at 1.00×, and leaving one or two rays to the single-ray
+/// test however few triangles the leaf holds at 1.006–1.008× (1.00× on the dragon's
+/// `incoherent_131072`).
+///
+/// The single-ray tests of such leaves take about a third of a 16-lane stream's time on the
+/// bunny's incoherent set, but not for want of the triangles in the caches: with the mesh's
+/// triangles sorted by a Morton code of their centres, or shuffled, before the tree is built,
+/// streams ran at 10.3 and 10.0 Mrays/s against 10.2 as loaded, so copies of the leaves'
+/// triangles in tree order were not tried.
 #[inline(always)]
 fn rays_per_triangle(live: u32, prims: &[u32]) -> bool {
     2 * live.count_ones() as usize >= prims.len()

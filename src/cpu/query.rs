@@ -52,7 +52,12 @@ pub const INCOHERENT_STREAM_MAX: usize = 262144;
 /// A stream of one octant's incoherent rays takes 65–70 bytes per ray, ray stack and ray
 /// arrays (16 MiB for the dragon's 256 K; `rt2 bench streams`, memory table).
 /// Mirror reflections of the dragon's 2752×1536 camera rays (557 K rays in mixed octants) ran
-/// alike with either stream size (2.93 and 3.05 Mrays/s, 5 interleaved runs).
+/// alike with either stream size (2.93 and 3.05 Mrays/s, 5 interleaved runs). With the empty
+/// bonus, on the bunny (one thread, 16 lanes, 5 runs each): 262 K incoherent rays in streams of
+/// at most 4 K, 8 K and 16 K rays ran at 0.73×, 0.80× and 0.90× of one stream per octant (about
+/// 32 K rays), and 2 M in streams of 64 K, 128 K and 256 K at 0.85–0.94×, 0.90–0.94× and
+/// 0.71–0.74× of 32 K: on the bunny more rays per stream pay up to about 32 K, so streams of
+/// mixed octants (larger ones from a small batch) were not tried.
 pub fn incoherent_stream_max(tree: &KdTree) -> usize {
     // Every inner node has two children: a tree of n nodes has (n + 1) / 2 leaves.
     tree.nodes
@@ -281,7 +286,11 @@ pub fn octant_runs_at_least(rays: &[Ray], run: usize) -> bool {
 /// place in the tree's box, one of the direction, 512 cells; a counting sort into one copy of
 /// the batch) rather than in the batch's order, so that a stream's rays share more nodes. The
 /// streams traced in 193 ms on the bunny and 149 ms on the Snowden bust against 198 and 148 in
-/// octant order, and the sort cost 45 ms more than the octant sort.
+/// octant order, and the sort cost 45 ms more than the octant sort. One pass writing every ray
+/// to its place in a sorted copy of the batch (and the answers back from one sorted array),
+/// rather than a gathered copy per stream: 1.036× on the bunny's 262 K incoherent rays, but
+/// 1.00× on the dragon's 131 K, 1.01× on 262 K of the Snowden bust and 0.985× on 2 M of the
+/// bunny's (16 lanes, 10–30 paired runs in one process).
 fn streamed<T: RayAnswer>(
     (rays, exclude): Rays,
     out: &mut [T],
