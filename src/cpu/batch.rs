@@ -635,6 +635,12 @@ impl<'a, A: Answer, const WATERTIGHT: bool> Batch<'a, A, WATERTIGHT> {
     /// Keeps the rays of `block` for a later traversal: their origins and reciprocal
     /// directions in [`Batch::split`] (made on the first keep: packets may need none), their
     /// roots in the group of their octant.
+    ///
+    /// Measured and dropped: a block of consecutive rays of one octant (a stream's, always)
+    /// written with whole-block stores (every lane's origin and reciprocal, its roots pushed
+    /// without an octant per lane), 0.999–1.022× on the bunny's `incoherent_262144`, 0.994×
+    /// on the dragon's `incoherent_131072`, 1.005× on the Snowden bust (16 lanes, one thread,
+    /// 20–30 paired runs in one process).
     #[inline(always)]
     pub fn keep<const N: usize>(
         &mut self,

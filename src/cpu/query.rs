@@ -278,19 +278,17 @@ pub fn octant_runs_at_least(rays: &[Ray], run: usize) -> bool {
 /// Streams of no more than a thread's share (but at least [`STREAM_CHUNK`]), traced in
 /// parallel. Rays that come in long octant runs are cut in their own order, in streams of at
 /// most [`STREAM_MAX`] rays; others are sorted by octant (a stable counting sort) and each
-/// octant cut into streams of at most `incoherent_max` rays, each traced on a gathered copy,
-/// with `out` filled from its answers.
+/// octant cut into streams of at most `incoherent_max` rays, each traced on a copy of its rays
+/// in the batch's order, with `out` filled from its answers: in one pass over the batch up to
+/// [`ONE_PASS_MAX`] rays ([`one_pass`]), else through an index of the sorted order, a copy
+/// gathered per stream.
 ///
 /// Measured and dropped (2 M incoherent rays, one thread): an octant cut in the order of cells
 /// of rays that start near each other and point alike (two levels of halves of the origin's
 /// place in the tree's box, one of the direction, 512 cells; a counting sort into one copy of
 /// the batch) rather than in the batch's order, so that a stream's rays share more nodes. The
 /// streams traced in 193 ms on the bunny and 149 ms on the Snowden bust against 198 and 148 in
-/// octant order, and the sort cost 45 ms more than the octant sort. One pass writing every ray
-/// to its place in a sorted copy of the batch (and the answers back from one sorted array),
-/// rather than a gathered copy per stream: 1.036× on the bunny's 262 K incoherent rays, but
-/// 1.00× on the dragon's 131 K, 1.01× on 262 K of the Snowden bust and 0.985× on 2 M of the
-/// bunny's (16 lanes, 10–30 paired runs in one process).
+/// octant order, and the sort cost 45 ms more than the octant sort.
 fn streamed<T: RayAnswer>(
     (rays, exclude): Rays,
     out: &mut [T],
@@ -303,6 +301,9 @@ fn streamed<T: RayAnswer>(
         return chunked((rays, exclude), out, size, trace);
     }
     let most = share.clamp(STREAM_CHUNK, incoherent_max.max(STREAM_CHUNK));
+    if rays.len() <= ONE_PASS_MAX {
+        return one_pass((rays, exclude), out, most, trace);
+    }
     let octants: Vec<u8> = rays.iter().map(|r| octant(r) as u8).collect();
     let mut start = [0usize; 9];
     for &o in &octants {
@@ -344,6 +345,97 @@ fn streamed<T: RayAnswer>(
         for (&i, a) in part.iter().zip(answers) {
             out[i] = a;
         }
+    }
+    stats
+}
+
+/// Most rays of a batch that [`streamed`] sorts by octant in one pass ([`one_pass`]): 512 K,
+/// whose sorted copy and answers (48 bytes a ray, 24 MiB) fit in memory the allocator reuses
+/// from batch to batch. On the bunny (one thread, 16 lanes, the two paths alternated in one
+/// process, medians of 10–14 paired runs) 1 M and 2 M incoherent rays ran at 0.937× and 0.932×
+/// of the per-stream gather, 512 K at 1.06×: presumably page faults, as glibc maps a block of
+/// 32 MiB or more (the 1 M-ray copy) afresh for every batch; the eight-vector variant below
+/// took 1000 more page faults per batch where it lost (`perf stat`).
+const ONE_PASS_MAX: usize = 1 << 19;
+
+/// [`streamed`]'s incoherent batches of at most [`ONE_PASS_MAX`] rays: one pass writes every
+/// ray to its place in a copy of the batch sorted by octant (a stable counting sort, its
+/// excluded primitive likewise), each octant's run of the copy is cut into streams of at most
+/// `most` rays traced in place with their answers in one sorted array, and one pass in the
+/// batch's order takes each ray's answer from its octant's next place. No index of the sorted
+/// order is made: an index (8 bytes a ray) written by the sort, read to gather each stream's
+/// copy and again to write its answers back cost about a tenth of the time of the bunny's
+/// 262 K incoherent rays (sort 0.5 ms, gathers 1.25 ms, answers 0.5 ms of 23.5 ms). With the
+/// same hits and statistics (one thread, 16 lanes, AMD EPYC, the two paths alternated in one
+/// process, medians of 30 paired runs): the bunny's `incoherent_262144` 1.056–1.063×, 262 K
+/// incoherent rays of the Snowden bust 1.056–1.059×, the dragon's `incoherent_131072`
+/// 1.022–1.024×. An earlier one-pass copy that still wrote the answers back through an index
+/// of the sorted order ran at 1.036×, 1.01× and 1.00× on these sets and 0.985× on 2 M of the
+/// bunny's rays (10–30 paired runs). A copy per octant (eight vectors, each allocated for its
+/// rays) lost on the Snowden bust (0.94×), with 1000 more page faults per batch.
+fn one_pass<T: RayAnswer>(
+    (rays, exclude): Rays,
+    out: &mut [T],
+    most: usize,
+    trace: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
+) -> TraversalStats {
+    let octants: Vec<u8> = rays.iter().map(|r| octant(r) as u8).collect();
+    let mut start = [0usize; 9];
+    for &o in &octants {
+        start[o as usize + 1] += 1;
+    }
+    for o in 0..8 {
+        start[o + 1] += start[o];
+    }
+    // Writes each item to its octant's next place.
+    fn sort<X: Copy>(items: &[X], octants: &[u8], start: &[usize; 9], sorted: &mut [X]) {
+        let mut next = *start;
+        for (x, &o) in items.iter().zip(octants) {
+            sorted[next[o as usize]] = *x;
+            next[o as usize] += 1;
+        }
+    }
+    let mut sorted: Vec<Ray> = bytemuck::zeroed_vec(rays.len());
+    sort(rays, &octants, &start, &mut sorted);
+    let sorted_exclude: Vec<PrimIndex>;
+    let exclude_of = match exclude {
+        Excluded::Each(e) => {
+            let mut x = vec![0; rays.len()];
+            sort(e, &octants, &start, &mut x);
+            sorted_exclude = x;
+            Some(&sorted_exclude[..])
+        }
+        Excluded::All(_) => None,
+    };
+    let mut answers = vec![T::MISS; rays.len()];
+    let mut parts = Vec::new();
+    let mut rest = &mut answers[..];
+    for o in 0..8 {
+        let (octant_answers, after) = rest.split_at_mut(start[o + 1] - start[o]);
+        rest = after;
+        let octant_rays = &sorted[start[o]..start[o + 1]];
+        let pieces = octant_rays
+            .chunks(most)
+            .zip(octant_answers.chunks_mut(most));
+        for (k, (r, a)) in pieces.enumerate() {
+            let e = match exclude_of {
+                Some(x) => Excluded::Each(&x[start[o] + k * most..][..r.len()]),
+                None => exclude,
+            };
+            parts.push((r, e, a));
+        }
+    }
+    let stats = parts
+        .into_par_iter()
+        .map(|(r, e, a)| trace(r, e, a))
+        .reduce(TraversalStats::default, |mut a, b| {
+            a.add(&b);
+            a
+        });
+    let mut next = start;
+    for (o, &oct) in out.iter_mut().zip(&octants) {
+        *o = answers[next[oct as usize]];
+        next[oct as usize] += 1;
     }
     stats
 }
