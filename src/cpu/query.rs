@@ -304,14 +304,7 @@ fn streamed<T: RayAnswer>(
     if rays.len() <= ONE_PASS_MAX {
         return one_pass((rays, exclude), out, most, trace);
     }
-    let octants: Vec<u8> = rays.iter().map(|r| octant(r) as u8).collect();
-    let mut start = [0usize; 9];
-    for &o in &octants {
-        start[o as usize + 1] += 1;
-    }
-    for o in 0..8 {
-        start[o + 1] += start[o];
-    }
+    let (octants, start) = octant_starts(rays);
     // Ray indices as `usize`: a Rust caller may pass more than 2^32 rays.
     let mut order = vec![0usize; rays.len()];
     let mut next = start;
@@ -349,6 +342,20 @@ fn streamed<T: RayAnswer>(
     stats
 }
 
+/// Each ray's octant, and where each octant's rays start in the batch sorted by octant (a
+/// stable counting sort: `start[o]..start[o + 1]` for octant `o`).
+fn octant_starts(rays: &[Ray]) -> (Vec<u8>, [usize; 9]) {
+    let octants: Vec<u8> = rays.iter().map(|r| octant(r) as u8).collect();
+    let mut start = [0usize; 9];
+    for &o in &octants {
+        start[o as usize + 1] += 1;
+    }
+    for o in 0..8 {
+        start[o + 1] += start[o];
+    }
+    (octants, start)
+}
+
 /// Most rays of a batch that [`streamed`] sorts by octant in one pass ([`one_pass`]): 512 K,
 /// whose sorted copy and answers (48 bytes a ray, 24 MiB) fit in memory the allocator reuses
 /// from batch to batch. On the bunny (one thread, 16 lanes, the two paths alternated in one
@@ -379,14 +386,7 @@ fn one_pass<T: RayAnswer>(
     most: usize,
     trace: impl Fn(&[Ray], Excluded, &mut [T]) -> TraversalStats + Sync,
 ) -> TraversalStats {
-    let octants: Vec<u8> = rays.iter().map(|r| octant(r) as u8).collect();
-    let mut start = [0usize; 9];
-    for &o in &octants {
-        start[o as usize + 1] += 1;
-    }
-    for o in 0..8 {
-        start[o + 1] += start[o];
-    }
+    let (octants, start) = octant_starts(rays);
     // Writes each item to its octant's next place.
     fn sort<X: Copy>(items: &[X], octants: &[u8], start: &[usize; 9], sorted: &mut [X]) {
         let mut next = *start;
