@@ -819,6 +819,99 @@ fn excluded_primitives_are_ignored_in_every_mode() {
     }
 }
 
+/// Exclusions travel with their rays through the octant sort of incoherent stream batches: rays
+/// in every octant, in batches that `query` sorts in one pass (at most `ONE_PASS_MAX` rays) and
+/// through a gathered copy per stream (more). Every mode, both intersectors, closest and any
+/// hits, gives the single-ray answers bit for bit (which the test above checks analytically),
+/// and a ray that ignores its first hit meets the other grid (or, where it crosses the first on
+/// an edge, the neighbouring triangle).
+#[test]
+fn excluded_primitives_follow_their_rays_through_the_octant_sort() {
+    unsafe {
+        let (ctx, scene) = empty_scene_on(null());
+        for z in [0.0, -1.0] {
+            let (p, i) = grid(8, z, |_, _| true);
+            add_mesh(scene, &p, &i);
+        }
+        assert_eq!(rt2_scene_commit(scene), Rt2Status::Ok);
+        // Down from above or up from below, tilted so that consecutive rays change octant.
+        let ray = |k: usize| {
+            let sign = |bit: usize| if k >> bit & 1 == 0 { 1.0 } else { -1.0 };
+            let f = |s: f32| 1.0 + (s * 0.37) % 6.0;
+            let z = sign(0);
+            rt2_ray {
+                org: [f(k as f32), f(k as f32 * 1.9 + 0.5), 10.0 * z],
+                tmin: 0.0,
+                dir: [0.01 * sign(1), 0.01 * sign(2), -z],
+                tmax: f32::INFINITY,
+            }
+        };
+        let nothing = rt2_hit {
+            t: f32::INFINITY,
+            u: 0.0,
+            v: 0.0,
+            object: RT2_INVALID_ID,
+            prim: RT2_INVALID_ID,
+        };
+        let one_pass_max = rt2::cpu::query::ONE_PASS_MAX;
+        for (count, modes) in [(20_000, &MODES[..]), (one_pass_max + 1000, &MODES[2..3])] {
+            let rays: Vec<rt2_ray> = (0..count).map(ray).collect();
+            let answers = |mode: Rt2QueryMode, intersector: Rt2Intersector, exclude: &[rt2_hit]| {
+                let mut opt = rt2_query_options_default();
+                (opt.mode, opt.intersector) = (mode as u32, intersector as u32);
+                if !exclude.is_empty() {
+                    opt.exclude = exclude.as_ptr();
+                }
+                let mut hits = vec![UNWRITTEN; rays.len()];
+                assert_eq!(
+                    intersect_all(ctx, scene, &rays, &mut hits, &opt),
+                    Rt2Status::Ok
+                );
+                let short: Vec<rt2_ray> =
+                    rays.iter().map(|r| rt2_ray { tmax: 10.5, ..*r }).collect();
+                let mut occ = vec![2u8; rays.len()];
+                assert_eq!(
+                    occluded_all(ctx, scene, &short, &mut occ, &opt),
+                    Rt2Status::Ok
+                );
+                (hits, occ)
+            };
+            let (first, _) = answers(Rt2QueryMode::Single, Rt2Intersector::MollerTrumbore, &[]);
+            assert!(first.iter().all(|h| h.object != RT2_INVALID_ID));
+            // Every third ray ignores its first hit, the others nothing.
+            let exclude: Vec<rt2_hit> = first
+                .iter()
+                .enumerate()
+                .map(|(k, h)| if k % 3 == 0 { *h } else { nothing })
+                .collect();
+            for intersector in [Rt2Intersector::MollerTrumbore, Rt2Intersector::Watertight] {
+                let (want, want_occ) = answers(Rt2QueryMode::Single, intersector, &exclude);
+                // The other grid, or (through an edge) the neighbouring triangle at the same t (but for
+                // rounding).
+                for (k, (w, f)) in want.iter().zip(&first).enumerate().step_by(3) {
+                    let near = (w.t - f.t).abs() <= 1e-5 * f.t;
+                    let neighbour = w.object == f.object && near && w.prim != f.prim;
+                    assert!(
+                        w.object == 1 - f.object || neighbour,
+                        "ray {k}: {w:?} after {f:?}"
+                    );
+                }
+                for &mode in modes {
+                    let (hits, occ) = answers(mode, intersector, &exclude);
+                    let same = |a: &rt2_hit, b: &rt2_hit| {
+                        (a.t, a.u, a.v, a.object, a.prim) == (b.t, b.u, b.v, b.object, b.prim)
+                    };
+                    let wrong = hits.iter().zip(&want).position(|(h, w)| !same(h, w));
+                    assert_eq!(wrong, None, "{count} rays {mode:?} {intersector:?}");
+                    assert!(occ == want_occ, "{count} rays {mode:?} {intersector:?}");
+                }
+            }
+        }
+        rt2_scene_destroy(scene);
+        rt2_context_destroy(ctx);
+    }
+}
+
 /// A rope traversal asked of PACKET or STREAM queries on the CPU, which follow the standard
 /// order whatever the traversal, builds no ropes (about 3x the tree); asked of SINGLE queries,
 /// it does. Before, every such query built them. A GPU context builds them for any mode: its

@@ -363,7 +363,7 @@ fn octant_starts(rays: &[Ray]) -> (Vec<u8>, [usize; 9]) {
 /// of the per-stream gather, 512 K at 1.06×: presumably page faults, as glibc maps a block of
 /// 32 MiB or more (the 1 M-ray copy) afresh for every batch; the eight-vector variant below
 /// took 1000 more page faults per batch where it lost (`perf stat`).
-const ONE_PASS_MAX: usize = 1 << 19;
+pub const ONE_PASS_MAX: usize = 1 << 19;
 
 /// [`streamed`]'s incoherent batches of at most [`ONE_PASS_MAX`] rays: one pass writes every
 /// ray to its place in a copy of the batch sorted by octant (a stable counting sort, its
