@@ -356,7 +356,7 @@ fn octant_starts(rays: &[Ray]) -> (Vec<u8>, [usize; 9]) {
     (octants, start)
 }
 
-/// Most rays of a batch that [`streamed`] sorts by octant in one pass ([`one_pass`]): 512 K,
+/// Most rays of an incoherent stream batch sorted by octant in one pass (`one_pass`): 512 K,
 /// whose sorted copy and answers (48 bytes a ray, 24 MiB) fit in memory the allocator reuses
 /// from batch to batch. On the bunny (one thread, 16 lanes, the two paths alternated in one
 /// process, medians of 10–14 paired runs) 1 M and 2 M incoherent rays ran at 0.937× and 0.932×
