@@ -1125,34 +1125,19 @@ fn malformed_obj_errors_name_file_and_line() {
 // ---------------------------------------------------------------------------------------------
 // Files, extensions, I/O errors
 
-/// A directory of one test's own in the system's temporary folder, removed with its files when
-/// dropped (a failing test's too), so that test runs leave nothing behind.
-struct ScratchDir(PathBuf);
-
-impl ScratchDir {
-    fn new(test: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("rt2-loaders-{test}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        ScratchDir(dir)
-    }
-
-    /// A path named `file_name` in the directory, nothing at it yet.
-    fn path(&self, file_name: &str) -> PathBuf {
-        self.0.join(file_name)
-    }
-
-    /// A file named `file_name` in the directory, holding `content`.
-    fn file(&self, file_name: &str, content: &[u8]) -> PathBuf {
-        let path = self.path(file_name);
-        std::fs::write(&path, content).unwrap();
-        path
-    }
+/// A path named `file_name` in this test binary's scratch folder (`support::scratch`, under
+/// `target/tmp`), nothing at it yet (a FIFO or link left by an earlier run is removed).
+fn scratch_path(file_name: &str) -> PathBuf {
+    let path = support::scratch("loaders").join(file_name);
+    let _ = std::fs::remove_file(&path);
+    path
 }
 
-impl Drop for ScratchDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
+/// A file named `file_name` in the scratch folder, holding `content`.
+fn scratch_file(file_name: &str, content: &[u8]) -> PathBuf {
+    let path = scratch_path(file_name);
+    std::fs::write(&path, content).unwrap();
+    path
 }
 
 /// A file whose geometry `rt2_scene_add_mesh` would refuse (a triangle whose edges overflow
@@ -1161,8 +1146,7 @@ impl Drop for ScratchDir {
 #[test]
 fn a_file_with_a_triangle_beyond_f32_is_refused_naming_file_and_triangle() {
     use rt2::api::*;
-    let dir = ScratchDir::new("huge");
-    let path = dir.file(
+    let path = scratch_file(
         "huge.obj",
         b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 3e38 0 0\nv -3e38 1 0\nf 1 2 3\nf 4 5 3\n",
     );
@@ -1196,13 +1180,12 @@ fn a_file_with_a_triangle_beyond_f32_is_refused_naming_file_and_triangle() {
 
 #[test]
 fn load_mesh_picks_format_by_extension_case_insensitively() {
-    let dir = ScratchDir::new("extension");
-    let ply = dir.file("Upper.PLY", &binary_with_extras(true));
-    let obj = dir.file("mixed.Obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    let ply = scratch_file("Upper.PLY", &binary_with_extras(true));
+    let obj = scratch_file("mixed.Obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
     assert_eq!(load_mesh(&ply).unwrap().triangles.len(), 3);
     assert_eq!(load_mesh(&obj).unwrap().triangles, vec![[0, 1, 2]]);
     // The path is the name in parse errors.
-    let bad = dir.file("bad.obj", b"v 0 0\n");
+    let bad = scratch_file("bad.obj", b"v 0 0\n");
     let err = load_mesh(&bad).unwrap_err();
     assert_eq!(err.status, Rt2Status::Parse);
     assert!(
@@ -1281,8 +1264,7 @@ fn assert_not_regular(result: Result<Mesh>, path: &std::path::Path, kind: &str) 
 #[cfg(unix)]
 #[test]
 fn fifo_is_refused_promptly_not_waited_on() {
-    let dir = ScratchDir::new("fifo");
-    let path = dir.path("fifo.ply");
+    let path = scratch_path("fifo.ply");
     let c_path = std::ffi::CString::new(path.to_str().unwrap()).unwrap();
     // SAFETY: `c_path` is a C string.
     let made = unsafe { libc::mkfifo(c_path.as_ptr(), 0o600) };
@@ -1301,8 +1283,7 @@ fn fifo_is_refused_promptly_not_waited_on() {
 #[cfg(unix)]
 #[test]
 fn symlink_to_dev_zero_is_refused_promptly_not_read() {
-    let dir = ScratchDir::new("zero");
-    let path = dir.path("zero.ply");
+    let path = scratch_path("zero.ply");
     std::os::unix::fs::symlink("/dev/zero", &path).unwrap();
     // Read to the end, /dev/zero would fill memory; it must be refused without reading.
     let result = load_within(&path, std::time::Duration::from_secs(5));
@@ -1311,8 +1292,7 @@ fn symlink_to_dev_zero_is_refused_promptly_not_read() {
 
 #[test]
 fn directory_is_an_io_error() {
-    let scratch = ScratchDir::new("directory");
-    let dir = scratch.path("dir.obj");
+    let dir = scratch_path("dir.obj");
     std::fs::create_dir_all(&dir).unwrap();
     let err = load_mesh(&dir).unwrap_err();
     assert_eq!(err.status, Rt2Status::Io, "{}", err.message);
