@@ -14,6 +14,15 @@ const MODES: [Rt2QueryMode; 4] = [
     Rt2QueryMode::Auto,
 ];
 
+/// A miss as the C API writes it; as an excluded primitive, none.
+const MISS: rt2_hit = rt2_hit {
+    t: f32::INFINITY,
+    u: 0.0,
+    v: 0.0,
+    object: RT2_INVALID_ID,
+    prim: RT2_INVALID_ID,
+};
+
 /// A hit record no query writes: outputs start as it, so that an answer left unwritten shows.
 const UNWRITTEN: rt2_hit = rt2_hit {
     t: -1.0,
@@ -672,15 +681,8 @@ fn excluded_primitives_are_ignored_in_every_mode() {
                 }
             })
             .collect();
-        let miss = rt2_hit {
-            t: f32::INFINITY,
-            u: 0.0,
-            v: 0.0,
-            object: RT2_INVALID_ID,
-            prim: RT2_INVALID_ID,
-        };
         let run = |opt: &rt2_query_options| {
-            let mut hits = vec![miss; rays.len()];
+            let mut hits = vec![MISS; rays.len()];
             let st = intersect_all(ctx, scene, &rays, &mut hits, opt);
             (st, hits)
         };
@@ -706,7 +708,7 @@ fn excluded_primitives_are_ignored_in_every_mode() {
             rt2_hit {
                 object: 2,
                 prim: 0,
-                ..miss
+                ..MISS
             };
             rays.len()
         ];
@@ -724,7 +726,7 @@ fn excluded_primitives_are_ignored_in_every_mode() {
                     prim: h.prim ^ 1,
                     ..*h
                 },
-                _ => miss,
+                _ => MISS,
             })
             .collect();
         for intersector in [Rt2Intersector::MollerTrumbore, Rt2Intersector::Watertight] {
@@ -782,25 +784,25 @@ fn excluded_primitives_are_ignored_in_every_mode() {
             bad[rays.len() - 1] = rt2_hit {
                 object,
                 prim,
-                ..miss
+                ..MISS
             };
             let mut opt = rt2_query_options_default();
             (opt.mode, opt.exclude) = (Rt2QueryMode::Stream as u32, bad.as_ptr());
             let (st, hits) = run(&opt);
             assert_eq!(st, Rt2Status::InvalidArgument, "({object}, {prim})");
-            assert!(hits.iter().all(|h| *h == miss), "({object}, {prim})");
+            assert!(hits.iter().all(|h| *h == MISS), "({object}, {prim})");
         }
         // A query of more than one step (2^20 rays) is checked whole first: a bad name in
         // its last step leaves the first step's hits unwritten too.
         let long = (1 << 20) + 1;
         let (many, mut bad): (Vec<rt2_ray>, Vec<rt2_hit>) =
-            (0..long).map(|k| (rays[k % rays.len()], miss)).unzip();
+            (0..long).map(|k| (rays[k % rays.len()], MISS)).unzip();
         bad[long - 1] = rt2_hit {
             object: 7,
             prim: 0,
-            ..miss
+            ..MISS
         };
-        let mut hits = vec![miss; long];
+        let mut hits = vec![MISS; long];
         let mut opt = rt2_query_options_default();
         opt.exclude = bad.as_ptr();
         let st = rt2_intersect(
@@ -813,7 +815,7 @@ fn excluded_primitives_are_ignored_in_every_mode() {
             null_mut(),
         );
         assert_eq!(st, Rt2Status::InvalidArgument);
-        assert!(hits.iter().all(|h| *h == miss));
+        assert!(hits.iter().all(|h| *h == MISS));
         rt2_scene_destroy(scene);
         rt2_context_destroy(ctx);
     }
@@ -846,13 +848,6 @@ fn excluded_primitives_follow_their_rays_through_the_octant_sort() {
                 tmax: f32::INFINITY,
             }
         };
-        let nothing = rt2_hit {
-            t: f32::INFINITY,
-            u: 0.0,
-            v: 0.0,
-            object: RT2_INVALID_ID,
-            prim: RT2_INVALID_ID,
-        };
         let one_pass_max = rt2::cpu::query::ONE_PASS_MAX;
         for (count, modes) in [(20_000, &MODES[..]), (one_pass_max + 1000, &MODES[2..3])] {
             let rays: Vec<rt2_ray> = (0..count).map(ray).collect();
@@ -882,7 +877,7 @@ fn excluded_primitives_follow_their_rays_through_the_octant_sort() {
             let exclude: Vec<rt2_hit> = first
                 .iter()
                 .enumerate()
-                .map(|(k, h)| if k % 3 == 0 { *h } else { nothing })
+                .map(|(k, h)| if k % 3 == 0 { *h } else { MISS })
                 .collect();
             for intersector in [Rt2Intersector::MollerTrumbore, Rt2Intersector::Watertight] {
                 let (want, want_occ) = answers(Rt2QueryMode::Single, intersector, &exclude);
